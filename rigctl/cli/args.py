@@ -1,0 +1,63 @@
+"""Argument types shared by the verbs: each refuses a bad value with one line naming the option."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from typing import NoReturn
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line on stderr and exit code 2 (no usage dump)."""
+
+    def error(self, message: str) -> NoReturn:
+        sys.stderr.write(f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        sys.exit(2)
+
+
+def _number(text: str) -> float:
+    try:
+        value = float(text.strip().rstrip("m"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if math.isnan(value):
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}")
+    return value
+
+
+def distance(text: str) -> float:
+    """A positive, finite distance in metres."""
+    value = _number(text)
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"must be a positive distance in metres, got {text!r}")
+    return value
+
+
+def far_distance(text: str) -> float:
+    """A positive distance in metres, or ``inf`` for the background at infinity."""
+    value = _number(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be a positive distance in metres or 'inf', got {text!r}")
+    return value
+
+
+def depth(text: str) -> float:
+    """A non-negative extent in metres (zero is a flat subject)."""
+    value = _number(text)
+    if not (value >= 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"must be a depth >= 0 in metres, got {text!r}")
+    return value
+
+
+def fraction(text: str) -> float:
+    """A fraction in (0, 1]; ``4%`` is accepted for 0.04."""
+    t = text.strip()
+    scale = 0.01 if t.endswith("%") else 1.0
+    try:
+        value = float(t.rstrip("%")) * scale
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (0 < value <= 1):
+        raise argparse.ArgumentTypeError(f"must be a fraction in (0, 1] such as 0.04 or 4%, got {text!r}")
+    return value

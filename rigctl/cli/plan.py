@@ -1,0 +1,51 @@
+"""``rigctl plan``: equations (1) and (2) for every camera pair of a rig."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from rigctl.cli import args
+from rigctl.plan_report import format_plan, plan_rig
+from rigctl.rig import load_rig
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "plan",
+        help="near/far distances, parallax per camera pair, budget, disparity range",
+        description=(
+            "Apply equations (1) and (2) to every camera pair of RIG. With --subject-depth alone, solve the "
+            "nearest distance that keeps the reference (adjacent horizontal) pair within the budget; with "
+            "--near and --far, check every pair and name those over budget."
+        ),
+    )
+    p.add_argument("rig", nargs="?", help="rig file or shipped rig name (default: sim-3x3)")
+    p.add_argument("--subject-depth", type=args.depth, metavar="M", help="depth of the subject in metres")
+    p.add_argument("--near", type=args.distance, metavar="M", help="nearest point of the subject, metres")
+    p.add_argument(
+        "--far", type=args.far_distance, metavar="M", help="farthest point, metres ('inf' allowed)"
+    )
+    p.add_argument("--budget", type=args.fraction, metavar="F", help="parallax budget, fraction of the image")
+    p.add_argument("--subject-width", type=args.depth, metavar="M", help="check the subject fits every view")
+    p.add_argument("--subject-height", type=args.depth, metavar="M", help="check the subject fits every view")
+    p.add_argument("--json", action="store_true", help="print the plan as JSON")
+    p.set_defaults(func=run)
+
+
+def run(ns: argparse.Namespace) -> int:
+    rig = load_rig(ns.rig)
+    plan = plan_rig(
+        rig,
+        subject_depth_m=ns.subject_depth,
+        near_m=ns.near,
+        far_m=ns.far,
+        budget_fraction=ns.budget,
+        subject_width_m=ns.subject_width,
+        subject_height_m=ns.subject_height,
+    )
+    if ns.json:
+        print(json.dumps(plan.as_json(), indent=2, allow_nan=False))
+    else:
+        print(format_plan(plan, rig))
+    return 0

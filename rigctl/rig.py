@@ -1,0 +1,318 @@
+"""The rig model: what a rig file (``rigs/*.yaml``, ``spec: 1``) says, validated.
+
+Lengths are metres and angles degrees unless a field's name says otherwise (``width_mm``,
+``focal_length_mm``). Optional sections (tally, camera control, reference, USB identities, storage,
+plan defaults) are ``None`` when a rig does not have them, and nothing that needs them is shown or run.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from rigctl.errors import RigFileError
+from rigctl.yamlfile import check_spec, describe_validation_error, load_yaml_with_lines
+
+RIG_SPEC = 1
+CAMERA_NAME = re.compile(r"^r(\d+)c(\d+)$")
+PIXEL_FORMATS = ("UYVY", "YUYV", "BGR3", "GREY")
+
+PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+PositiveInt = Annotated[int, Field(gt=0)]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=False)
+
+
+class Sensor(_Section):
+    """Active sensor area that the output format covers."""
+
+    width_mm: PositiveFloat
+    height_mm: PositiveFloat
+
+
+class OutputFormat(_Section):
+    """What each camera delivers to the host."""
+
+    width_px: PositiveInt
+    height_px: PositiveInt
+    fps: Annotated[float, Field(gt=0, le=1000, allow_inf_nan=False)]
+    pixel_format: Literal["UYVY", "YUYV", "BGR3", "GREY"] = "UYVY"
+
+
+class Lens(_Section):
+    focal_length_mm: PositiveFloat
+
+
+class Grid(_Section):
+    """A planar rectangular grid, row 0 at the top, column 0 at the left, seen from behind the rig."""
+
+    rows: Annotated[int, Field(ge=1, le=64)]
+    columns: Annotated[int, Field(ge=1, le=64)]
+    spacing_x_m: PositiveFloat
+    spacing_y_m: PositiveFloat
+
+
+class UsbIdentity(_Section):
+    """Which physical USB device a camera or port is: matched by ``rigctl devices`` after every boot."""
+
+    vendor_id: Annotated[int, Field(ge=0, le=0xFFFF)]
+    product_id: Annotated[int, Field(ge=0, le=0xFFFF)]
+    serial: str | None = None
+    bus_path: str | None = None
+
+
+class CameraEntry(_Section):
+    name: str
+    device: str = Field(min_length=1)
+    usb: UsbIdentity | None = None
+
+    @field_validator("name")
+    @classmethod
+    def _grid_name(cls, value: str) -> str:
+        if not CAMERA_NAME.match(value):
+            raise ValueError("must be a grid position r{row}c{col}, e.g. r1c1")
+        return value
+
+
+class PlanDefaults(_Section):
+    """The shot the rig is planned for; ``rigctl plan`` and depth use it when no values are given."""
+
+    subject_depth_m: PositiveFloat | None = None
+    near_m: PositiveFloat | None = None
+    far_m: Annotated[float, Field(gt=0)] | None = None  # may be .inf: background at infinity
+    budget_fraction: Annotated[float, Field(gt=0, le=1)] = 0.04
+
+
+class Tally(_Section):
+    protocol: Literal["tsl-umd-3.1", "tsl-umd-5.0", "bmd-embedded"]
+    port: str = Field(min_length=1)
+    addresses: dict[str, Annotated[int, Field(ge=0, le=126)]] | None = None
+    pad_with_nul: bool = False
+
+
+class CameraControl(_Section):
+    """Camera control through an SDI bridge (see the bridge protocol in the README)."""
+
+    bridge: str = Field(min_length=1)
+    camera_ids: dict[str, Annotated[int, Field(ge=0, le=254)]] | None = None
+
+
+class Reference(_Section):
+    source: Literal["internal", "program", "external"] = "external"
+
+
+class Storage(_Section):
+    path: str = Field(min_length=1)
+    cameras: list[str] | None = None
+
+
+class RigModel(_Section):
+    spec: Literal[1]
+    name: str = Field(min_length=1)
+    description: str = ""
+    sensor: Sensor
+    format: OutputFormat
+    lens: Lens
+    grid: Grid
+    cameras: list[CameraEntry] = Field(min_length=1)
+    plan: PlanDefaults | None = None
+    tally: Tally | None = None
+    camera_control: CameraControl | None = None
+    reference: Reference | None = None
+    storage: list[Storage] | None = None
+
+    @model_validator(mode="after")
+    def _cameras_fit_grid(self) -> RigModel:
+        seen: set[str] = set()
+        devices: set[str] = set()
+        for i, cam in enumerate(self.cameras):
+            m = CAMERA_NAME.match(cam.name)
+            assert m is not None  # checked by the field validator
+            row, col = int(m.group(1)), int(m.group(2))
+            if row >= self.grid.rows or col >= self.grid.columns:
+                raise ValueError(
+                    f"cameras[{i}].name {cam.name} lies outside the {self.grid.rows}x{self.grid.columns} grid"
+                )
+            if cam.name in seen:
+                raise ValueError(f"cameras[{i}].name {cam.name} appears twice")
+            if cam.device in devices:
+                raise ValueError(f"cameras[{i}].device {cam.device} is used by two cameras")
+            seen.add(cam.name)
+            devices.add(cam.device)
+        for section, names in (
+            ("tally.addresses", (self.tally.addresses or {}) if self.tally else {}),
+            (
+                "camera_control.camera_ids",
+                (self.camera_control.camera_ids or {}) if self.camera_control else {},
+            ),
+        ):
+            for name in names:
+                if name not in seen:
+                    raise ValueError(f"{section} names {name}, which is not a camera of this rig")
+        return self
+
+
+@dataclass(frozen=True)
+class Camera:
+    """One camera of the rig with its grid position and nominal position in rig coordinates (metres).
+
+    Rig coordinates: origin at the grid centre, x to the right, y down, z towards the scene.
+    """
+
+    name: str
+    row: int
+    col: int
+    device: str
+    x_m: float
+    y_m: float
+    usb: UsbIdentity | None = None
+
+
+@dataclass(frozen=True)
+class Rig:
+    """A validated rig with derived quantities the planner and the recorder need."""
+
+    model: RigModel
+    source: str
+
+    @property
+    def name(self) -> str:
+        return self.model.name
+
+    @property
+    def width_px(self) -> int:
+        return self.model.format.width_px
+
+    @property
+    def height_px(self) -> int:
+        return self.model.format.height_px
+
+    @property
+    def fps(self) -> float:
+        return self.model.format.fps
+
+    @property
+    def frame_period_s(self) -> float:
+        return 1.0 / self.model.format.fps
+
+    @property
+    def pixel_pitch_m(self) -> tuple[float, float]:
+        """Effective pixel pitch at the output resolution (sensor extent over pixels), x and y."""
+        s = self.model.sensor
+        f = self.model.format
+        return s.width_mm * 1e-3 / f.width_px, s.height_mm * 1e-3 / f.height_px
+
+    @property
+    def focal_length_m(self) -> float:
+        return self.model.lens.focal_length_mm * 1e-3
+
+    @property
+    def c0_px(self) -> float:
+        """C0 = f / s_p of equation (1): the focal length in horizontal pixels."""
+        return self.focal_length_m / self.pixel_pitch_m[0]
+
+    @property
+    def c0_y_px(self) -> float:
+        return self.focal_length_m / self.pixel_pitch_m[1]
+
+    @property
+    def spacing_m(self) -> tuple[float, float]:
+        return self.model.grid.spacing_x_m, self.model.grid.spacing_y_m
+
+    @property
+    def cameras(self) -> list[Camera]:
+        g = self.model.grid
+        out = []
+        for cam in self.model.cameras:
+            m = CAMERA_NAME.match(cam.name)
+            assert m is not None
+            row, col = int(m.group(1)), int(m.group(2))
+            out.append(
+                Camera(
+                    name=cam.name,
+                    row=row,
+                    col=col,
+                    device=cam.device,
+                    x_m=(col - (g.columns - 1) / 2) * g.spacing_x_m,
+                    y_m=(row - (g.rows - 1) / 2) * g.spacing_y_m,
+                    usb=cam.usb,
+                )
+            )
+        return sorted(out, key=lambda c: (c.row, c.col))
+
+    def camera(self, name: str) -> Camera:
+        for cam in self.cameras:
+            if cam.name == name:
+                return cam
+        known = ", ".join(c.name for c in self.cameras)
+        raise RigFileError(f"{self.source}: rig has no camera {name!r} (it has {known})")
+
+    @property
+    def camera_names(self) -> list[str]:
+        return [c.name for c in self.cameras]
+
+    def fov_deg(self) -> tuple[float, float]:
+        s = self.model.sensor
+        f = self.model.lens.focal_length_mm
+        return (
+            math.degrees(2 * math.atan(s.width_mm / (2 * f))),
+            math.degrees(2 * math.atan(s.height_mm / (2 * f))),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The rig as plain data (for a take's manifest snapshot): it loads back with :func:`rig_from_dict`."""
+        return self.model.model_dump(mode="json", exclude_none=True)
+
+
+BUILTIN_RIGS = ("sim-3x3", "bmd-micro-studio-4k-3x3")
+DEFAULT_RIG = "sim-3x3"
+
+
+def _builtin_text(ref: str) -> str | None:
+    """The text of a shipped rig named ``ref`` (``sim-3x3``, ``sim-3x3.yaml`` or ``rigs/sim-3x3.yaml``)."""
+    path = Path(ref)
+    if path.parent not in (Path("."), Path("rigs")):
+        return None
+    stem = path.name.removesuffix(".yaml")
+    if stem not in BUILTIN_RIGS:
+        return None
+    return (resources.files("rigctl.rigs") / f"{stem}.yaml").read_text(encoding="utf-8")
+
+
+def load_rig(ref: str | Path | None = None) -> Rig:
+    """Load and validate a rig: a path to a YAML file, or the name of a shipped rig (default ``sim-3x3``).
+
+    A path that exists is read from disk; otherwise a shipped rig of that name (``sim-3x3``,
+    ``rigs/sim-3x3.yaml``) is used, so the contract's paths work from any directory.
+    Raises :class:`RigFileError` naming file, line and field on any problem.
+    """
+    ref = DEFAULT_RIG if ref is None else ref
+    path = Path(ref)
+    text = None
+    if not path.exists():
+        text = _builtin_text(str(ref))
+        if text is None:
+            raise RigFileError(
+                f"{ref}: no such rig file (shipped rigs: {', '.join(BUILTIN_RIGS)}; or a path)"
+            )
+        path = Path("rigs") / f"{path.name.removesuffix('.yaml')}.yaml"
+    data, lines = load_yaml_with_lines(path, text)
+    return rig_from_dict(data, source=str(path), lines=lines)
+
+
+def rig_from_dict(data: Any, source: str = "<rig>", lines: dict[Any, int] | None = None) -> Rig:
+    lines = lines or {}
+    check_spec(Path(source), data, lines, RIG_SPEC, "rig file")
+    try:
+        model = RigModel.model_validate(data)
+    except ValidationError as exc:
+        raise RigFileError(describe_validation_error(Path(source), exc, lines)) from None
+    return Rig(model=model, source=source)

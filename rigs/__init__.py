@@ -1,0 +1,1 @@
+"""Rig files shipped with rigctl (data only; installed as rigctl.rigs)."""

@@ -1,0 +1,47 @@
+"""Shared fixtures. Tests read real data from ../shared (never copied into the project)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hypothesis import settings
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"
+
+settings.register_profile("ci", deadline=None, max_examples=200, derandomize=True)
+settings.register_profile("dev", deadline=None, max_examples=100)
+settings.load_profile("ci" if os.environ.get("CI") else "dev")
+
+
+def rigctl_command() -> list[str]:
+    """The installed console script (what a user runs), next to the interpreter running the tests."""
+    exe = Path(sys.executable).with_name("rigctl")
+    if exe.exists():
+        return [str(exe)]
+    found = shutil.which("rigctl")
+    if found is None:
+        raise RuntimeError("the rigctl console script is not installed: pip install -e . first")
+    return [found]
+
+
+@pytest.fixture
+def run_cli(tmp_path: Path):
+    """Run the real ``rigctl`` console script in a scratch directory; returns CompletedProcess."""
+
+    def run(*argv: str, cwd: Path | None = None, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [*rigctl_command(), *argv],
+            cwd=cwd or tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            stdin=subprocess.DEVNULL,
+        )
+
+    return run
