@@ -205,9 +205,7 @@ def plan_rig(
         if subject_depth_m is None:
             raise ParameterError("far_m given without near_m: give --near or --subject-depth as well")
         if math.isinf(far_m):
-            raise ParameterError(
-                "far_m is infinite: give --near, a subject depth cannot be measured from infinity"
-            )
+            raise ParameterError("far_m is infinite: give --near, a subject depth cannot be measured from infinity")
         near_m = far_m - subject_depth_m
         if not near_m > 0:
             raise ParameterError(
@@ -260,9 +258,7 @@ def plan_rig(
     if subject_width_m is not None:
         fits["width"] = bool(planner.fits_every_view(subject_width_m, (g.columns - 1) * sx, view_w))
     if subject_height_m is not None:
-        fits["height"] = bool(
-            planner.fits_every_view(subject_height_m, (g.rows - 1) * rig.spacing_m[1], view_h)
-        )
+        fits["height"] = bool(planner.fits_every_view(subject_height_m, (g.rows - 1) * rig.spacing_m[1], view_h))
     fov = (
         float(planner.field_of_view_deg(sensor.width_mm * 1e-3, f)),
         float(planner.field_of_view_deg(sensor.height_mm * 1e-3, f)),

@@ -94,9 +94,7 @@ def parallax_px(c0: ArrayLike, baseline_m: ArrayLike, near_m: ArrayLike, far_m: 
     return c0 * b * span
 
 
-def subject_parallax_px(
-    c0: ArrayLike, baseline_m: ArrayLike, near_m: ArrayLike, subject_depth_m: ArrayLike
-) -> Array:
+def subject_parallax_px(c0: ArrayLike, baseline_m: ArrayLike, near_m: ArrayLike, subject_depth_m: ArrayLike) -> Array:
     """Equation (2) for a subject ``subject_depth_m`` deep whose front is at ``near_m``.
 
     C0 * dx * D / (near * (near + D)): exact for any depth, where forming far = near + D first would
@@ -111,9 +109,7 @@ def subject_parallax_px(
     return c0 * b * np.where(finite, d / near / (near + d), 1.0 / near)
 
 
-def min_near_m(
-    c0: ArrayLike, baseline_m: ArrayLike, subject_depth_m: ArrayLike, max_parallax_px: ArrayLike
-) -> Array:
+def min_near_m(c0: ArrayLike, baseline_m: ArrayLike, subject_depth_m: ArrayLike, max_parallax_px: ArrayLike) -> Array:
     """The nearest distance at which a subject ``subject_depth_m`` deep stays within the parallax budget.
 
     Solves near^2 + D*near - a*D = 0 with a = C0 * dx / d_max (equation (2) with far = near + D).

@@ -300,9 +300,7 @@ def load_rig(ref: str | Path | None = None) -> Rig:
     if not path.exists():
         text = _builtin_text(str(ref))
         if text is None:
-            raise RigFileError(
-                f"{ref}: no such rig file (shipped rigs: {', '.join(BUILTIN_RIGS)}; or a path)"
-            )
+            raise RigFileError(f"{ref}: no such rig file (shipped rigs: {', '.join(BUILTIN_RIGS)}; or a path)")
         path = Path("rigs") / f"{path.name.removesuffix('.yaml')}.yaml"
     data, lines = load_yaml_with_lines(path, text)
     return rig_from_dict(data, source=str(path), lines=lines)

@@ -92,9 +92,7 @@ def _phrase(err: Mapping[str, Any]) -> str:
     if kind == "extra_forbidden":
         return "is not a known field (check its spelling and the rig file reference in the README)"
     if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
-        op = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<", "less_than_equal": "<="}[
-            kind
-        ]
+        op = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<", "less_than_equal": "<="}[kind]
         bound = next(iter(ctx.values()))
         if isinstance(bound, float) and bound.is_integer():
             bound = int(bound)
@@ -127,9 +125,7 @@ def check_spec(path: Path, data: Any, lines: Mapping[Loc, int], known: int, what
         raise RigFileError(f"{path}:1: spec is required (this rigctl writes and reads 'spec: {known}')")
     spec = data["spec"]
     if not isinstance(spec, int) or isinstance(spec, bool) or spec < 1:
-        raise RigFileError(
-            f"{path}:{line_of(lines, ('spec',))}: spec must be a positive integer, got {spec!r}"
-        )
+        raise RigFileError(f"{path}:{line_of(lines, ('spec',))}: spec must be a positive integer, got {spec!r}")
     if spec > known:
         raise SpecVersionError(
             f"{path}:{line_of(lines, ('spec',))}: {what} spec {spec} is newer than this rigctl understands "

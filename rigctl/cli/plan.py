@@ -23,9 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("rig", nargs="?", help="rig file or shipped rig name (default: sim-3x3)")
     p.add_argument("--subject-depth", type=args.depth, metavar="M", help="depth of the subject in metres")
     p.add_argument("--near", type=args.distance, metavar="M", help="nearest point of the subject, metres")
-    p.add_argument(
-        "--far", type=args.far_distance, metavar="M", help="farthest point, metres ('inf' allowed)"
-    )
+    p.add_argument("--far", type=args.far_distance, metavar="M", help="farthest point, metres ('inf' allowed)")
     p.add_argument("--budget", type=args.fraction, metavar="F", help="parallax budget, fraction of the image")
     p.add_argument("--subject-width", type=args.depth, metavar="M", help="check the subject fits every view")
     p.add_argument("--subject-height", type=args.depth, metavar="M", help="check the subject fits every view")

@@ -73,9 +73,7 @@ def test_solved_near_keeps_subject_in_every_camera(run_cli) -> None:  # type: ig
     # one camera sees about 1.02 m at 1.948 m; the outer columns are 0.24 m apart
     assert plan["view_at_near_m"]["width"] == pytest.approx(13.056 * 1.948 / 25, abs=2e-3)
     assert plan["subject_fits"] == {"width": True}
-    wide = json.loads(
-        run_cli("plan", PAPER, "--subject-depth", "1", "--subject-width", "0.9", "--json").stdout
-    )
+    wide = json.loads(run_cli("plan", PAPER, "--subject-depth", "1", "--subject-width", "0.9", "--json").stdout)
     assert wide["subject_fits"] == {"width": False}
 
 

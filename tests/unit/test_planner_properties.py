@@ -55,9 +55,7 @@ def test_parallax_monotonic_in_spacing_focal_and_depth(
 
 
 @given(focal, pitch, spacing, budget_px, st.floats(1e-12, 1e-3))
-def test_min_near_continuous_as_depth_goes_to_zero(
-    f: float, sp: float, b: float, bpx: float, d: float
-) -> None:
+def test_min_near_continuous_as_depth_goes_to_zero(f: float, sp: float, b: float, bpx: float, d: float) -> None:
     c0 = float(planner.c0_px(f, sp))
     a = c0 * b / bpx
     near = float(planner.min_near_m(c0, b, d, bpx))

@@ -1,0 +1,160 @@
+"""The calibration of a camera array and its file, ``calibration.yaml`` (``spec: 1``).
+
+Per camera: ``K`` (3x3), ``dist`` (OpenCV order k1, k2, p1, p2, k3), ``R`` (3x3) and ``t`` (metres) with
+X_cam = R @ X_rig + t, and ``image_size`` [width, height]. Rig coordinates: x right, y down, z towards the
+scene. ``rigctl calibrate`` writes this file and a simulated take's ``truth/calibration.yaml`` has the
+same schema, so the two can be compared field by field.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import yaml
+from numpy.typing import NDArray
+
+from rigctl.errors import RigFileError
+from rigctl.rig import CAMERA_NAME
+from rigctl.yamlfile import check_spec, line_of, load_yaml_with_lines
+
+CALIBRATION_SPEC = 1
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """One calibrated camera (pinhole with OpenCV's radial-tangential distortion)."""
+
+    name: str
+    K: F64
+    dist: F64
+    R: F64
+    t: F64
+    image_size: tuple[int, int]
+
+    @property
+    def grid_position(self) -> tuple[int, int]:
+        m = CAMERA_NAME.match(self.name)
+        if m is None:
+            raise RigFileError(f"camera name {self.name!r} is not a grid position r{{row}}c{{col}}")
+        return int(m.group(1)), int(m.group(2))
+
+    @property
+    def centre(self) -> F64:
+        """Camera centre in rig coordinates (metres)."""
+        return np.asarray(-self.R.T @ self.t, dtype=np.float64)
+
+    def project(self, points_rig: NDArray[np.floating]) -> F64:
+        """Pixel coordinates (N x 2) of rig points (N x 3), with distortion."""
+        rvec, _ = cv2.Rodrigues(self.R)
+        pts, _ = cv2.projectPoints(
+            np.asarray(points_rig, dtype=np.float64).reshape(-1, 1, 3), rvec, self.t, self.K, self.dist
+        )
+        return np.asarray(pts.reshape(-1, 2), dtype=np.float64)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "K": self.K.tolist(),
+            "dist": self.dist.ravel().tolist(),
+            "R": self.R.tolist(),
+            "t": self.t.ravel().tolist(),
+            "image_size": list(self.image_size),
+        }
+
+
+@dataclass(frozen=True)
+class ArrayCalibration:
+    """All cameras of one array, with the reference camera named."""
+
+    rig: str
+    cameras: dict[str, CameraModel]
+    reference: str
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __getitem__(self, name: str) -> CameraModel:
+        return self.cameras[name]
+
+    @property
+    def names(self) -> list[str]:
+        return sorted(self.cameras, key=lambda n: self.cameras[n].grid_position)
+
+    def as_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "spec": CALIBRATION_SPEC,
+            "rig": self.rig,
+            "reference_camera": self.reference,
+            "cameras": {n: self.cameras[n].as_dict() for n in self.names},
+        }
+        if self.meta:
+            out["meta"] = self.meta
+        return out
+
+    def save(self, path: Path) -> None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        tmp.write_text(yaml.safe_dump(self.as_dict(), sort_keys=False, default_flow_style=None))
+        tmp.replace(path)
+
+
+def _matrix(path: Path, lines: dict[Any, int], loc: tuple[Any, ...], value: Any, shape: tuple[int, ...]) -> F64:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = None
+    if arr is None or (shape and arr.shape != shape) or not np.all(np.isfinite(arr)):
+        field_name = ".".join(str(p) for p in loc)
+        raise RigFileError(
+            f"{path}:{line_of(lines, loc)}: {field_name} must be {'x'.join(map(str, shape)) or 'a list of'} "
+            f"finite numbers, got {value!r}"
+        )
+    return arr
+
+
+def load_calibration(path: Path) -> ArrayCalibration:
+    """Read ``calibration.yaml``; errors name the file, line and field."""
+    data, lines = load_yaml_with_lines(path)
+    check_spec(path, data, lines, CALIBRATION_SPEC, "calibration")
+    cams = data.get("cameras")
+    if not isinstance(cams, dict) or not cams:
+        raise RigFileError(f"{path}:{line_of(lines, ('cameras',))}: cameras must map camera names to models")
+    models: dict[str, CameraModel] = {}
+    for name, c in cams.items():
+        if not isinstance(c, dict):
+            raise RigFileError(f"{path}:{line_of(lines, ('cameras', name))}: cameras.{name} must be a mapping")
+        for key in ("K", "dist", "R", "t", "image_size"):
+            if key not in c:
+                raise RigFileError(f"{path}:{line_of(lines, ('cameras', name))}: cameras.{name}.{key} is required")
+        loc = ("cameras", name)
+        R = _matrix(path, lines, (*loc, "R"), c["R"], (3, 3))
+        if abs(np.linalg.det(R) - 1) > 1e-6 or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
+            raise RigFileError(f"{path}:{line_of(lines, (*loc, 'R'))}: cameras.{name}.R is not a rotation matrix")
+        size = c["image_size"]
+        if not (isinstance(size, list) and len(size) == 2 and all(isinstance(v, int) and v > 0 for v in size)):
+            raise RigFileError(
+                f"{path}:{line_of(lines, (*loc, 'image_size'))}: cameras.{name}.image_size must be [width, height]"
+            )
+        models[name] = CameraModel(
+            name=name,
+            K=_matrix(path, lines, (*loc, "K"), c["K"], (3, 3)),
+            dist=_matrix(path, lines, (*loc, "dist"), c["dist"], ()).ravel(),
+            R=R,
+            t=_matrix(path, lines, (*loc, "t"), c["t"], (3,)),
+            image_size=(size[0], size[1]),
+        )
+        if not CAMERA_NAME.match(name):
+            raise RigFileError(f"{path}:{line_of(lines, loc)}: camera name {name!r} is not r{{row}}c{{col}}")
+    ref = data.get("reference_camera", next(iter(models)))
+    if ref not in models:
+        raise RigFileError(f"{path}:{line_of(lines, ('reference_camera',))}: reference_camera {ref!r} is not a camera")
+    return ArrayCalibration(rig=str(data.get("rig", "")), cameras=models, reference=ref, meta=data.get("meta") or {})
+
+
+def rotation_angle_deg(R: NDArray[np.floating]) -> float:
+    """The angle of a rotation matrix, in degrees (robust near 0 and 180)."""
+    rvec, _ = cv2.Rodrigues(np.asarray(R, dtype=np.float64))
+    return math.degrees(float(np.linalg.norm(rvec)))

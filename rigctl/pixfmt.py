@@ -1,0 +1,100 @@
+"""Pixel formats: packed 4:2:2 (UYVY, YUYV) to and from RGB, BT.709 limited range as on HD/UHD SDI.
+
+The simulator encodes with these functions and ``take export`` decodes with them, so colours round-trip
+with the same matrix (OpenCV's own UYVY conversion uses BT.601, which would shift every colour).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from rigctl.errors import ParameterError
+
+# BT.709: Y = 0.2126 R + 0.7152 G + 0.0722 B; limited range Y 16..235, Cb/Cr 16..240.
+_KR, _KB = 0.2126, 0.0722
+_KG = 1.0 - _KR - _KB
+_RGB_TO_YCBCR = np.array(
+    [
+        [_KR, _KG, _KB],
+        [-_KR / (2 * (1 - _KB)), -_KG / (2 * (1 - _KB)), 0.5],
+        [0.5, -_KG / (2 * (1 - _KR)), -_KB / (2 * (1 - _KR))],
+    ],
+    dtype=np.float64,
+)
+_YCBCR_TO_RGB = np.linalg.inv(_RGB_TO_YCBCR)
+
+
+def rgb_to_uyvy(rgb: NDArray[np.floating], order: str = "UYVY") -> NDArray[np.uint8]:
+    """RGB in [0, 1] (H x W x 3, W even) to packed 4:2:2 bytes (H x 2W), chroma averaged over pairs."""
+    h, w, _ = rgb.shape
+    if w % 2:
+        raise ParameterError(f"packed 4:2:2 needs an even width, got {w}")
+    scale = np.array([219.0, 224.0, 224.0])[:, None]
+    offset = np.array([16.0, 128.0, 128.0])[:, None]
+    m = np.hstack([_RGB_TO_YCBCR * scale, offset]).astype(np.float32)
+    ycc = cv2.transform(np.ascontiguousarray(rgb, dtype=np.float32), m)  # Y, Cb, Cr in code values
+    chroma = cv2.resize(np.ascontiguousarray(ycc[..., 1:]), (w // 2, h), interpolation=cv2.INTER_AREA)
+    out = np.empty((h, w // 2, 4), dtype=np.float32)
+    y0, y1 = ycc[:, 0::2, 0], ycc[:, 1::2, 0]
+    if order == "UYVY":
+        out[..., 0], out[..., 1], out[..., 2], out[..., 3] = chroma[..., 0], y0, chroma[..., 1], y1
+    elif order == "YUYV":
+        out[..., 0], out[..., 1], out[..., 2], out[..., 3] = y0, chroma[..., 0], y1, chroma[..., 1]
+    else:
+        raise ParameterError(f"unknown packed 4:2:2 order {order!r}")
+    # convertScaleAbs rounds and saturates to 0..255 in one pass
+    return np.asarray(cv2.convertScaleAbs(out.reshape(h, 2 * w)), dtype=np.uint8)
+
+
+def uyvy_to_rgb(packed: NDArray[np.uint8], order: str = "UYVY") -> NDArray[np.float32]:
+    """Packed 4:2:2 bytes (H x 2W) to RGB float32 in [0, 1] (chroma repeated over each pair)."""
+    h, w2 = packed.shape[:2]
+    q = packed.reshape(h, w2 // 4, 4).astype(np.float32)
+    if order == "UYVY":
+        cb, y0, cr, y1 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    elif order == "YUYV":
+        y0, cb, y1, cr = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    else:
+        raise ParameterError(f"unknown packed 4:2:2 order {order!r}")
+    y = np.empty((h, w2 // 2), dtype=np.float32)
+    y[:, 0::2], y[:, 1::2] = y0, y1
+    ycc = np.empty((h, w2 // 2, 3), dtype=np.float32)
+    ycc[..., 0] = (y - 16.0) / 219.0
+    ycc[..., 1] = np.repeat((cb - 128.0) / 224.0, 2, axis=1)
+    ycc[..., 2] = np.repeat((cr - 128.0) / 224.0, 2, axis=1)
+    rgb = ycc @ _YCBCR_TO_RGB.T.astype(np.float32)
+    return np.clip(rgb, 0.0, 1.0)
+
+
+def luma(packed: NDArray[np.uint8], order: str = "UYVY") -> NDArray[np.uint8]:
+    """The Y plane of packed 4:2:2 bytes as an H x W view-free copy (fast path for matching)."""
+    start = 1 if order == "UYVY" else 0
+    return np.ascontiguousarray(packed[:, start::2])
+
+
+def to_rgb(data: NDArray[np.uint8], pixel_format: str, width: int, height: int) -> NDArray[np.float32]:
+    """Any supported captured format to RGB float32 in [0, 1]."""
+    if pixel_format in ("UYVY", "YUYV"):
+        return uyvy_to_rgb(data.reshape(height, width * 2), pixel_format)
+    if pixel_format == "BGR3":
+        return data.reshape(height, width, 3)[..., ::-1].astype(np.float32) / 255.0
+    if pixel_format == "GREY":
+        g = data.reshape(height, width).astype(np.float32) / 255.0
+        return np.repeat(g[..., None], 3, axis=2)
+    raise ParameterError(f"unsupported pixel format {pixel_format!r}")
+
+
+def from_rgb(rgb: NDArray[np.floating], pixel_format: str) -> NDArray[np.uint8]:
+    """RGB in [0, 1] to the bytes of ``pixel_format`` (2-D array, rows of bytes)."""
+    if pixel_format in ("UYVY", "YUYV"):
+        return rgb_to_uyvy(rgb, pixel_format)
+    h, w, _ = rgb.shape
+    u8 = np.clip(np.rint(np.asarray(rgb) * 255.0), 0, 255).astype(np.uint8)
+    if pixel_format == "BGR3":
+        return np.ascontiguousarray(u8[..., ::-1]).reshape(h, w * 3)
+    if pixel_format == "GREY":
+        g = np.rint(np.asarray(rgb, dtype=np.float32) @ np.array([_KR, _KG, _KB], dtype=np.float32) * 255.0)
+        return np.clip(g, 0, 255).astype(np.uint8)
+    raise ParameterError(f"unsupported pixel format {pixel_format!r}")

@@ -1,0 +1,78 @@
+"""The one place that maps a rig file's device addresses onto drivers and simulators.
+
+``sim://rXcY`` cameras come from :mod:`rigctl.simulators`; ``v4l2:///dev/videoN`` (and the stable
+``/dev/v4l/by-path/...`` and ``/dev/v4l/by-id/...`` forms) from :mod:`rigctl.drivers`. Everything above
+this module sees only the interfaces in :mod:`rigctl.interfaces`.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+from rigctl.errors import DeviceError
+from rigctl.interfaces import Camera
+from rigctl.rig import Rig
+
+log = logging.getLogger(__name__)
+
+
+class TruthProvider(Protocol):
+    """Something that knows what the cameras really saw (only a simulation can)."""
+
+    def write_truth(self, folder: Path, frame_sets: list[tuple[int, dict[str, int]]]) -> None:
+        """Write ``truth/`` for frame sets given as (number, {camera: sequence number})."""
+
+
+@dataclass
+class DeviceSet:
+    """The opened devices of a rig."""
+
+    cameras: dict[str, Camera]
+    truth: TruthProvider | None = None
+    settings: dict[str, Any] = field(default_factory=dict)  # recorded in the take's manifest
+    description: str = ""
+
+    def close(self) -> None:
+        for cam in self.cameras.values():
+            try:
+                cam.close()
+            except Exception as exc:  # closing must reach every camera
+                log.warning("closing %s: %s", cam.name, exc)
+
+
+def scheme_of(address: str) -> str:
+    if address.startswith("sim://"):
+        return "sim"
+    if address.startswith("v4l2://") or address.startswith("/dev/video") or address.startswith("/dev/v4l/"):
+        return "v4l2"
+    raise DeviceError(f"device address {address!r}: unknown scheme (use sim://rXcY or v4l2:///dev/videoN)")
+
+
+def open_cameras(rig: Rig, sim: list[str] | None = None, cameras: list[str] | None = None) -> DeviceSet:
+    """Create camera objects for ``rig`` (not yet opened). ``sim`` holds ``KEY=VALUE`` settings for
+    simulated cameras; ``cameras`` limits the set to the named ones."""
+    wanted = [c for c in rig.cameras if cameras is None or c.name in cameras]
+    if cameras:
+        unknown = set(cameras) - {c.name for c in rig.cameras}
+        if unknown:
+            raise DeviceError(f"rig {rig.name} has no camera {', '.join(sorted(unknown))}")
+    schemes = {scheme_of(c.device) for c in wanted}
+    if sim and "sim" not in schemes:
+        raise DeviceError(f"--sim settings given but rig {rig.name} has no simulated cameras")
+    out: dict[str, Camera] = {}
+    truth: TruthProvider | None = None
+    settings: dict[str, Any] = {}
+    description = ""
+    if "sim" in schemes:
+        from rigctl.simulators.device_set import simulated_cameras
+
+        sim_cams, truth, settings, description = simulated_cameras(rig, sim or [], [c.name for c in wanted])
+        out.update(sim_cams)
+    if "v4l2" in schemes:
+        raise DeviceError(
+            f"rig {rig.name} uses V4L2 devices ({wanted[0].device}); V4L2 capture is not in this build yet"
+        )
+    return DeviceSet(cameras=out, truth=truth, settings=settings, description=description)

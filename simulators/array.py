@@ -1,0 +1,419 @@
+"""The simulated array: true cameras, rendered frames, timing, and the ground truth behind them.
+
+One :class:`SimArray` serves every ``sim://`` camera of a rig. It draws each camera's true pose and lens
+from the seed (mounting errors, focal spread, principal point, distortion), renders each distinct scene
+state once for all cameras (frames are cached ahead of delivery so they arrive at the rig's rate in real
+time), and knows for every delivered frame which scene state it shows, so the ground truth of a take is
+exact.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import time
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import cv2
+import numpy as np
+import yaml
+from numpy.typing import NDArray
+from rigctl.simulators import scenes
+from rigctl.simulators.raycast import RayCamera, RenderResult, Scene, render
+from rigctl.simulators.settings import SimSettings
+
+from rigctl.board import BoardSpec
+from rigctl.calibration_model import ArrayCalibration, CameraModel
+from rigctl.interfaces import CaptureFormat
+from rigctl.pfm import write_pfm
+from rigctl.pixfmt import from_rgb
+from rigctl.rectgeom import RectifiedGrid, common_plane
+from rigctl.rig import Rig
+
+log = logging.getLogger(__name__)
+
+F64 = NDArray[np.float64]
+NOISE_BANK = 8
+
+
+@dataclass(frozen=True)
+class FrameTiming:
+    """When a camera's frame was captured, which sequence number it carries and what it shows."""
+
+    sequence: int
+    capture_ns: int  # relative to the array's stream start
+    scene_frame: int  # index on the common (genlocked) frame grid
+    delivered: bool  # False: dropped at the source
+
+
+def _rays_for(cam: CameraModel, pixel_grid: tuple[NDArray[np.float32], NDArray[np.float32]]) -> RayCamera:
+    w, h = cam.image_size
+    xs, ys = pixel_grid
+    pts = np.stack([xs.ravel(), ys.ravel()], axis=1).astype(np.float64).reshape(-1, 1, 2)
+    if np.any(cam.dist):
+        # the default 5 iterations leave ~0.01 px at the corners; iterate to convergence
+        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
+        norm = cv2.undistortPoints(pts, cam.K, cam.dist, None, np.eye(3), np.eye(3), crit).reshape(-1, 2)
+    else:
+        norm = cv2.undistortPoints(pts, cam.K, cam.dist).reshape(-1, 2)
+    local = np.column_stack([norm, np.ones(len(norm))])
+    dirs = (local @ cam.R).astype(np.float32).reshape(h, w, 3)  # R^T applied to row vectors
+    centre = cam.centre
+
+    def project_box(corners: F64) -> tuple[int, int, int, int] | None:
+        zc = (corners - centre) @ cam.R[2]
+        if np.all(zc <= 1e-3):
+            return None
+        if np.any(zc <= 1e-3):
+            return 0, 0, w, h
+        uv = cam.project(corners)
+        if not np.all(np.isfinite(uv)):
+            return 0, 0, w, h
+        m = 4 + int(abs(cam.dist[0]) * w) if cam.dist.size else 4  # distortion bends the box's edges
+        x0 = max(0, int(np.floor(uv[:, 0].min())) - m)
+        y0 = max(0, int(np.floor(uv[:, 1].min())) - m)
+        x1 = min(w, int(np.ceil(uv[:, 0].max())) + m + 1)
+        y1 = min(h, int(np.ceil(uv[:, 1].max())) + m + 1)
+        if x0 >= x1 or y0 >= y1:
+            return None
+        return x0, y0, x1, y1
+
+    return RayCamera(origin=centre, dirs=dirs, focal_px=float(cam.K[0, 0]), project_box=project_box)
+
+
+class SimArray:
+    """All simulated cameras of one rig, sharing one scene, one clock and one render cache."""
+
+    def __init__(self, rig: Rig, settings: SimSettings | None = None) -> None:
+        self.rig = rig
+        self.requested = settings or SimSettings()
+        self.settings = self.requested.effective()
+        self.fps = self.settings.fps or rig.fps
+        self.period_ns = round(1e9 / self.fps)
+        self.names = rig.camera_names
+        self.index = {n: i for i, n in enumerate(self.names)}
+        self.format = CaptureFormat(rig.width_px, rig.height_px, rig.model.format.pixel_format, self.fps)
+        self.board = BoardSpec()
+        self._lock = threading.Lock()
+        self._frames: dict[int, list[NDArray[np.uint8]]] = {}
+        self._truth: dict[int, tuple[list[NDArray[np.float32]], list[NDArray[np.bool_]]]] = {}
+        self._backgrounds: dict[tuple[str, bool], RenderResult] = {}
+        self.exposure_us = {n: self.settings.exposure_us for n in self.names}
+        self.stream_start_ns: int | None = None
+        self._claimed: set[str] = set()
+        self._prime_lock = threading.Lock()
+        self._luts: dict[float, NDArray[np.uint8]] = {}
+
+    # ---- device bookkeeping ------------------------------------------------------------------------
+    def claim(self, name: str) -> None:
+        from rigctl.errors import DeviceError
+
+        with self._lock:
+            if name not in self.index:
+                raise DeviceError(f"sim://{name}: no such simulated camera (rig has {', '.join(self.names)})")
+            if name in self._claimed:
+                raise DeviceError(f"sim://{name}: device is busy (opened by another user)")
+            self._claimed.add(name)
+
+    def release(self, name: str) -> None:
+        with self._lock:
+            self._claimed.discard(name)
+            if not self._claimed:
+                self.stream_start_ns = None
+
+    def start_stream(self) -> int:
+        """The genlocked grid's origin: set by the first camera that starts, shared by all."""
+        with self._lock:
+            if self.stream_start_ns is None:
+                self.stream_start_ns = time.monotonic_ns()
+            return self.stream_start_ns
+
+    def gain_lut(self, gain: float) -> NDArray[np.uint8]:
+        """A 4-channel LUT scaling packed 4:2:2 bytes as RGB would scale by ``gain``."""
+        key = round(gain, 4)
+        with self._lock:
+            lut = self._luts.get(key)
+        if lut is None:
+            v = np.arange(256, dtype=np.float64)
+            y = np.clip(np.rint(16 + (v - 16) * gain), 0, 255)
+            c = np.clip(np.rint(128 + (v - 128) * gain), 0, 255)
+            order = (c, y, c, y) if self.format.pixel_format == "UYVY" else (y, c, y, c)
+            lut = np.stack(order, axis=1).astype(np.uint8).reshape(1, 256, 4)
+            with self._lock:
+                self._luts[key] = lut
+        return lut
+
+    # ---- the true cameras -------------------------------------------------------------------------
+    @cached_property
+    def calibration(self) -> ArrayCalibration:
+        """The true calibration: nominal lattice plus the seed's mounting and lens errors."""
+        s = self.settings
+        rig = self.rig
+        w, h = rig.width_px, rig.height_px
+        rng = np.random.default_rng(np.random.SeedSequence([s.seed, 1]))
+        cams = {}
+        for cam in rig.cameras:
+            draw = rng.normal(size=10)
+            fx = rig.c0_px * (1 + s.focal_spread * draw[0])
+            fy = rig.c0_y_px * (fx / rig.c0_px)
+            cx = (w - 1) / 2 + s.principal_offset_px * draw[1] * w / 960
+            cy = (h - 1) / 2 + s.principal_offset_px * draw[2] * w / 960
+            k1 = s.distortion_k1 + s.distortion_spread * draw[3]
+            dist = np.array([k1, -0.3 * k1, 0.0, 0.0, 0.0])
+            rvec = np.radians(s.mount_rotation_deg) * draw[4:7]
+            R = cv2.Rodrigues(rvec)[0]
+            C = np.array([cam.x_m, cam.y_m, 0.0]) + s.mount_position_mm * 1e-3 * draw[7:10]
+            K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]])
+            cams[cam.name] = CameraModel(cam.name, K, dist, R, -R @ C, (w, h))
+        ref = "r1c1" if "r1c1" in cams else self.names[0]
+        return ArrayCalibration(rig=rig.name, cameras=cams, reference=ref, meta={"source": "simulation truth"})
+
+    @cached_property
+    def rectified(self) -> RectifiedGrid:
+        return common_plane(self.calibration, self.rig.spacing_m)
+
+    @cached_property
+    def _pixel_grid(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        h, w = self.rig.height_px, self.rig.width_px
+        ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+        return xs, ys
+
+    @cached_property
+    def _raw_rays(self) -> dict[str, RayCamera]:
+        return {n: _rays_for(self.calibration[n], self._pixel_grid) for n in self.names}
+
+    @cached_property
+    def _rect_rays(self) -> dict[str, RayCamera]:
+        if self.settings.ideal:
+            return self._raw_rays
+        return {n: _rays_for(self.rectified.camera(n), self._pixel_grid) for n in self.names}
+
+    @cached_property
+    def _effects(self) -> dict[str, NDArray[np.float32]]:
+        """Per camera: vignetting times per-channel gain (exposure and colour mismatch), H x W x 3."""
+        s = self.settings
+        rng = np.random.default_rng(np.random.SeedSequence([s.seed, 2]))
+        h, w = self.rig.height_px, self.rig.width_px
+        ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+        r2 = ((xs - w / 2) ** 2 + (ys - h / 2) ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
+        vig = (1.0 - s.vignetting * r2).astype(np.float32)
+        out = {}
+        for n in self.names:
+            d = rng.normal(size=4)
+            gain = (1 + s.exposure_spread * d[0]) * (1 + s.colour_spread * d[1:4])
+            out[n] = np.ascontiguousarray(vig[..., None] * gain.astype(np.float32)[None, None, :])
+        return out
+
+    @cached_property
+    def _noise(self) -> list[NDArray[np.int16]]:
+        s = self.settings
+        rng = np.random.default_rng(np.random.SeedSequence([s.seed, 3]))
+        shape = (self.rig.height_px, self.rig.width_px * 2)
+        return [np.rint(rng.normal(0, s.noise, shape)).astype(np.int16) for _ in range(NOISE_BANK)]
+
+    # ---- scene states -----------------------------------------------------------------------------
+    @property
+    def distinct_states(self) -> int:
+        """How many different scene states a stream cycles through (each is rendered once)."""
+        s = self.settings
+        if s.scene == "charuco":
+            return s.board_poses
+        if not s.motion:
+            return 1
+        return s.motion_states
+
+    def state_of(self, scene_frame: int) -> int:
+        """Which distinct scene state a frame on the common grid shows."""
+        s = self.settings
+        if s.scene == "charuco":
+            return (scene_frame // s.board_hold_frames) % s.board_poses
+        if not s.motion:
+            return 0
+        per_cycle = max(1, round(scenes.MOTION_PERIOD_S * self.fps))
+        return (scene_frame % per_cycle) * s.motion_states // per_cycle
+
+    @cached_property
+    def board_poses(self) -> list[scenes.BoardPose]:
+        half = self.rig.model.sensor.width_mm / (2 * self.rig.model.lens.focal_length_mm)
+        return scenes.board_poses(self.settings, self.board, half)
+
+    def scene(self, state: int) -> Scene:
+        if self.settings.scene == "charuco":
+            pose = self.board_poses[state]
+            # a power of two per square: the texture's mip levels then need no resampling, which would
+            # shift corners by a fraction of a texel depending on where they fall
+            need = self.rig.c0_px * self.board.square_m / self.settings.board_distance_m[0] * 2
+            px = int(2 ** np.clip(np.ceil(np.log2(need)), 5, 9))
+            return scenes.charuco(self.settings, self.board, pose, px)
+        return scenes.presenter(self.settings, state * scenes.MOTION_PERIOD_S / self.settings.motion_states)
+
+    def _static(self, scene: Scene, name: str, rectified: bool) -> RenderResult:
+        """The scene's static background through one camera, rendered once."""
+        key = (name, rectified)
+        with self._lock:
+            cached = self._backgrounds.get(key)
+        if cached is None:
+            rays = (self._rect_rays if rectified else self._raw_rays)[name]
+            static = Scene(scene.primitives[: scene.static], scene.light_dir, scene.ambient, scene.background)
+            cached = render(static, rays, colour=not rectified)
+            with self._lock:
+                self._backgrounds[key] = cached
+        return cached
+
+    def _render_camera(self, scene: Scene, name: str) -> NDArray[np.uint8]:
+        base = self._static(scene, name, rectified=False)
+        res: RenderResult = render(scene, self._raw_rays[name], base=base, skip=scene.static)
+        rgb = np.asarray(cv2.multiply(res.rgb, self._effects[name]), dtype=np.float32)
+        return from_rgb(np.clip(rgb, 0.0, 1.0, out=rgb), self.format.pixel_format)
+
+    def frames(self, state: int) -> list[NDArray[np.uint8]]:
+        """Rendered bytes of every camera for one scene state (cached)."""
+        with self._lock:
+            cached = self._frames.get(state)
+        if cached is not None:
+            return cached
+        scene = self.scene(state)
+        with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+            out = list(pool.map(lambda n: self._render_camera(scene, n), self.names))
+        with self._lock:
+            self._frames[state] = out
+        return out
+
+    def prime(self) -> None:
+        """Render every distinct scene state before streaming starts, so delivery is real time."""
+        with self._prime_lock:
+            for state in range(self.distinct_states):
+                self.frames(state)
+            if self.settings.noise:
+                self._noise  # noqa: B018  (computed here, not on the first frame)
+
+    def truth(self, state: int) -> tuple[list[NDArray[np.float32]], list[NDArray[np.bool_]]]:
+        """Per camera: disparity in the rectified geometry of the true calibration (+inf off the subject)
+        and the subject matte."""
+        with self._lock:
+            cached = self._truth.get(state)
+        if cached is not None:
+            return cached
+        scene = self.scene(state)
+        disp, mattes = [], []
+        for n in self.names:
+            base = self._static(scene, n, rectified=True)
+            res = render(scene, self._rect_rays[n], colour=False, base=base, skip=scene.static)
+            d = self.rectified.disparity_from_depth(res.depth.astype(np.float64)).astype(np.float32)
+            d[~res.subject] = np.inf
+            disp.append(d)
+            mattes.append(res.subject)
+        with self._lock:
+            self._truth[state] = (disp, mattes)
+        return disp, mattes
+
+    # ---- timing -----------------------------------------------------------------------------------
+    @cached_property
+    def _start_offsets(self) -> dict[str, int]:
+        """Start-up stagger: each camera's first frame is a whole number of periods after stream start."""
+        s = self.settings
+        rng = np.random.default_rng(np.random.SeedSequence([s.seed, 4]))
+        most = int(s.stagger_ms * 1e6 // self.period_ns)
+        return {n: int(rng.integers(0, most + 1)) if most else 0 for n in self.names}
+
+    def timing(self, name: str, first_grid: int = 0) -> Iterator[FrameTiming]:
+        """Frame timings of camera ``name`` after it starts streaming at grid slot ``first_grid``
+        (an endless generator). Sequence numbers start at 0, as after a V4L2 STREAMON."""
+        s = self.settings
+        skew_ns = int(s.skew_us.get(name, 0.0) * 1e3)
+        drops = set(s.drops.get(name, []))
+        loss = s.signal_loss.get(name)
+        rng = np.random.default_rng(np.random.SeedSequence([s.seed, 5, self.index[name]]))
+        grid = first_grid + self._start_offsets[name]
+        seq = 0
+        while True:
+            t_grid = grid * self.period_ns
+            jitter = int(rng.normal(0, s.jitter_us * 1e3)) if s.jitter_us else 0
+            if loss is not None and loss[0] * 1e9 <= t_grid < loss[1] * 1e9:
+                grid += 1
+                continue
+            yield FrameTiming(seq, t_grid + skew_ns + jitter, grid, seq not in drops)
+            seq += 1
+            grid += 1
+
+    def signal_present(self, name: str, t_rel_ns: int) -> bool:
+        loss = self.settings.signal_loss.get(name)
+        return loss is None or not (loss[0] * 1e9 <= t_rel_ns < loss[1] * 1e9)
+
+    def noise_for(self, name: str, sequence: int) -> NDArray[np.int16] | None:
+        if not self.settings.noise:
+            return None
+        return self._noise[(self.index[name] * 3 + sequence * 5) % NOISE_BANK]
+
+    def gain_for(self, name: str) -> float:
+        """Brightness change from camera control (exposure set away from what was rendered)."""
+        return self.exposure_us[name] / self.settings.exposure_us
+
+    # ---- ground truth on disk ---------------------------------------------------------------------
+    def write_truth_for(
+        self, folder: Path, frame_sets: list[tuple[int, dict[str, int]]], delivered: dict[str, dict[int, int]]
+    ) -> None:
+        """:meth:`write_truth` for frame sets given as {camera: sequence number}."""
+        scene_sets = [(n, {c: delivered[c][seq] for c, seq in members.items()}) for n, members in frame_sets]
+        self.write_truth(folder, scene_sets)
+
+    def write_truth(self, folder: Path, frame_sets: list[tuple[int, dict[str, int]]]) -> None:
+        """Write ``truth/``: the true calibration, per frame set and camera the disparity (PFM), the
+        subject matte (PNG) and, for the charuco scene, the board's pose. ``frame_sets`` lists
+        (frame set number, {camera: scene frame on the common grid}). Repeated scene states are hard
+        links, not copies."""
+        folder.mkdir(parents=True, exist_ok=True)
+        self.calibration.save(folder / "calibration.yaml")
+        (folder / "settings.yaml").write_text(yaml.safe_dump(self.requested.model_dump(mode="json"), sort_keys=False))
+        first_file: dict[tuple[int, str, str], Path] = {}
+        poses: dict[int, dict[str, object]] = {}
+        for number, members in frame_sets:
+            out = folder / "disparity" / f"{number:06d}"
+            out.mkdir(parents=True, exist_ok=True)
+            scene_frames = set(members.values())
+            if len(scene_frames) != 1:
+                log.warning("frame set %d mixes scene frames %s; truth follows the first", number, scene_frames)
+            state = self.state_of(min(scene_frames))
+            if self.settings.scene == "charuco":
+                pose = self.board_poses[state]
+                poses[number] = {"R": pose.R.tolist(), "origin": pose.origin.tolist(), "state": state}
+            for name in members:
+                for kind, suffix in (("disparity", ".pfm"), ("matte", ".png")):
+                    target = folder / kind / f"{number:06d}" / f"{name}{suffix}"
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    key = (state, name, kind)
+                    if key in first_file:
+                        os.link(first_file[key], target)
+                        continue
+                    disp, mattes = self.truth(state)
+                    i = self.index[name]
+                    if kind == "disparity":
+                        write_pfm(target, disp[i])
+                    else:
+                        cv2.imwrite(str(target), mattes[i].astype(np.uint8) * 255)
+                    first_file[key] = target
+        if poses:
+            doc = {"board": self.board.as_dict(), "poses": poses}
+            (folder / "board_poses.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+
+    def frame_period_s(self) -> float:
+        return 1.0 / self.fps
+
+    def describe(self) -> str:
+        s = self.settings
+        return (
+            f"simulated {self.rig.name}: scene {s.scene}, seed {s.seed}, {'ideal' if s.ideal else 'realistic'}, "
+            f"{self.distinct_states} distinct state{'s' if self.distinct_states != 1 else ''}, "
+            f"{self.format.describe()}"
+        )
+
+
+def nominal_near_far(settings: SimSettings) -> tuple[float, float]:
+    """Where the presenter's surfaces lie (for tests and the demo's plan)."""
+    near = settings.subject_distance_m
+    return near, near + scenes.PRESENTER_DEPTH_M

@@ -1,0 +1,163 @@
+"""A simulated camera behind the :class:`~rigctl.interfaces.Camera` interface.
+
+It behaves like a V4L2 capture device: sequence numbers restart at 0 on every start, frames arrive in
+real time on the array's genlocked grid (plus the configured skew and jitter), a reader that falls more
+than ``buffers`` frames behind loses frames at the source (sequence gaps), and a signal loss stops
+delivery without advancing the sequence. Every frame carries its ids burnt into the top-left corner.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Iterator
+
+import cv2
+import numpy as np
+from rigctl.simulators import burnin
+from rigctl.simulators.array import FrameTiming, SimArray
+
+from rigctl.errors import DeviceError
+from rigctl.interfaces import CameraStatus, CaptureFormat, Frame, FrameFlags
+
+log = logging.getLogger(__name__)
+
+
+class SimCamera:
+    """One ``sim://rXcY`` camera of a :class:`SimArray`."""
+
+    def __init__(self, name: str, array: SimArray, buffers: int = 4, latency_us: float = 800.0) -> None:
+        self.name = name
+        self.array = array
+        self.buffers = buffers
+        self.latency_ns = int(latency_us * 1e3)
+        self._open = False
+        self._streaming = False
+        self._timings: Iterator[FrameTiming] | None = None
+        self._pending: FrameTiming | None = None
+        self._lock = threading.Lock()
+        self._source_drops = 0
+        self._frames = 0
+        self._fps = 0.0
+        self._last_capture: int | None = None
+        self.delivered: dict[int, int] = {}  # sequence -> scene frame, for the ground truth
+
+    # lifecycle -------------------------------------------------------------------------------------
+    def open(self) -> None:
+        if self._open:
+            raise DeviceError(f"sim://{self.name}: device is busy (already open)")
+        self.array.claim(self.name)
+        self._open = True
+
+    def configure(self, fmt: CaptureFormat) -> CaptureFormat:
+        have = self.array.format
+        if (fmt.width, fmt.height, fmt.pixel_format) != (have.width, have.height, have.pixel_format):
+            raise DeviceError(f"sim://{self.name}: format {fmt.describe()} not offered (offered: {have.describe()})")
+        if abs(fmt.fps - have.fps) > 1e-6:
+            raise DeviceError(f"sim://{self.name}: {fmt.fps:g} fps not offered (offered: {have.fps:g} fps)")
+        return have
+
+    def start(self) -> None:
+        if not self._open:
+            raise DeviceError(f"sim://{self.name}: start before open")
+        self.array.prime()
+        t0 = self.array.start_stream()
+        now = time.monotonic_ns()
+        first_grid = max(0, -(-(now - t0) // self.array.period_ns))
+        self._timings = self.array.timing(self.name, first_grid=first_grid)
+        self._pending = None
+        self._source_drops = 0
+        self._frames = 0
+        self._streaming = True
+
+    def stop(self) -> None:
+        self._streaming = False
+        self._timings = None
+        self._pending = None
+
+    def close(self) -> None:
+        self.stop()
+        if self._open:
+            self.array.release(self.name)
+        self._open = False
+
+    # frames ----------------------------------------------------------------------------------------
+    def read(self, timeout_s: float, into: memoryview | None = None) -> Frame | None:
+        if not self._streaming or self._timings is None:
+            raise DeviceError(f"sim://{self.name}: read while not streaming")
+        deadline = time.monotonic_ns() + int(timeout_s * 1e9)
+        t0 = self.array.stream_start_ns
+        assert t0 is not None
+        while True:
+            timing = self._pending or next(self._timings)
+            self._pending = None
+            due = t0 + timing.capture_ns + self.latency_ns
+            now = time.monotonic_ns()
+            if not timing.delivered:
+                self._source_drops += 1
+                continue
+            if now - due > self.buffers * self.array.period_ns:
+                # the reader fell behind: every driver buffer was full, the device dropped this frame
+                self._source_drops += 1
+                continue
+            if due > deadline:
+                self._pending = timing
+                if deadline > now:
+                    time.sleep((deadline - now) / 1e9)
+                return None
+            if due > now:
+                time.sleep((due - now) / 1e9)
+            return self._deliver(timing, t0, into)
+
+    def _deliver(self, timing: FrameTiming, t0: int, into: memoryview | None) -> Frame:
+        arr = self.array
+        state = arr.state_of(timing.scene_frame)
+        clean = arr.frames(state)[arr.index[self.name]]
+        nbytes = clean.nbytes
+        if into is None:
+            buf = np.empty_like(clean)
+        else:
+            if len(into) < nbytes:
+                raise DeviceError(f"sim://{self.name}: buffer of {len(into)} bytes for a {nbytes}-byte frame")
+            buf = np.frombuffer(into, dtype=np.uint8, count=nbytes).reshape(clean.shape)
+        gain = arr.gain_for(self.name)
+        noise = arr.noise_for(self.name, timing.sequence)
+        if gain != 1.0:
+            lut = arr.gain_lut(gain)
+            cv2.LUT(clean.reshape(clean.shape[0], -1, 4), lut, dst=buf.reshape(clean.shape[0], -1, 4))
+            src = buf
+        else:
+            src = clean
+        if noise is not None:
+            cv2.add(src, noise, dst=buf, dtype=cv2.CV_8U)
+        elif src is not buf:
+            np.copyto(buf, src)
+        if arr.format.pixel_format in ("UYVY", "YUYV"):
+            burnin.burn(buf, arr.format.width, arr.index[self.name], timing.sequence, timing.scene_frame)
+        capture = t0 + timing.capture_ns
+        with self._lock:
+            if self._last_capture is not None and capture > self._last_capture:
+                inst = 1e9 / (capture - self._last_capture)
+                self._fps = inst if self._fps == 0 else 0.9 * self._fps + 0.1 * inst
+            self._last_capture = capture
+            self._frames += 1
+            self.delivered[timing.sequence] = timing.scene_frame
+        flags = FrameFlags.TIMESTAMP_MONOTONIC | FrameFlags.TIMESTAMP_SOE
+        data = buf.reshape(-1).data
+        return Frame(self.name, timing.sequence, capture, time.monotonic_ns(), flags, data)
+
+    def status(self) -> CameraStatus:
+        t0 = self.array.stream_start_ns
+        now_rel = time.monotonic_ns() - t0 if t0 is not None else 0
+        present = self.array.signal_present(self.name, now_rel)
+        with self._lock:
+            return CameraStatus(
+                signal_present=present,
+                format=self.array.format if present else None,
+                measured_fps=self._fps if self._streaming else 0.0,
+                source_drops=self._source_drops,
+                frames=self._frames,
+                reference_locked=True,
+                detail=self.array.describe(),
+            )

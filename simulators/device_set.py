@@ -1,0 +1,43 @@
+"""Simulated cameras for a rig's ``sim://`` addresses, with the array's ground truth behind them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from rigctl.simulators.array import SimArray
+from rigctl.simulators.camera import SimCamera
+from rigctl.simulators.settings import parse_sim_args
+
+from rigctl.errors import DeviceError
+from rigctl.interfaces import Camera
+from rigctl.rig import Rig
+
+
+class SimTruth:
+    """Ground truth of a simulated take, written by the recorder through the generic truth hook."""
+
+    def __init__(self, array: SimArray, cameras: dict[str, SimCamera]) -> None:
+        self.array = array
+        self.cameras = cameras
+
+    def write_truth(self, folder: Path, frame_sets: list[tuple[int, dict[str, int]]]) -> None:
+        delivered = {name: cam.delivered for name, cam in self.cameras.items()}
+        self.array.write_truth_for(folder, frame_sets, delivered)
+
+
+def simulated_cameras(
+    rig: Rig, sim_args: list[str], names: list[str]
+) -> tuple[dict[str, Camera], SimTruth, dict[str, Any], str]:
+    settings = parse_sim_args(sim_args)
+    array = SimArray(rig, settings)
+    cams: dict[str, SimCamera] = {}
+    for cam in rig.cameras:
+        if cam.name not in names or not cam.device.startswith("sim://"):
+            continue
+        target = cam.device.removeprefix("sim://")
+        if target != cam.name:
+            raise DeviceError(f"{rig.source}: camera {cam.name} has device {cam.device}; expected sim://{cam.name}")
+        cams[cam.name] = SimCamera(cam.name, array)
+    out: dict[str, Camera] = dict(cams)
+    return out, SimTruth(array, cams), settings.model_dump(mode="json"), array.describe()

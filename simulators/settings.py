@@ -1,0 +1,149 @@
+"""Settings of the simulated array, given as ``--sim KEY=VALUE`` and recorded with every take.
+
+Keys with a camera in them (``drops.r0c1=[5,6,20]``, ``skew_us.r2c2=3000``,
+``signal_loss.r1c1=[1.0,1.5]``) set one camera; ``ideal=true`` turns every realism setting off
+(a perfect lattice of identical pinhole cameras, which is already rectified).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from rigctl.errors import ParameterError
+from rigctl.rig import CAMERA_NAME
+
+NonNeg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+
+SCENES = ("presenter", "charuco")
+PER_CAMERA = ("skew_us", "drops", "signal_loss")
+
+
+class SimSettings(BaseModel):
+    """Everything the simulated array can be told. Defaults are a realistic rig on a real stage."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    scene: Literal["presenter", "charuco"] = Field("presenter", description="what the cameras see")
+    seed: int = Field(0, description="same seed, same frames, byte for byte")
+    ideal: bool = Field(False, description="perfect lattice, identical pinhole cameras, no noise")
+    # the presenter scene
+    subject_distance_m: Annotated[float, Field(gt=0.3, le=50, allow_inf_nan=False)] = Field(
+        2.0, description="distance of the subject's nearest point (hands); it is about 0.9 m deep"
+    )
+    screen_gap_m: Annotated[float, Field(gt=0.05, le=20)] = Field(1.0, description="green screen behind subject")
+    desk: bool = Field(True, description="a desk in front of the presenter")
+    motion: bool = Field(True, description="slight motion of the presenter over time")
+    motion_states: Annotated[int, Field(ge=1, le=200)] = Field(
+        10, description="distinct poses in one 1.6 s motion cycle (each is rendered once and cached)"
+    )
+    texture: Literal["photo", "flat", "repetitive"] = Field(
+        "photo", description="photo: real photographs; flat: uniform colours; repetitive: periodic patterns"
+    )
+    # the charuco scene
+    board_poses: Annotated[int, Field(ge=1, le=2000)] = Field(40, description="distinct board poses")
+    board_hold_frames: Annotated[int, Field(ge=1, le=1000)] = Field(1, description="frames each pose is held")
+    board_distance_m: tuple[float, float] = Field((1.8, 3.2), description="range of board distances")
+    board_tilt_deg: Annotated[float, Field(ge=0, le=80)] = Field(40.0, description="largest board tilt")
+    # realism (all zero with ideal=true)
+    mount_position_mm: NonNeg = Field(0.2, description="sigma of each camera's position error (machined frame)")
+    mount_rotation_deg: NonNeg = Field(0.5, description="sigma of each camera's rotation error")
+    focal_spread: NonNeg = Field(0.005, description="relative sigma of focal lengths")
+    principal_offset_px: NonNeg = Field(2.0, description="sigma of principal point offsets")
+    distortion_k1: float = Field(-0.04, ge=-0.5, le=0.5, description="mean radial distortion k1")
+    distortion_spread: NonNeg = Field(0.01, description="sigma of k1 between cameras")
+    noise: NonNeg = Field(1.0, description="sensor noise sigma, 8-bit grey levels")
+    exposure_spread: NonNeg = Field(0.03, description="relative sigma of exposure between cameras")
+    colour_spread: NonNeg = Field(0.02, description="relative sigma of per-channel gains")
+    vignetting: NonNeg = Field(0.15, description="relative fall-off at the image corners")
+    # timing
+    fps: Annotated[float, Field(gt=0, le=240)] | None = Field(None, description="frame rate (default: rig's)")
+    jitter_us: NonNeg = Field(50.0, description="sigma of capture timestamp jitter")
+    skew_us: dict[str, float] = Field(default_factory=dict, description="fixed per-camera timestamp skew")
+    stagger_ms: NonNeg = Field(0.0, description="largest start-up stagger between cameras")
+    drops: dict[str, list[Annotated[int, Field(ge=0)]]] = Field(
+        default_factory=dict, description="sequence numbers a camera drops"
+    )
+    signal_loss: dict[str, tuple[NonNeg, NonNeg]] = Field(
+        default_factory=dict, description="[start, end] seconds after stream start with no signal"
+    )
+    exposure_us: Annotated[float, Field(gt=0, le=1e6)] = Field(
+        20000.0, description="exposure time (camera control can change it; brightness scales with it)"
+    )
+
+    @field_validator("skew_us", "drops", "signal_loss")
+    @classmethod
+    def _camera_keys(cls, value: dict[str, Any]) -> dict[str, Any]:
+        for key in value:
+            if not CAMERA_NAME.match(key):
+                raise ValueError(f"{key!r} is not a camera name r{{row}}c{{col}}")
+        return value
+
+    def effective(self) -> SimSettings:
+        """These settings with every realism setting zeroed when ``ideal`` is set."""
+        if not self.ideal:
+            return self
+        zero = {
+            k: 0.0
+            for k in (
+                "mount_position_mm",
+                "mount_rotation_deg",
+                "focal_spread",
+                "principal_offset_px",
+                "distortion_k1",
+                "distortion_spread",
+                "noise",
+                "exposure_spread",
+                "colour_spread",
+                "vignetting",
+            )
+        }
+        return self.model_copy(update=zero)
+
+
+def _value(text: str) -> Any:
+    if "," in text and not text.lstrip().startswith(("[", "{")):
+        text = f"[{text}]"
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+
+
+def parse_sim_args(pairs: list[str], base: dict[str, Any] | None = None) -> SimSettings:
+    """``["seed=7", "drops.r0c1=[5,6]"]`` -> validated settings; errors name the key."""
+    data: dict[str, Any] = dict(base or {})
+    for pair in pairs:
+        if "=" not in pair:
+            raise ParameterError(f"--sim {pair!r}: expected KEY=VALUE (see rigctl record --help)")
+        key, _, raw = pair.partition("=")
+        key = key.strip()
+        value = _value(raw)
+        if "." in key:
+            outer, _, inner = key.partition(".")
+            if outer not in PER_CAMERA:
+                raise ParameterError(f"--sim {key}: {outer} is not a per-camera setting ({', '.join(PER_CAMERA)} are)")
+            data.setdefault(outer, {})
+            data[outer] = {**data[outer], inner: value}
+        else:
+            data[key] = value
+    try:
+        return SimSettings.model_validate(data)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        loc = ".".join(str(p) for p in err["loc"])
+        if err["type"] == "extra_forbidden":
+            raise ParameterError(f"--sim {loc}: unknown setting (rigctl record --help lists them)") from None
+        msg = str(err["msg"]).removeprefix("Value error, ")
+        raise ParameterError(f"--sim {loc}: {msg}, got {err.get('input')!r}") from None
+
+
+def describe_settings() -> str:
+    """One line per setting with its default and meaning, for ``rigctl record --help``."""
+    lines = []
+    for name, info in SimSettings.model_fields.items():
+        default = info.get_default(call_default_factory=True)
+        lines.append(f"  {name}={default!r}: {info.description}")
+    return "\n".join(lines)

@@ -1,0 +1,49 @@
+"""``--sim KEY=VALUE`` settings: parsed, validated, errors name the key."""
+
+from __future__ import annotations
+
+import pytest
+from rigctl.simulators.settings import describe_settings, parse_sim_args
+
+from rigctl.errors import ParameterError
+
+
+def test_values_and_per_camera_keys() -> None:
+    s = parse_sim_args(
+        [
+            "ideal=true",
+            "seed=7",
+            "subject_distance_m=2.4",
+            "drops.r0c1=5,6,20",
+            "skew_us.r2c2=3000",
+            "signal_loss.r1c1=[1.0,1.5]",
+        ]
+    )
+    assert s.ideal and s.seed == 7 and s.subject_distance_m == 2.4
+    assert s.drops == {"r0c1": [5, 6, 20]} and s.skew_us == {"r2c2": 3000.0}
+    assert s.signal_loss == {"r1c1": (1.0, 1.5)}
+    eff = s.effective()
+    assert eff.noise == 0 and eff.mount_rotation_deg == 0 and eff.distortion_k1 == 0
+
+
+@pytest.mark.parametrize(
+    ("pairs", "message"),
+    [
+        (["colour=red"], "--sim colour: unknown setting"),
+        (["seed"], "expected KEY=VALUE"),
+        (["noise=-1"], "--sim noise: "),
+        (["drops.centre=[1]"], "is not a camera name"),
+        (["scene=forest"], "--sim scene: "),
+        (["subject_distance_m=nan"], "--sim subject_distance_m"),
+        (["seed.r0c0=1"], "seed is not a per-camera setting"),
+    ],
+)
+def test_bad_settings_are_named(pairs: list[str], message: str) -> None:
+    with pytest.raises(ParameterError, match=message.replace(".", r"\.").replace("[", r"\[")):
+        parse_sim_args(pairs)
+
+
+def test_help_lists_every_setting() -> None:
+    text = describe_settings()
+    for key in ("scene=", "seed=", "ideal=", "drops=", "skew_us=", "signal_loss=", "stagger_ms=", "jitter_us="):
+        assert key in text
