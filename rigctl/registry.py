@@ -76,3 +76,10 @@ def open_cameras(rig: Rig, sim: list[str] | None = None, cameras: list[str] | No
             f"rig {rig.name} uses V4L2 devices ({wanted[0].device}); V4L2 capture is not in this build yet"
         )
     return DeviceSet(cameras=out, truth=truth, settings=settings, description=description)
+
+
+def sim_settings_help() -> str:
+    """The simulator's settings, for ``rigctl record --help``."""
+    from rigctl.simulators.settings import describe_settings
+
+    return describe_settings()

@@ -1,0 +1,66 @@
+"""``rigctl take info | check | export``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from rigctl.cli.progress import Progress
+from rigctl.cli.record import format_summary
+from rigctl.take.check import check_take
+from rigctl.take.export import export_take
+from rigctl.take.reader import TakeReader
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("take", help="inspect, check and export takes")
+    verbs = p.add_subparsers(dest="take_verb", metavar="info|check|export", required=True)
+    info = verbs.add_parser("info", help="frames, drops, complete frame sets, skew")
+    info.add_argument("take", type=Path)
+    info.add_argument("--json", action="store_true")
+    info.set_defaults(func=run_info)
+    check = verbs.add_parser("check", help="is everything the take claims readable? (exit 0 when it is)")
+    check.add_argument("take", type=Path)
+    check.add_argument("--quick", action="store_true", help="skip reading every frame's checksum")
+    check.set_defaults(func=run_check)
+    export = verbs.add_parser("export", help="frame sets as DIR/<frame>/<camera>.png or .exr")
+    export.add_argument("take", type=Path)
+    export.add_argument("--out", type=Path, required=True, metavar="DIR")
+    export.add_argument("--frames", metavar="A-B", help="N or A-B, frame-set numbers from 0 (default: all)")
+    export.add_argument("--format", default="png", choices=("png", "exr"))
+    export.set_defaults(func=run_export)
+
+
+def run_info(ns: argparse.Namespace) -> int:
+    summary = TakeReader(ns.take).summary()
+    print(json.dumps(summary, indent=2) if ns.json else format_summary(summary))
+    return 0
+
+
+def run_check(ns: argparse.Namespace) -> int:
+    report = check_take(ns.take, verify_data=not ns.quick)
+    for w in report.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    for e in report.errors:
+        print(f"error: {e}", file=sys.stderr)
+    if report.ok:
+        print(f"{ns.take}: ok ({report.frames_checked} frames checked)")
+        return 0
+    print(f"{ns.take}: {len(report.errors)} problem(s)", file=sys.stderr)
+    return 1
+
+
+def run_export(ns: argparse.Namespace) -> int:
+    reader = TakeReader(ns.take)
+    bar = Progress(f"exporting {reader.manifest.take}")
+    try:
+        result = export_take(reader, ns.out, ns.frames, ns.format, progress=bar.steps)
+    finally:
+        bar.close()
+    print(
+        f"{result['images']} images from {result['sets']} frame sets written to {ns.out}"
+        + (f" ({result['missing']} missing members skipped)" if result["missing"] else "")
+    )
+    return 0

@@ -1,0 +1,518 @@
+"""The recorder: every camera of a rig to disk at full rate, nothing lost, everything accounted for.
+
+Per camera, a capture thread reads frames from the device into a fixed pool of preallocated buffers and
+hands them to that camera's writer thread through a bounded queue. Capture never waits for the writer
+or the UI: when no buffer is free the frame is still taken from the device (so the device keeps
+flowing) and counted as a writer drop with its sequence number. Sequence gaps are source drops; frames
+the device flags as corrupted are error frames. Recording starts at one instant T0 for all cameras and
+ends at T1; frame sets are assembled by capture time afterwards (see :mod:`rigctl.take.framesets`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import logging
+import os
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rigctl import __version__
+from rigctl.errors import DeviceError, RigctlError, TakeError
+from rigctl.interfaces import Camera, CaptureFormat, Frame, FrameFlags
+from rigctl.registry import DeviceSet
+from rigctl.rig import Rig
+from rigctl.take import framesets, sidecars
+from rigctl.take.accounting import CameraStats
+from rigctl.take.manifest import TAKE_SPEC, write_manifest
+from rigctl.take.writer import CameraWriter, DiskFullError
+
+log = logging.getLogger(__name__)
+
+RESERVE_BYTES = 1 << 20  # kept free on every destination so the manifest can be written when it fills
+
+
+class _Pool:
+    """Preallocated frame buffers of one camera; taking one never blocks."""
+
+    def __init__(self, count: int, size: int) -> None:
+        self.buffers = [bytearray(size) for _ in range(count)]
+        self.views = [memoryview(b) for b in self.buffers]
+        self.free: queue.SimpleQueue[int] = queue.SimpleQueue()
+        for i in range(count):
+            self.free.put(i)
+        self.scratch = memoryview(bytearray(size))
+
+    def take(self) -> int | None:
+        try:
+            return self.free.get_nowait()
+        except queue.Empty:
+            return None
+
+    def give(self, i: int) -> None:
+        self.free.put(i)
+
+
+@dataclass
+class TakePlan:
+    """Where a take goes: its name, the primary folder (manifest) and per camera the folder of its files."""
+
+    name: str
+    folder: Path
+    camera_folders: dict[str, Path]
+
+    @classmethod
+    def spread(cls, name: str, destinations: list[Path], cameras: list[str]) -> TakePlan:
+        """Cameras dealt round-robin over the destinations; the manifest lives on the first."""
+        folders = {cam: destinations[i % len(destinations)] / name / "cameras" for i, cam in enumerate(cameras)}
+        return cls(name, destinations[0] / name, folders)
+
+
+class Recorder:
+    """Records one take from an opened :class:`DeviceSet`."""
+
+    def __init__(
+        self,
+        rig: Rig,
+        devices: DeviceSet,
+        plan: TakePlan,
+        *,
+        checksum: bool = True,
+        buffers_per_camera: int | None = None,
+        stop_timeout_s: float = 5.0,
+        writer_factory: Callable[..., CameraWriter] = CameraWriter,
+        notes: list[str] | None = None,
+    ) -> None:
+        self.rig = rig
+        self.devices = devices
+        self.plan = plan
+        self.cameras: dict[str, Camera] = devices.cameras
+        self.names = sorted(self.cameras, key=lambda n: rig.camera_names.index(n))
+        self.format = CaptureFormat(rig.width_px, rig.height_px, rig.model.format.pixel_format, rig.fps)
+        self.period_ns = round(1e9 / rig.fps)
+        self.checksum = checksum
+        self.buffers = buffers_per_camera or self.default_buffers(self.format)
+        self.stop_timeout_s = stop_timeout_s
+        self.writer_factory = writer_factory
+        self.notes = list(notes or [])
+        self.stats = {n: CameraStats(n, pool_size=self.buffers) for n in self.names}
+        self.t0_ns: int | None = None
+        self.t1_ns: int | None = None
+        self.started_utc = ""
+        self.error: RigctlError | None = None
+        self.end_reason = ""
+        self._stop = threading.Event()
+        self._capturing = threading.Event()
+        self._armed = False
+        self._threads: list[threading.Thread] = []
+        self._queues: dict[str, queue.Queue[tuple[Frame, int] | None]] = {}
+        self._pools: dict[str, _Pool] = {}
+        self._writers: dict[str, CameraWriter] = {}
+        self._writer_busy: dict[str, Frame | None] = {}
+        self._writer_threads: dict[str, threading.Thread] = {}
+        self._lock = threading.Lock()
+        self._finished = threading.Event()
+        self.sync_interval_s = 1.0
+
+    @staticmethod
+    def default_buffers(fmt: CaptureFormat, budget_bytes: int = 3 << 30, cameras: int = 9) -> int:
+        """Buffers per camera: a second of frames to ride out a slow flush, within a memory budget."""
+        per_second = max(8, round(fmt.fps))
+        affordable = budget_bytes // max(cameras * fmt.bytes_per_frame, 1)
+        return int(max(4, min(per_second, affordable)))
+
+    # ---- arming -----------------------------------------------------------------------------------
+    def arm(self) -> None:
+        """Open, configure and start every camera; frames flow (and are discarded) until :meth:`start`."""
+        negotiated: dict[str, CaptureFormat] = {}
+        try:
+            for name in self.names:
+                cam = self.cameras[name]
+                cam.open()
+                negotiated[name] = cam.configure(self.format)
+        except RigctlError:
+            self.devices.close()
+            raise
+        different = {n: f for n, f in negotiated.items() if f != self.format}
+        if different:
+            self.devices.close()
+            first = next(iter(different))
+            raise DeviceError(
+                f"camera {first} delivers {different[first].describe()}, the rig asks for {self.format.describe()}"
+            )
+        for name in self.names:
+            self._pools[name] = _Pool(self.buffers, self.format.bytes_per_frame)
+            self._queues[name] = queue.Queue(maxsize=self.buffers)
+        for name in self.names:
+            self.cameras[name].start()
+        self._capturing.set()
+        for name in self.names:
+            t = threading.Thread(target=self._capture, args=(name,), name=f"capture-{name}", daemon=True)
+            t.start()
+            self._threads.append(t)
+        self._armed = True
+
+    # ---- the take ---------------------------------------------------------------------------------
+    def start(self, frames: int | None = None, lead_periods: int = 3) -> None:
+        """Create the take and record from the next common instant T0 (``frames`` frame sets, or until
+        :meth:`stop`)."""
+        if not self._armed:
+            raise TakeError("recorder not armed")
+        self._create_take()
+        now = time.monotonic_ns()
+        phase = self._grid_phase()
+        first_slot = now + lead_periods * self.period_ns
+        # T0 half a period before a grid instant: every camera's first stored frame is then in one slot
+        grid = first_slot + ((phase - first_slot) % self.period_ns)
+        self.t0_ns = grid - self.period_ns // 2
+        self.t1_ns = self.t0_ns + frames * self.period_ns if frames else None
+        self.started_utc = dt.datetime.now(dt.UTC).isoformat(timespec="milliseconds")
+        write_manifest(self.plan.folder, self._manifest("recording"))
+
+    def _grid_phase(self) -> int:
+        """The rig's frame phase (capture time modulo the period), from the latest frames seen."""
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline:
+            seen = [s.last_capture_ns for s in self.stats.values() if s.last_capture_ns]
+            if len(seen) == len(self.names) or (seen and time.monotonic() > deadline - 1.0):
+                break
+            time.sleep(0.01)
+        seen = [s.last_capture_ns % self.period_ns for s in self.stats.values() if s.last_capture_ns]
+        if not seen:
+            raise DeviceError("no camera delivers frames: check signal and cabling before recording")
+        # circular median: rotate so the phases do not straddle the wrap-around
+        ref = seen[0]
+        offsets = [((p - ref + self.period_ns // 2) % self.period_ns) - self.period_ns // 2 for p in seen]
+        return int(ref + np.median(offsets)) % self.period_ns
+
+    def _create_take(self) -> None:
+        folder = self.plan.folder
+        if folder.exists():
+            raise TakeError(f"{folder}: a take of that name exists already; takes are never overwritten")
+        try:
+            folder.mkdir(parents=True)
+            for name in self.names:
+                self.plan.camera_folders[name].mkdir(parents=True, exist_ok=True)
+            for dest in {p.parent for p in self.plan.camera_folders.values()} | {folder}:
+                with open(dest / ".reserve", "wb") as f:
+                    f.write(b"\0" * RESERVE_BYTES)
+        except OSError as exc:
+            raise TakeError(f"{folder}: cannot create the take: {exc.strerror}") from None
+        for name in self.names:
+            self._writers[name] = self.writer_factory(
+                name, self.plan.camera_folders[name], self.format.fps, checksum=self.checksum, sync_interval_s=0
+            )
+            self._writer_busy[name] = None
+            t = threading.Thread(target=self._write, args=(name,), name=f"writer-{name}", daemon=True)
+            t.start()
+            self._writer_threads[name] = t
+        self._syncer = threading.Thread(target=self._sync_loop, name="syncer", daemon=True)
+        self._syncer.start()
+
+    def _sync_loop(self) -> None:
+        """Flush every camera's files to the device once a second, off the writers' threads."""
+        while not self._finished.wait(self.sync_interval_s):
+            for name, writer in list(self._writers.items()):
+                try:
+                    writer.sync()
+                except OSError as exc:
+                    log.warning("flushing %s: %s", name, exc.strerror)
+
+    def stop(self) -> None:
+        """End the take at the next common instant (frames captured before it are kept)."""
+        if self.t0_ns is not None and self.t1_ns is None:
+            now = time.monotonic_ns()
+            self.t1_ns = max(self.t0_ns, now + ((self.t0_ns - now) % self.period_ns))
+        self._stop.set()
+
+    def wait(self, timeout_s: float | None = None, progress: Callable[[float], None] | None = None) -> bool:
+        """Wait until every camera passed T1 (or ended, or the take failed); True when finished."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while True:
+            if self.error is not None:
+                return True
+            if self.t1_ns is not None:
+                now = time.monotonic_ns()
+                # a camera that delivers nothing (lost signal) does not hold up the end for long
+                grace = now > self.t1_ns + 4 * self.period_ns + 500_000_000
+                if all(s.done or s.ended or grace for s in self.stats.values()):
+                    return True
+                if progress and self.t0_ns is not None:
+                    progress(min(1.0, max(0.0, (now - self.t0_ns) / max(self.t1_ns - self.t0_ns, 1))))
+            if deadline is not None and time.monotonic() > deadline:
+                return False
+            time.sleep(0.02)
+
+    # ---- threads ----------------------------------------------------------------------------------
+    def _in_window(self, t: int) -> int:
+        """-1 before T0, 0 inside the take, 1 at or after T1."""
+        t0, t1 = self.t0_ns, self.t1_ns
+        if t0 is None or t < t0:
+            return -1
+        if t1 is not None and t >= t1:
+            return 1
+        return 0
+
+    def _capture(self, name: str) -> None:
+        cam = self.cameras[name]
+        pool = self._pools[name]
+        q = self._queues[name]
+        st = self.stats[name]
+        while self._capturing.is_set():
+            slot = pool.take()
+            into = pool.scratch if slot is None else pool.views[slot]
+            try:
+                frame = cam.read(0.2, into)
+            except RigctlError as exc:
+                st.ended = str(exc)
+                log.error("camera %s: %s", name, exc)
+                if slot is not None:
+                    pool.give(slot)
+                return
+            if frame is None:
+                if slot is not None:
+                    pool.give(slot)
+                continue
+            where = self._in_window(frame.capture_ns)
+            self._account_gap(st, frame)
+            st.last_capture_ns, st.last_host_ns, st.last_sequence = frame.capture_ns, frame.host_ns, frame.sequence
+            if where != 0:
+                if slot is not None:
+                    pool.give(slot)
+                if where > 0:
+                    st.done = True
+                continue
+            st.seen_in_window = True
+            if frame.flags & FrameFlags.FORMAT_CHANGED:
+                st.format_changes.append(frame.sequence)
+            if frame.flags & FrameFlags.ERROR:
+                st.error_frames.append(frame.sequence)
+                if slot is not None:
+                    pool.give(slot)
+                continue
+            if self.error is not None:  # the take already failed (e.g. disk full): nothing more is stored
+                if slot is not None:
+                    pool.give(slot)
+                st.done = True
+                continue
+            if slot is None:
+                st.writer_drops.append(frame.sequence)
+                continue
+            st.queued += 1
+            q.put_nowait((frame, slot))  # never blocks: the queue holds as many entries as the pool
+
+    def _account_gap(self, st: CameraStats, frame: Frame) -> None:
+        """Sequence numbers skipped since the last frame are source drops, when they fall in the take."""
+        last = st.last_sequence
+        if last is None or frame.sequence <= last + 1:
+            return
+        missing = frame.sequence - last - 1
+        for k in range(1, missing + 1):
+            t = st.last_capture_ns + k * self.period_ns
+            if self._in_window(t) == 0:
+                st.source_drops.append(last + k)
+
+    def _write(self, name: str) -> None:
+        q = self._queues[name]
+        pool = self._pools[name]
+        st = self.stats[name]
+        writer = self._writers[name]
+        while True:
+            item = q.get()
+            if item is None:
+                return
+            frame, slot = item
+            if self.error is not None:
+                st.not_written.append(frame.sequence)
+                st.queued -= 1
+                pool.give(slot)
+                continue
+            self._writer_busy[name] = frame
+            try:
+                writer.write(frame)
+                st.written.append((frame.sequence, frame.capture_ns))
+                st.bytes_written += len(frame.data)
+            except RigctlError as exc:
+                st.not_written.append(frame.sequence)
+                with self._lock:
+                    if self.error is None:
+                        self.error = exc
+                        self.end_reason = "disk full" if isinstance(exc, DiskFullError) else "write failed"
+                        log.info("%s", exc)  # the CLI reports it once, as the error of the take
+                self._stop.set()
+            finally:
+                self._writer_busy[name] = None
+                st.queued -= 1
+                pool.give(slot)
+
+    # ---- ending -----------------------------------------------------------------------------------
+    def finish(self) -> dict[str, Any]:
+        """Stop capture, drain writers (bounded in time), assemble frame sets, write sidecars, truth and
+        the final manifest. Returns the manifest."""
+        self._capturing.clear()
+        for t in self._threads:
+            t.join(timeout=2.0)
+        for cam in self.cameras.values():
+            try:
+                cam.stop()
+            except RigctlError as exc:
+                log.warning("stopping %s: %s", cam.name, exc)
+        if not self._writers:  # never started a take
+            self.devices.close()
+            return {}
+        for name in self.names:
+            self._queues[name].put(None)
+        deadline = time.monotonic() + self.stop_timeout_s
+        stalled = []
+        for name, t in self._writer_threads.items():
+            t.join(timeout=max(0.0, deadline - time.monotonic()))
+            if t.is_alive():
+                stalled.append(name)
+        for name in stalled:
+            st = self.stats[name]
+            q = self._queues[name]
+            while True:
+                try:
+                    item = q.get_nowait()
+                except queue.Empty:
+                    break
+                if item is not None:
+                    st.not_written.append(item[0].sequence)
+            busy = self._writer_busy.get(name)
+            if busy is not None:
+                st.not_written.append(busy.sequence)
+            self.notes.append(
+                f"writer of {name} stalled at stop: {len(st.not_written)} frame(s) not written "
+                f"(sequences {st.not_written[:10]}{' ...' if len(st.not_written) > 10 else ''})"
+            )
+        self._finished.set()
+        for name, writer in self._writers.items():
+            if name not in stalled:
+                writer.close()
+        self.devices_close()
+        for dest in {p.parent for p in self.plan.camera_folders.values()} | {self.plan.folder}:
+            with contextlib.suppress(OSError):
+                (dest / ".reserve").unlink()
+        if not self.end_reason:
+            self.end_reason = "stopped" if self._stop.is_set() else "frames reached"
+        if stalled and self.error is None:
+            self.end_reason = "stopped with a stalled writer"
+        return self._finalise(stalled)
+
+    def devices_close(self) -> None:
+        self.devices.close()
+
+    def _frame_sets(self) -> list[framesets.FrameSet]:
+        stamps = {n: np.array([c for _, c in self.stats[n].written], dtype=np.int64) for n in self.names}
+        return framesets.assemble(stamps, self.period_ns, self.t0_ns)
+
+    def _finalise(self, stalled: list[str]) -> dict[str, Any]:
+        """The manifest goes first (the reserve was just freed for it), then what can be rebuilt or
+        lost without losing the take: sidecars and ground truth."""
+        sets = self._frame_sets()
+        folder = self.plan.folder
+        status = "complete" if self.error is None and not stalled and self.end_reason == "frames reached" else "ended"
+        write_manifest(folder, self._manifest(status, sets))
+        extras_failed = False
+        try:
+            sidecars.write_sets_csv(folder / "sets.csv", sets, self.names, self.stats)
+            devices = {n: self.rig.camera(n).device for n in self.names}
+            sidecars.write_log_csv(folder / "log.csv", self.names, devices, self.stats)
+            sidecars.write_ale(
+                folder / f"{self.plan.name}.ale", self.plan.name, self.started_utc, self.format, self.names, self.stats
+            )
+        except OSError as exc:
+            self.notes.append(f"sidecar logs not written: {exc.strerror}")
+            extras_failed = True
+        if self.devices.truth is not None:
+            if isinstance(self.error, DiskFullError):
+                self.notes.append("ground truth not written: the destination is full")
+                extras_failed = True
+            else:
+                members = [(s.number, {c: self.stats[c].written[i][0] for c, i in s.members.items()}) for s in sets]
+                try:
+                    self.devices.truth.write_truth(folder / "truth", members)
+                except OSError as exc:
+                    self.notes.append(f"ground truth not written: {exc.strerror}")
+                    extras_failed = True
+        manifest = self._manifest(status, sets)
+        if extras_failed:
+            try:
+                write_manifest(folder, manifest)
+            except OSError:
+                log.warning("%s: notes could not be added to the manifest", folder)
+        return manifest
+
+    def _manifest(self, status: str, sets: list[framesets.FrameSet] | None = None) -> dict[str, Any]:
+        cams: dict[str, Any] = {}
+        for name in self.names:
+            st = self.stats[name]
+            cam_folder = self.plan.camera_folders[name]
+            rel = os.path.relpath(cam_folder, self.plan.folder)
+            base = rel if not rel.startswith("..") else str(cam_folder)
+            entry: dict[str, Any] = {
+                "essence": f"{base}/{name}.essence",
+                "index": f"{base}/{name}.index",
+                "frames": st.frames_written,
+                "first_sequence": st.written[0][0] if st.written else None,
+                "last_sequence": st.written[-1][0] if st.written else None,
+                "source_drops": sorted(st.source_drops),
+                "error_frames": st.error_frames,
+                "writer_drops": st.writer_drops,
+                "not_written": st.not_written,
+            }
+            if st.ended:
+                entry["ended_early"] = st.ended
+            if st.format_changes:
+                entry["format_changed_at"] = st.format_changes
+            cams[name] = entry
+        fmt = self.format
+        data: dict[str, Any] = {
+            "spec": TAKE_SPEC,
+            "take": self.plan.name,
+            "status": status,
+            "started_utc": self.started_utc,
+            "software": {"name": "rigctl", "version": __version__},
+            "rig": self.rig.to_dict(),
+            "format": {
+                "width": fmt.width,
+                "height": fmt.height,
+                "pixel_format": fmt.pixel_format,
+                "fps": fmt.fps,
+                "bytes_per_frame": fmt.bytes_per_frame,
+            },
+            "timing": {
+                "clock": "CLOCK_MONOTONIC",
+                "t0_ns": self.t0_ns,
+                "t1_ns": self.t1_ns,
+                "frame_period_ns": self.period_ns,
+                "start_timecode": sidecars.timecode_of(self.started_utc, fmt.fps),
+            },
+            "checksum": "crc32" if self.checksum else "none",
+            "devices": {"description": self.devices.description, "settings": self.devices.settings},
+            "cameras": cams,
+            "notes": self.notes,
+        }
+        if sets is not None:
+            complete = [s for s in sets if s.complete(self.names)]
+            incomplete = [
+                {"number": s.number, "missing": [c for c in self.names if c not in s.members]}
+                for s in sets
+                if not s.complete(self.names)
+            ]
+            data["frame_sets"] = {
+                "count": len(sets),
+                "complete": len(complete),
+                "incomplete": incomplete,
+                "skew": framesets.skew_stats(sets),
+                "file": "sets.csv",
+            }
+            data["end"] = {"reason": self.end_reason, "message": str(self.error) if self.error else ""}
+        return data

@@ -1,0 +1,35 @@
+"""Per-camera accounting of a take: what was written, and what was lost where, with sequence numbers."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass
+class CameraStats:
+    """Live and final accounting of one camera (read by the UI without locks: plain values only)."""
+
+    name: str
+    written: list[tuple[int, int]] = field(default_factory=list)  # (sequence, capture_ns) in write order
+    source_drops: list[int] = field(default_factory=list)
+    writer_drops: list[int] = field(default_factory=list)
+    error_frames: list[int] = field(default_factory=list)
+    not_written: list[int] = field(default_factory=list)
+    bytes_written: int = 0
+    queued: int = 0
+    pool_size: int = 0
+    last_capture_ns: int = 0
+    last_host_ns: int = 0
+    last_sequence: int | None = None
+    seen_in_window: bool = False
+    done: bool = False
+    ended: str = ""  # why the stream ended early, if it did
+    format_changes: list[int] = field(default_factory=list)
+
+    @property
+    def frames_written(self) -> int:
+        return len(self.written)
+
+    @property
+    def queue_fill(self) -> float:
+        return self.queued / self.pool_size if self.pool_size else 0.0

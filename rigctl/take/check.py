@@ -1,0 +1,88 @@
+"""``rigctl take check``: is everything the take claims readable? Problems name file and byte offset."""
+
+from __future__ import annotations
+
+import os
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from rigctl.errors import RigctlError
+from rigctl.take.index import RECORD_SIZE
+from rigctl.take.reader import TakeReader
+
+
+@dataclass
+class CheckReport:
+    errors: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    frames_checked: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return not self.errors
+
+
+def check_take(folder: Path, verify_data: bool = True) -> CheckReport:
+    report = CheckReport()
+    try:
+        reader = TakeReader(folder)
+    except RigctlError as exc:
+        report.errors.append(str(exc))
+        return report
+    man = reader.manifest
+    if man.status == "recording":
+        report.warnings.append(
+            f"{folder / 'take.yaml'}: status 'recording': the recording did not end cleanly (crash or power loss); "
+            "what the indexes hold is checked"
+        )
+    for name in reader.names:
+        idx = reader.index[name]
+        ipath = reader.index_path(name)
+        epath = reader.essence_path(name)
+        for p in reader.problems[name]:
+            if p.torn_tail:
+                report.warnings.append(f"{p} (torn by the interruption: last frame excluded)")
+            else:
+                report.errors.append(str(p))
+        if len(idx) == 0:
+            continue
+        seq = idx["sequence"].astype(np.int64)
+        cap = idx["capture_ns"].astype(np.int64)
+        if np.any(np.diff(seq) <= 0):
+            k = int(np.flatnonzero(np.diff(seq) <= 0)[0]) + 1
+            report.errors.append(f"{ipath}: byte {k * RECORD_SIZE}: sequence {seq[k]} does not follow {seq[k - 1]}")
+        if np.any(np.diff(cap) <= 0):
+            k = int(np.flatnonzero(np.diff(cap) <= 0)[0]) + 1
+            report.errors.append(f"{ipath}: byte {k * RECORD_SIZE}: capture time goes backwards")
+        wrong = np.flatnonzero(idx["size"] != reader.bytes_per_frame)
+        if wrong.size:
+            k = int(wrong[0])
+            report.errors.append(
+                f"{ipath}: byte {k * RECORD_SIZE}: frame of {int(idx['size'][k])} bytes, format needs "
+                f"{reader.bytes_per_frame}"
+            )
+        entry = man.cameras[name]
+        if man.status != "recording" and entry.frames != len(idx):
+            report.errors.append(
+                f"{folder / 'take.yaml'}: cameras.{name}.frames claims {entry.frames} frames, {ipath.name} holds "
+                f"{len(idx)} readable"
+            )
+        if verify_data:
+            fd = os.open(epath, os.O_RDONLY)
+            try:
+                for rec in idx:
+                    report.frames_checked += 1
+                    if not rec["crc"]:
+                        continue
+                    data = os.pread(fd, int(rec["size"]), int(rec["offset"]))
+                    if zlib.crc32(data) != int(rec["crc"]):
+                        report.errors.append(
+                            f"{epath}: byte {int(rec['offset'])}: frame {int(rec['sequence'])} fails its checksum "
+                            f"({int(rec['size'])} bytes from there)"
+                        )
+            finally:
+                os.close(fd)
+    return report

@@ -1,0 +1,112 @@
+"""Frame sets: which frames of the cameras were captured together, assembled by time.
+
+Genlock makes the sensors scan together but does not tell the host which captured frames belong
+together (sequence numbers restart on every start, cameras start at different moments). Frames are
+therefore grouped by capture timestamp, within half a frame period of each set's time, tracking the
+rig's phase; or by timecode when every frame carries one. A camera missing from a set leaves an
+explicit gap: later sets are never shifted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+
+@dataclass(frozen=True)
+class FrameSet:
+    """One instant of the take: set number, time (ns), and per camera the position in its index."""
+
+    number: int
+    time_ns: int
+    members: dict[str, int]
+    spread_ns: int
+
+    def complete(self, cameras: list[str]) -> bool:
+        return all(c in self.members for c in cameras)
+
+
+def assemble(
+    timestamps: dict[str, NDArray[np.int64]],
+    period_ns: int,
+    t0_ns: int | None = None,
+    timecodes: dict[str, NDArray[np.int64]] | None = None,
+) -> list[FrameSet]:
+    """Group per-camera capture timestamps (each sorted, in ns) into frame sets.
+
+    With ``timecodes`` (frame counts, one per frame, for every camera) sets are formed by equal
+    timecode. Otherwise each set collects, per camera, the frame within half a period of the set's
+    expected time; the expected time follows the median of each set's members, so a slow drift of the
+    rig's clock against the host's is tracked. ``t0_ns`` is the recording start: set 0 is the first
+    frame slot at or after it.
+    """
+    if timecodes is not None:
+        return _by_timecode(timestamps, timecodes)
+    items = [(int(t), cam, i) for cam, ts in timestamps.items() for i, t in enumerate(ts)]
+    if not items:
+        return []
+    items.sort()
+    half = period_ns // 2
+    first = [int(ts[0]) for ts in timestamps.values() if len(ts)]
+    if t0_ns is not None:
+        in_slot = [t for t in first if t0_ns <= t < t0_ns + period_ns]
+        expected = int(np.median(in_slot)) if in_slot else min(first)
+    else:
+        expected = int(np.median([t for t in first if t < min(first) + half])) if first else items[0][0]
+    sets: list[FrameSet] = []
+    k = 0
+    number = 0
+    while k < len(items):
+        lo, hi = expected - half, expected + half
+        members: dict[str, int] = {}
+        times: list[int] = []
+        while k < len(items) and items[k][0] < hi:
+            t, cam, i = items[k]
+            if t >= lo and cam not in members:
+                members[cam] = i
+                times.append(t)
+            # a frame before the window (or a second one of a camera in this window) would belong
+            # to no set: it can only happen with timestamps that jump; it is left out
+            k += 1
+        if times:
+            centre = int(np.median(times))
+            sets.append(FrameSet(number, centre, members, max(times) - min(times)))
+            expected = expected + period_ns + (centre - expected) // 2
+        else:
+            sets.append(FrameSet(number, expected, {}, 0))
+            expected += period_ns
+        number += 1
+    while sets and not sets[-1].members:
+        sets.pop()
+    return sets
+
+
+def _by_timecode(timestamps: dict[str, NDArray[np.int64]], timecodes: dict[str, NDArray[np.int64]]) -> list[FrameSet]:
+    start = min(int(tc[0]) for tc in timecodes.values() if len(tc))
+    end = max(int(tc[-1]) for tc in timecodes.values() if len(tc))
+    slots: list[dict[str, int]] = [{} for _ in range(end - start + 1)]
+    for cam, tcs in timecodes.items():
+        for i, tc in enumerate(tcs):
+            slots[int(tc) - start].setdefault(cam, i)
+    out = []
+    for n, members in enumerate(slots):
+        times = [int(timestamps[c][i]) for c, i in members.items()]
+        out.append(
+            FrameSet(n, int(np.median(times)) if times else 0, members, (max(times) - min(times)) if times else 0)
+        )
+    return out
+
+
+def skew_stats(sets: list[FrameSet]) -> dict[str, float]:
+    """Spread of capture times within frame sets of two or more cameras: p50, p99 and max, in us."""
+    spreads = np.array([s.spread_ns for s in sets if len(s.members) > 1], dtype=np.float64) / 1e3
+    if spreads.size == 0:
+        return {"p50_us": 0.0, "p99_us": 0.0, "max_us": 0.0, "sets": 0}
+    return {
+        "p50_us": round(float(np.percentile(spreads, 50)), 1),
+        "p99_us": round(float(np.percentile(spreads, 99)), 1),
+        "max_us": round(float(spreads.max()), 1),
+        "sets": int(spreads.size),
+    }

@@ -1,0 +1,129 @@
+"""The per-frame index of a camera's essence file: fixed 64-byte little-endian records.
+
+A record is written only after its frame's bytes were written, and carries a CRC of itself and of the
+frame, so a reader can tell a complete frame from one torn by a crash and never returns a partial frame.
+
+    offset size field
+    0      4    magic b"RGIX"
+    4      2    version (1)
+    6      2    flags (rigctl.interfaces.FrameFlags)
+    8      8    sequence number (device)
+    16     8    capture timestamp, ns (CLOCK_MONOTONIC)
+    24     8    host timestamp, ns (CLOCK_MONOTONIC)
+    32     8    offset of the frame in the essence file
+    40     4    size of the frame in bytes
+    44     4    CRC-32 of the frame bytes (0 when checksums are off)
+    48     4    frame set number assigned at capture (-1: none yet)
+    52     4    timecode as frames since midnight (valid when flags has TIMECODE)
+    56     4    reserved (0)
+    60     4    CRC-32 of bytes 0..59
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from rigctl.errors import TakeError
+
+MAGIC = b"RGIX"
+VERSION = 1
+RECORD = struct.Struct("<4sHHQqqQIIiI4s")
+assert RECORD.size == 60
+RECORD_SIZE = 64
+
+DTYPE = np.dtype(
+    [
+        ("sequence", "<u8"),
+        ("capture_ns", "<i8"),
+        ("host_ns", "<i8"),
+        ("offset", "<u8"),
+        ("size", "<u4"),
+        ("crc", "<u4"),
+        ("flags", "<u2"),
+        ("set", "<i4"),
+        ("timecode", "<u4"),
+    ]
+)
+
+
+def pack_into(
+    buf: bytearray,
+    seq: int,
+    capture_ns: int,
+    host_ns: int,
+    flags: int,
+    offset: int,
+    size: int,
+    crc: int,
+    frame_set: int = -1,
+    timecode: int = 0,
+) -> None:
+    """Fill ``buf`` (64 bytes, reused for every frame) with one record."""
+    RECORD.pack_into(
+        buf, 0, MAGIC, VERSION, flags, seq, capture_ns, host_ns, offset, size, crc, frame_set, timecode, b""
+    )
+    struct.pack_into("<I", buf, 60, zlib.crc32(memoryview(buf)[:60]))
+
+
+@dataclass
+class IndexProblem:
+    """Something wrong at a byte offset of an index file."""
+
+    path: Path
+    offset: int
+    message: str
+    torn_tail: bool = False  # the last record(s) of a file cut short by a crash: excluded, not an error
+
+    def __str__(self) -> str:
+        return f"{self.path}: byte {self.offset}: {self.message}"
+
+
+def read_index(path: Path, essence_size: int | None = None) -> tuple[NDArray[np.void], list[IndexProblem]]:
+    """All valid records of an index file, and the problems found.
+
+    A short or corrupt record at the very end (a write cut by a crash), or a last frame whose bytes are
+    not all in the essence file, is a torn tail: excluded and reported as such. Anything wrong before
+    the tail is corruption.
+    """
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise TakeError(f"{path}: cannot read index: {exc.strerror}") from None
+    n = len(data) // RECORD_SIZE
+    problems: list[IndexProblem] = []
+    if len(data) % RECORD_SIZE:
+        problems.append(
+            IndexProblem(path, n * RECORD_SIZE, f"{len(data) % RECORD_SIZE} bytes of a cut record", torn_tail=True)
+        )
+    out = np.zeros(n, dtype=DTYPE)
+    good = np.zeros(n, dtype=bool)
+    for i in range(n):
+        rec = data[i * RECORD_SIZE : (i + 1) * RECORD_SIZE]
+        at = i * RECORD_SIZE
+        (crc,) = struct.unpack_from("<I", rec, 60)
+        if rec[:4] != MAGIC or zlib.crc32(rec[:60]) != crc:
+            problems.append(IndexProblem(path, at, "record checksum mismatch", torn_tail=(i == n - 1)))
+            continue
+        _, version, flags, seq, cap, host, off, size, dcrc, fset, tc, _ = RECORD.unpack_from(rec, 0)
+        if version != VERSION:
+            problems.append(IndexProblem(path, at, f"record version {version} unknown (this rigctl reads {VERSION})"))
+            continue
+        if essence_size is not None and off + size > essence_size:
+            problems.append(
+                IndexProblem(
+                    path,
+                    at,
+                    f"frame at essence offset {off} runs past the end of the essence file ({essence_size} bytes)",
+                    torn_tail=(i == n - 1),
+                )
+            )
+            continue
+        out[i] = (seq, cap, host, off, size, dcrc, flags, fset, tc)
+        good[i] = True
+    return out[good], problems

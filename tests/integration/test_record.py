@@ -1,0 +1,209 @@
+"""Recording takes from the simulated rig: drops, skew, frame sets, sidecars, export, names, preflight."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+from rigctl.simulators import burnin
+
+from rigctl.take.reader import TakeReader
+
+FAST = ["--sim", "motion=false"]
+
+
+@pytest.fixture(scope="module")
+def dropped_take(tmp_path_factory):  # type: ignore[no-untyped-def]
+    """A 9-camera take with drops at known sequence numbers on r0c1 (numbers counted from the device's
+    stream start: the take starts a few frames in, so the drops land inside it)."""
+    from tests_support import run_rigctl  # type: ignore[import-not-found]
+
+    out = tmp_path_factory.mktemp("takes")
+    res = run_rigctl(
+        "record",
+        "--take",
+        "drops",
+        "--frames",
+        "40",
+        "--out",
+        str(out),
+        *FAST,
+        "--sim",
+        "drops.r0c1=[12,13,20]",
+        "--sim",
+        "skew_us.r2c2=3000",
+        "--json",
+    )
+    assert res.returncode == 0, res.stderr
+    return out / "drops", json.loads(res.stdout)
+
+
+def test_drops_reported_exactly_where_injected(dropped_take) -> None:  # type: ignore[no-untyped-def]
+    folder, summary = dropped_take
+    man = yaml.safe_load((folder / "take.yaml").read_text())
+    assert man["status"] == "complete"
+    for name, cam in man["cameras"].items():
+        if name == "r0c1":
+            assert cam["source_drops"] == [12, 13, 20]
+            assert cam["frames"] == 37
+        else:
+            assert cam["source_drops"] == [], name
+            assert cam["frames"] == 40
+        assert cam["writer_drops"] == [] and cam["error_frames"] == []
+    assert summary["cameras"]["r0c1"]["source_drops"] == 3
+
+
+def test_burnt_ids_prove_order_and_no_duplicates(dropped_take) -> None:  # type: ignore[no-untyped-def]
+    folder, _ = dropped_take
+    reader = TakeReader(folder)
+    for ci, name in enumerate(reader.names):
+        idx = reader.index[name]
+        ids = []
+        for i in range(len(idx)):
+            packed = reader.frame_bytes(name, i, verify=True).reshape(reader.height, -1)
+            got = burnin.read(packed, reader.width)
+            assert got is not None, f"{name} frame {i}: burnt-in id unreadable"
+            assert got.camera_index == ci
+            assert got.sequence == int(idx["sequence"][i])
+            ids.append(got.scene_frame)
+        assert ids == sorted(set(ids)), f"{name}: scene frames reordered or duplicated"
+
+
+def test_missing_members_are_gaps_and_later_sets_unaffected(dropped_take) -> None:  # type: ignore[no-untyped-def]
+    folder, _ = dropped_take
+    reader = TakeReader(folder)
+    sets = reader.frame_sets
+    assert len(sets) == 40
+    incomplete = [s.number for s in sets if not s.complete(reader.names)]
+    first_seq = int(reader.index["r0c0"]["sequence"][0])
+    r0c1_first = int(reader.index["r0c1"]["sequence"][0])
+    expected = sorted(s - r0c1_first for s in (12, 13, 20))
+    assert incomplete == expected
+    # every set's members show the same scene frame: nothing shifted after the gaps
+    for s in sets:
+        scene = {
+            burnin.read(reader.frame_bytes(c, i).reshape(reader.height, -1), reader.width).scene_frame
+            for c, i in s.members.items()
+        }
+        assert len(scene) == 1, f"set {s.number} mixes scene frames {scene}"
+    with open(folder / "sets.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["set"]) for r in rows if r["complete"] == "0"] == expected
+    assert all(r["r0c1"] == "" for r in rows if r["complete"] == "0")
+    assert first_seq >= 0
+
+
+def test_skew_injected_on_one_camera_shows_in_statistics(dropped_take) -> None:  # type: ignore[no-untyped-def]
+    folder, summary = dropped_take
+    man = yaml.safe_load((folder / "take.yaml").read_text())
+    skew = man["frame_sets"]["skew"]
+    # r2c2 is 3 ms late; jitter is 50 us: every set spreads over about 3 ms
+    assert 2800 <= skew["p50_us"] <= 3400
+    assert skew["p99_us"] <= 3600
+    assert summary["skew"] == skew
+
+
+def test_sidecars_and_truth(dropped_take) -> None:  # type: ignore[no-untyped-def]
+    folder, _ = dropped_take
+    ale = (folder / "drops.ale").read_text().splitlines()
+    assert ale[0] == "Heading" and "FIELD_DELIM\tTABS" in ale
+    data = ale[ale.index("Data") + 1 :]
+    assert len(data) == 9 and data[1].split("\t")[0] == "drops_r0c1" and data[1].split("\t")[-1] == "3"
+    with open(folder / "log.csv") as f:
+        log = {r["camera"]: r for r in csv.DictReader(f)}
+    assert log["r0c1"]["source_drops"] == "3" and log["r0c0"]["frames"] == "40"
+    truth = folder / "truth"
+    assert (truth / "calibration.yaml").exists()
+    pfms = sorted((truth / "disparity").glob("*/*.pfm"))
+    assert len(pfms) == 9 * 40 - 3
+    from rigctl.pfm import read_pfm
+
+    d = read_pfm(truth / "disparity" / "000000" / "r1c1.pfm")
+    assert d.shape == (540, 960) and np.isinf(d).mean() > 0.5 and np.nanmax(d[np.isfinite(d)]) < 130
+
+
+def test_staggered_start_gives_a_tight_first_set(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    res = run_cli(
+        "record",
+        "--take",
+        "stagger",
+        "--frames",
+        "10",
+        "--out",
+        str(tmp_path),
+        *FAST,
+        "--sim",
+        "stagger_ms=160",
+        "--sim",
+        "seed=3",
+        "--json",
+    )
+    assert res.returncode == 0, res.stderr
+    reader = TakeReader(tmp_path / "stagger")
+    first = reader.frame_sets[0]
+    assert first.complete(reader.names)
+    assert first.spread_ns < reader.period_ns / 2
+    firsts = {int(reader.index[n]["sequence"][0]) for n in reader.names}
+    assert len(firsts) > 1, "seed 3 staggers the cameras' first sequence numbers"
+
+
+def test_export_png_and_exr(tmp_path: Path, run_cli, dropped_take) -> None:  # type: ignore[no-untyped-def]
+    folder, _ = dropped_take
+    res = run_cli("take", "export", str(folder), "--out", str(tmp_path / "png"), "--frames", "1-3")
+    assert res.returncode == 0, res.stderr
+    pngs = sorted((tmp_path / "png").glob("*/*.png"))
+    assert [p.parent.name for p in pngs[:1]] == ["000001"] and len({p.parent.name for p in pngs}) == 3
+    img = cv2.imread(str(tmp_path / "png" / "000001" / "r1c1.png"))
+    assert img.shape == (540, 960, 3)
+    assert img[270, 10, 1] > img[270, 10, 0] + 60  # the green screen is green
+    res = run_cli("take", "export", str(folder), "--out", str(tmp_path / "exr"), "--frames", "2", "--format", "exr")
+    assert res.returncode == 0, res.stderr
+    from rigctl.exr import read_exr
+
+    channels, header = read_exr(tmp_path / "exr" / "000002" / "r0c0.exr")
+    assert channels["RGB"].shape == (540, 960, 3) and channels["RGB"].dtype == np.float32
+    assert header["rigctl:camera"] == "r0c0"
+    for bad, message in (("9-3", "need 0 <= A <= B"), ("x", "expected N or A-B"), ("400", "has 40 frame sets")):
+        res = run_cli("take", "export", str(folder), "--out", str(tmp_path / "bad"), "--frames", bad)
+        assert res.returncode == 2 and message in res.stderr
+
+
+@pytest.mark.parametrize("name", ["..", "../escape", "a/b", ".hidden", "x..y", "", "a b"])
+def test_names_that_could_escape_are_refused(tmp_path: Path, run_cli, name: str) -> None:  # type: ignore[no-untyped-def]
+    res = run_cli("record", "--take", name, "--frames", "2", "--out", str(tmp_path), *FAST)
+    assert res.returncode == 2
+    assert "take name" in res.stderr and len(res.stderr.strip().splitlines()) == 1
+    assert not any(tmp_path.iterdir())
+
+
+def test_existing_take_is_never_overwritten(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    (tmp_path / "again").mkdir()
+    res = run_cli("record", "--take", "again", "--frames", "2", "--out", str(tmp_path), *FAST)
+    assert res.returncode == 2 and "never overwritten" in res.stderr
+
+
+def test_preflight_refuses_a_disk_too_slow_for_the_rig(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    rig = yaml.safe_load((Path(__file__).resolve().parents[2] / "rigs" / "sim-3x3.yaml").read_text())
+    rig["format"].update(width_px=7680, height_px=4320, fps=240)  # 9 x 16 GB/s: no disk here keeps up
+    path = tmp_path / "huge.yaml"
+    path.write_text(yaml.safe_dump(rig))
+    res = run_cli("record", str(path), "--take", "t", "--frames", "2", "--out", str(tmp_path / "out"))
+    assert res.returncode == 2
+    assert "MB/s" in res.stderr and "--force" in res.stderr
+    assert not (tmp_path / "out" / "t").exists()
+
+
+def test_cameras_spread_over_destinations(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    a, b = tmp_path / "a", tmp_path / "b"
+    res = run_cli("record", "--take", "spread", "--frames", "5", "--out", str(a), "--dest", str(b), *FAST)
+    assert res.returncode == 0, res.stderr
+    assert len(list((a / "spread" / "cameras").glob("*.essence"))) == 5
+    assert len(list((b / "spread" / "cameras").glob("*.essence"))) == 4
+    reader = TakeReader(a / "spread")
+    assert all(len(reader.index[n]) == 5 for n in reader.names)
+    assert run_cli("take", "check", str(a / "spread")).returncode == 0

@@ -1,0 +1,195 @@
+"""Nothing lost on a crash, a full disk or a stalled writer; corruption is found and located."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import threading
+import time
+import uuid
+from pathlib import Path
+
+import pytest
+import yaml
+from tests_support import rigctl_exe  # type: ignore[import-not-found]
+
+from rigctl.errors import TakeError
+from rigctl.recorder import Recorder, TakePlan
+from rigctl.registry import open_cameras
+from rigctl.rig import load_rig
+from rigctl.take.check import check_take
+from rigctl.take.index import RECORD_SIZE
+from rigctl.take.reader import TakeReader
+from rigctl.take.writer import CameraWriter, DiskFullError
+
+FAST = ["--sim", "motion=false"]
+RIG = load_rig("sim-3x3")
+
+
+def test_sigkill_mid_take_leaves_a_readable_take(tmp_path: Path) -> None:
+    proc = subprocess.Popen(
+        [*rigctl_exe(), "record", "--take", "crash", "--frames", "2000", "--out", str(tmp_path), *FAST],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+    )
+    index = tmp_path / "crash" / "cameras" / "r2c2.index"
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        if index.exists() and index.stat().st_size >= 30 * RECORD_SIZE:
+            break
+        time.sleep(0.05)
+    else:
+        proc.kill()
+        pytest.fail("recording did not get going")
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=10)
+    folder = tmp_path / "crash"
+    assert yaml.safe_load((folder / "take.yaml").read_text())["status"] == "recording"
+    check = subprocess.run([*rigctl_exe(), "take", "check", str(folder)], capture_output=True, text=True)
+    assert check.returncode == 0, check.stderr
+    assert "did not end cleanly" in check.stderr
+    reader = TakeReader(folder)
+    counts = {n: len(reader.index[n]) for n in reader.names}
+    assert min(counts.values()) >= 25
+    for name in reader.names:  # everything indexed reads back whole, checksum and all
+        for i in range(len(reader.index[name])):
+            reader.frame_bytes(name, i, verify=True)
+    assert len(reader.complete_sets()) >= 20
+    # a power loss can leave the last frame's bytes short of what its index says: excluded, not fatal
+    essence = reader.essence_path("r1c1")
+    last = reader.index["r1c1"][-1]
+    with open(essence, "r+b") as f:  # (bytes of a frame not yet indexed at the kill may follow: cut them too)
+        f.truncate(int(last["offset"]) + int(last["size"]) - 1000)
+    with open(reader.index_path("r0c0"), "ab") as f:
+        f.write(b"RGIX" + b"\x01" * 20)  # half a record
+    report = check_take(folder)
+    assert report.ok, report.errors
+    assert any("r1c1.index" in w and "torn" in w for w in report.warnings)
+    assert any("r0c0.index" in w and "cut record" in w for w in report.warnings)
+    again = TakeReader(folder)
+    assert len(again.index["r1c1"]) == counts["r1c1"] - 1
+    assert len(again.index["r0c0"]) == counts["r0c0"]
+
+
+@pytest.fixture
+def small_fs(tmp_path: Path):  # type: ignore[no-untyped-def]
+    """A real 12 MB filesystem (tmpfs), so the destination really fills up."""
+    mnt = tmp_path / "small"
+    mnt.mkdir()
+    res = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=12m", f"rigctl-test-{uuid.uuid4().hex[:6]}", str(mnt)],
+        capture_output=True,
+        text=True,
+    )
+    assert res.returncode == 0, f"cannot mount a small tmpfs for the disk-full test: {res.stderr.strip()}"
+    yield mnt
+    subprocess.run(["umount", "-l", str(mnt)], check=False)
+
+
+def test_full_destination_ends_the_take_cleanly(small_fs: Path) -> None:
+    res = subprocess.run(
+        [*rigctl_exe(), "record", "--take", "full", "--frames", "200", "--out", str(small_fs), "--force", *FAST],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert res.returncode == 2
+    assert "destination full" in res.stderr and len(res.stderr.strip().splitlines()) == 1
+    folder = small_fs / "full"
+    man = yaml.safe_load((folder / "take.yaml").read_text())
+    assert man["status"] == "ended" and man["end"]["reason"] == "disk full"
+    report = check_take(folder)
+    assert report.ok, report.errors
+    reader = TakeReader(folder)
+    written = sum(len(reader.index[n]) for n in reader.names)
+    assert written >= 5
+    assert sum(len(c["not_written"]) for c in man["cameras"].values()) >= 1
+
+
+def _recorder(tmp_path: Path, factory, frames: int = 30, stop_timeout_s: float = 5.0) -> Recorder:  # type: ignore[no-untyped-def]
+    devices = open_cameras(RIG, ["motion=false", "noise=0"], ["r0c0", "r0c1", "r0c2"])
+    plan = TakePlan.spread("t", [tmp_path], sorted(devices.cameras))
+    rec = Recorder(RIG, devices, plan, writer_factory=factory, stop_timeout_s=stop_timeout_s)
+    rec.arm()
+    rec.start(frames)
+    return rec
+
+
+def test_injected_enospc_at_the_write_call(tmp_path: Path) -> None:
+    class FillsUp(CameraWriter):
+        def write(self, frame, frame_set=-1):  # type: ignore[no-untyped-def]
+            if self.camera == "r0c1" and self.frames >= 6:
+                raise DiskFullError(f"{self.essence_path}: destination full (no space left on device)")
+            super().write(frame, frame_set)
+
+    rec = _recorder(tmp_path, FillsUp)
+    assert rec.wait(timeout_s=30)
+    man = rec.finish()
+    assert man["end"]["reason"] == "disk full" and "destination full" in man["end"]["message"]
+    assert man["cameras"]["r0c1"]["frames"] == 6
+    assert check_take(tmp_path / "t").ok
+
+
+def test_stalled_writer_still_stops_in_bounded_time(tmp_path: Path) -> None:
+    release = threading.Event()
+
+    class Stalls(CameraWriter):
+        def write(self, frame, frame_set=-1):  # type: ignore[no-untyped-def]
+            if self.camera == "r0c2" and self.frames >= 4:
+                release.wait(60)  # a disk that stops answering
+            super().write(frame, frame_set)
+
+    rec = _recorder(tmp_path, Stalls, frames=25, stop_timeout_s=1.0)
+    assert rec.wait(timeout_s=30)
+    t0 = time.monotonic()
+    man = rec.finish()
+    assert time.monotonic() - t0 < 5.0
+    stalled = man["cameras"]["r0c2"]
+    assert stalled["frames"] == 4
+    assert len(stalled["not_written"]) >= 1
+    assert any("writer of r0c2 stalled" in n for n in man["notes"])
+    assert man["cameras"]["r0c0"]["frames"] == 25
+    release.set()
+
+
+def test_corruption_is_located_by_file_and_byte(tmp_path: Path) -> None:
+    res = subprocess.run(
+        [*rigctl_exe(), "record", "--take", "c", "--frames", "6", "--out", str(tmp_path), *FAST],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert res.returncode == 0, res.stderr
+    folder = tmp_path / "c"
+    reader = TakeReader(folder)
+    # essence: flip a byte inside the fourth frame of r1c2
+    off = int(reader.index["r1c2"]["offset"][3]) + 5000
+    essence = reader.essence_path("r1c2")
+    with open(essence, "r+b") as f:
+        f.seek(off)
+        b = f.read(1)
+        f.seek(off)
+        f.write(bytes([b[0] ^ 0x40]))
+    report = check_take(folder)
+    start = int(reader.index["r1c2"]["offset"][3])
+    assert any(f"r1c2.essence: byte {start}: frame" in e and "fails its checksum" in e for e in report.errors)
+    # index: damage the second record of r0c0
+    with open(reader.index_path("r0c0"), "r+b") as f:
+        f.seek(RECORD_SIZE + 20)
+        f.write(b"\xff")
+    report = check_take(folder)
+    assert any(f"r0c0.index: byte {RECORD_SIZE}: record checksum mismatch" in e for e in report.errors)
+    cli = subprocess.run([*rigctl_exe(), "take", "check", str(folder)], capture_output=True, text=True)
+    assert cli.returncode == 1 and "r0c0.index: byte 64" in cli.stderr
+    # manifest: broken YAML is reported with its line
+    text = (folder / "take.yaml").read_text().splitlines()
+    text[5] = "rig: [unclosed"
+    (folder / "take.yaml").write_text("\n".join(text))
+    report = check_take(folder)
+    assert any("take.yaml:" in e and "not valid YAML" in e for e in report.errors)
+    with pytest.raises(Exception, match=r"take\.yaml"):
+        TakeReader(folder)
+    assert os.path.exists(essence)
+    _ = TakeError
