@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from rigctl.interfaces import CameraStatus, CaptureFormat, Frame, FrameFlags
+from rigctl.preflight import measure_write_speed
 from rigctl.recorder import Recorder, TakePlan
 from rigctl.registry import DeviceSet
 from rigctl.rig import load_rig, rig_from_dict
@@ -99,21 +100,6 @@ def record_at(
     return dropped == 0 and written == 9 * n, nbytes, wall, cpu / max(written, 1)
 
 
-def plain_write(folder: Path, nbytes: int) -> float:
-    block = memoryview(os.urandom(W * H * 2))
-    path = folder / "plain.bin"
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-    t0 = time.perf_counter()
-    done = 0
-    while done < nbytes:
-        done += os.write(fd, block)
-    os.fdatasync(fd)
-    elapsed = time.perf_counter() - t0
-    os.close(fd)
-    path.unlink()
-    return done / elapsed
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--dir", type=Path, default=None, help="destination (default: a temp folder under /work)")
@@ -142,7 +128,7 @@ def main() -> None:
                 continue
             fps, nbytes, wall, cpu_per_frame = best
             rec_rate = nbytes / wall
-            plain = plain_write(base, nbytes)
+            plain = measure_write_speed(base, nbytes)  # the same write-and-flush preflight uses
             print(
                 f"{label}: recorder sustains {fps} fps x 9 = {rec_rate / 1e6:.0f} MB/s; plain write of the same "
                 f"{nbytes / 1e9:.2f} GB {plain / 1e6:.0f} MB/s; ratio {rec_rate / plain:.2f} (target >= 0.8); "
