@@ -140,6 +140,11 @@ class Recorder:
         except RigctlError:
             self.devices.close()
             raise
+        silent = [n for n in self.names if not self.cameras[n].status().signal_present]
+        if silent:
+            self.devices.close()
+            where = ", ".join(f"{n} ({self.rig.camera(n).device})" for n in silent)
+            raise DeviceError(f"no signal on {where}: check the camera, its SDI cable and the capture input")
         different = {n: f for n, f in negotiated.items() if f != self.format}
         if different:
             self.devices.close()
@@ -166,8 +171,8 @@ class Recorder:
         if not self._armed:
             raise TakeError("recorder not armed")
         self._create_take()
+        phase = self._grid_phase()  # waits until every camera delivers (staggered start-up)
         now = time.monotonic_ns()
-        phase = self._grid_phase()
         first_slot = now + lead_periods * self.period_ns
         # T0 half a period before a grid instant: every camera's first stored frame is then in one slot
         grid = first_slot + ((phase - first_slot) % self.period_ns)
@@ -240,15 +245,20 @@ class Recorder:
                 return True
             if self.t1_ns is not None:
                 now = time.monotonic_ns()
-                # a camera that delivers nothing (lost signal) does not hold up the end for long
-                grace = now > self.t1_ns + 4 * self.period_ns + 500_000_000
-                if all(s.done or s.ended or grace for s in self.stats.values()):
+                if all(s.done or s.ended or self._given_up(s, now) for s in self.stats.values()):
                     return True
                 if progress and self.t0_ns is not None:
                     progress(min(1.0, max(0.0, (now - self.t0_ns) / max(self.t1_ns - self.t0_ns, 1))))
             if deadline is not None and time.monotonic() > deadline:
                 return False
             time.sleep(0.02)
+
+    def _given_up(self, st: CameraStats, now: int) -> bool:
+        """Past T1, stop waiting for a camera that has gone quiet (lost signal) or lags far behind."""
+        assert self.t1_ns is not None
+        past = now - self.t1_ns
+        quiet = now - st.last_host_ns > 500_000_000 if st.last_host_ns else True
+        return (past > 4 * self.period_ns and quiet) or past > 10_000_000_000
 
     # ---- threads ----------------------------------------------------------------------------------
     def _in_window(self, t: int) -> int:

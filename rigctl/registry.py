@@ -72,9 +72,11 @@ def open_cameras(rig: Rig, sim: list[str] | None = None, cameras: list[str] | No
         sim_cams, truth, settings, description = simulated_cameras(rig, sim or [], [c.name for c in wanted])
         out.update(sim_cams)
     if "v4l2" in schemes:
-        raise DeviceError(
-            f"rig {rig.name} uses V4L2 devices ({wanted[0].device}); V4L2 capture is not in this build yet"
-        )
+        from rigctl.drivers.v4l2.camera import V4L2Camera
+
+        for cam in wanted:
+            if scheme_of(cam.device) == "v4l2":
+                out[cam.name] = V4L2Camera(cam.name, cam.device)
     return DeviceSet(cameras=out, truth=truth, settings=settings, description=description)
 
 
@@ -83,3 +85,30 @@ def sim_settings_help() -> str:
     from rigctl.simulators.settings import describe_settings
 
     return describe_settings()
+
+
+def describe_attached(rig: Rig) -> dict[str, Any]:
+    """Attached devices of every kind the rig uses, and each camera's device: found, missing or simulated."""
+    import os
+
+    schemes = {c.name: scheme_of(c.device) for c in rig.cameras}
+    v4l2: list[dict[str, Any]] = []
+    if "v4l2" in schemes.values() or any(p.startswith("video") for p in os.listdir("/dev")):
+        from rigctl.drivers.v4l2.discovery import list_v4l2
+
+        v4l2 = [d.as_json() for d in list_v4l2()]
+    known = {d["path"] for d in v4l2}
+    cams, missing = [], []
+    for cam in rig.cameras:
+        entry: dict[str, Any] = {"name": cam.name, "device": cam.device}
+        if schemes[cam.name] == "sim":
+            entry["state"] = "simulated"
+        else:
+            path = cam.device.removeprefix("v4l2://")
+            resolved = os.path.realpath(path)
+            entry["resolved"] = resolved
+            entry["state"] = "found" if resolved in known else "MISSING"
+            if resolved not in known:
+                missing.append(f"{cam.name} ({cam.device})")
+        cams.append(entry)
+    return {"v4l2": v4l2, "cameras": cams, "missing": missing}

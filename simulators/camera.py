@@ -27,7 +27,7 @@ log = logging.getLogger(__name__)
 class SimCamera:
     """One ``sim://rXcY`` camera of a :class:`SimArray`."""
 
-    def __init__(self, name: str, array: SimArray, buffers: int = 4, latency_us: float = 800.0) -> None:
+    def __init__(self, name: str, array: SimArray, buffers: int = 8, latency_us: float = 800.0) -> None:
         self.name = name
         self.array = array
         self.buffers = buffers

@@ -47,6 +47,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--force", action="store_true", help="record even if preflight finds the disks too slow")
     p.add_argument("--no-checksum", action="store_true", help="skip per-frame CRC-32 (saves CPU at high rates)")
+    p.add_argument(
+        "--buffers",
+        type=int,
+        metavar="N",
+        help="frame buffers per camera (default: a second of frames within a 3 GB budget)",
+    )
     p.add_argument("--json", action="store_true", help="print the take's summary as JSON")
     p.set_defaults(func=run)
 
@@ -73,7 +79,9 @@ def run(ns: argparse.Namespace) -> int:
         raise PreflightError(
             report.problems[0] + (f" (and {len(report.problems) - 1} more)" if len(report.problems) > 1 else "")
         )
-    recorder = Recorder(rig, devices, plan, checksum=not ns.no_checksum)
+    if ns.buffers is not None and ns.buffers < 2:
+        raise ParameterError(f"--buffers must be at least 2, got {ns.buffers}")
+    recorder = Recorder(rig, devices, plan, checksum=not ns.no_checksum, buffers_per_camera=ns.buffers)
     bar = Progress(f"recording {name}")
     previous = signal.getsignal(signal.SIGINT)
 

@@ -46,19 +46,23 @@ def check_is_a_camera(make_camera: MakeCamera) -> None:
 
 def check_frames_in_order_with_monotonic_timestamps(make_camera: MakeCamera) -> None:
     cam, fmt = make_camera()
-    frames = _stream(cam, fmt, 12)
+    frames = _stream(cam, fmt, 16)
     seqs = [f[0] for f in frames]
     caps = [f[1] for f in frames]
     assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs), f"sequence not strictly increasing: {seqs}"
     assert all(b > a for a, b in itertools.pairwise(caps)), "capture timestamps not increasing"
-    assert all(host >= cap for _, cap, host, *_ in frames), "host timestamp before capture timestamp"
+    # vivid stamps end-of-frame times up to most of a period ahead of the host's clock at DQBUF
+    assert all(host >= cap - 1e9 / fmt.fps for _, cap, host, *_ in frames), "host time long before capture"
     assert all(f[4] == fmt.bytes_per_frame for f in frames), "frame size differs from the format"
     assert all(f[3] & FrameFlags.TIMESTAMP_MONOTONIC for f in frames), "timestamps not on the monotonic clock"
     now = time.monotonic_ns()
-    assert 0 < now - caps[-1] < 5e9, "capture timestamps are not on CLOCK_MONOTONIC"
+    assert -1e9 / fmt.fps < now - caps[-1] < 5e9, "capture timestamps are not on CLOCK_MONOTONIC"
     period = 1e9 / fmt.fps
-    gaps = np.diff(caps) / np.maximum(np.diff(seqs), 1)
-    assert np.median(gaps) == pytest.approx(period, rel=0.2), "frame interval differs from the format's rate"
+    # the rate over the stream after its first few frames (drivers settle after STREAMON)
+    rate = (caps[-1] - caps[4]) / (seqs[-1] - seqs[4])
+    assert rate == pytest.approx(period, rel=0.15), (
+        f"frame interval {rate / 1e6:.1f} ms, format says {period / 1e6:.1f}"
+    )
 
 
 def check_read_into_fills_the_given_buffer(make_camera: MakeCamera) -> None:
