@@ -12,9 +12,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
-from rigctl.errors import DeviceError
+from rigctl.errors import DeviceError, RigFileError
 from rigctl.interfaces import Camera
 from rigctl.rig import Rig
+from rigctl.tally import TallyOutput, tsl_addresses
 
 log = logging.getLogger(__name__)
 
@@ -112,3 +113,15 @@ def describe_attached(rig: Rig) -> dict[str, Any]:
                 missing.append(f"{cam.name} ({cam.device})")
         cams.append(entry)
     return {"v4l2": v4l2, "cameras": cams, "missing": missing}
+
+
+def open_tally(rig: Rig) -> TallyOutput:
+    """The rig's tally output, from its ``tally:`` section."""
+    tally = rig.model.tally
+    if tally is None:
+        raise RigFileError(f"{rig.source}: rig {rig.name} has no tally section (add tally: protocol and port)")
+    if tally.protocol == "tsl-umd-3.1":
+        from rigctl.drivers.tsl31_output import Tsl31Output
+
+        return Tsl31Output(tally.port, tsl_addresses(rig), pad_with_nul=tally.pad_with_nul)
+    raise RigFileError(f"{rig.source}: tally protocol {tally.protocol} is not supported by this build yet")

@@ -1,0 +1,36 @@
+"""``rigctl tally``: send the complete tally state once and exit."""
+
+from __future__ import annotations
+
+import argparse
+
+from rigctl.errors import ParameterError
+from rigctl.registry import open_tally
+from rigctl.rig import load_rig
+from rigctl.tally import TallyState
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("tally", help="send the complete tally state (program / preview) once")
+    p.add_argument("rig", nargs="?", help="rig file or shipped rig name (default: sim-3x3)")
+    p.add_argument("--program", nargs="*", default=[], metavar="CAM", help="cameras on program (live)")
+    p.add_argument("--preview", nargs="*", default=[], metavar="CAM", help="cameras on preview")
+    p.set_defaults(func=run)
+
+
+def run(ns: argparse.Namespace) -> int:
+    rig = load_rig(ns.rig)
+    known = set(rig.camera_names)
+    for cam in [*ns.program, *ns.preview]:
+        if cam not in known:
+            raise ParameterError(f"camera {cam!r} is not in rig {rig.name} (it has {', '.join(rig.camera_names)})")
+    out = open_tally(rig)
+    try:
+        out.send(TallyState(frozenset(ns.program), frozenset(ns.preview)))
+    finally:
+        out.close()
+    print(
+        f"tally sent to {rig.model.tally.port if rig.model.tally else '?'}: program {', '.join(ns.program) or '-'}; "
+        f"preview {', '.join(ns.preview) or '-'}"
+    )
+    return 0
