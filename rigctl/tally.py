@@ -8,10 +8,14 @@ Mapping for TSL UMD: tally 1 = preview, tally 2 = program, full brightness, labe
 from __future__ import annotations
 
 import logging
+import os
+import threading
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from rigctl.errors import RigFileError
+from rigctl.errors import RigctlError, RigFileError
 from rigctl.rig import Rig
 
 log = logging.getLogger(__name__)
@@ -42,3 +46,93 @@ def tsl_addresses(rig: Rig) -> dict[str, int]:
         raise RigFileError(f"{rig.source}: rig {rig.name} has no tally section")
     given = tally.addresses or {}
     return {name: given.get(name, i + 1) for i, name in enumerate(rig.camera_names)}
+
+
+class TallyService:
+    """Keeps a tally output right: sends the whole state on connect, on every change and every second,
+    and reopens a lost line with backoff (1, 2, 4 s, capped at 10 s), restoring the state without anyone
+    doing anything. A port whose device node comes back is retried at once."""
+
+    BACKOFF_S = (1.0, 2.0, 4.0, 10.0)
+
+    def __init__(
+        self, open_output: Callable[[], TallyOutput], port_path: str | None = None, resend_s: float = 1.0
+    ) -> None:
+        self._open = open_output
+        self._port = port_path
+        self._resend_s = resend_s
+        self._state = TallyState()
+        self._changed = threading.Event()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="tally", daemon=True)
+        self.connected = False
+        self.last_error = ""
+        self.sends = 0
+
+    def start(self) -> TallyService:
+        self._thread.start()
+        return self
+
+    def set(self, state: TallyState) -> None:
+        self._state = state
+        self._changed.set()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._changed.set()
+        self._thread.join(timeout=5)
+
+    def _node(self) -> tuple[int, int] | None:
+        if not self._port or "://" in self._port:
+            return None
+        try:
+            st = os.stat(self._port)
+        except OSError:
+            return None
+        return st.st_ino, st.st_rdev
+
+    def _wait_backoff(self, seconds: float, gone: tuple[int, int] | None) -> None:
+        deadline = time.monotonic() + seconds
+        while not self._stop.is_set() and time.monotonic() < deadline:
+            node = self._node()
+            if node is not None and node != gone:
+                return  # the device came back (replugged): try now
+            time.sleep(0.05)
+
+    def _run(self) -> None:
+        attempt = 0
+        output: TallyOutput | None = None
+        gone: tuple[int, int] | None = None
+        while not self._stop.is_set():
+            if output is None:
+                try:
+                    output = self._open()
+                    output.send(self._state)
+                    self.sends += 1
+                    self.connected, attempt, gone = True, 0, None
+                except RigctlError as exc:
+                    if output is not None:
+                        output.close()
+                        output = None
+                    self.connected, self.last_error = False, str(exc)
+                    wait = self.BACKOFF_S[min(attempt, len(self.BACKOFF_S) - 1)]
+                    attempt += 1
+                    self._wait_backoff(wait, gone)
+                continue
+            self._changed.wait(self._resend_s)
+            self._changed.clear()
+            if self._stop.is_set():
+                break
+            try:
+                output.send(self._state)
+                self.sends += 1
+            except RigctlError as exc:
+                log.warning("tally: %s; reopening", exc)
+                gone = self._node()
+                output.close()
+                output = None
+                self.connected, self.last_error = False, str(exc)
+                self._wait_backoff(self.BACKOFF_S[0], gone)
+                attempt = 1
+        if output is not None:
+            output.close()

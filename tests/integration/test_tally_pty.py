@@ -127,3 +127,40 @@ def test_line_settings_are_tsl_31(tmp_path: Path, pty_line) -> None:  # type: ig
 def test_rig_without_tally_says_so(run_cli) -> None:  # type: ignore[no-untyped-def]
     res = run_cli("tally", "--program", "r1c1")
     assert res.returncode == 2 and "has no tally section" in res.stderr
+
+
+def test_unplug_for_three_seconds_state_back_within_a_second_of_replug(tmp_path: Path) -> None:
+    import time
+
+    from rigctl.simulators.tsl_receiver import SimTslReceiver
+
+    from rigctl.tally import TallyService
+
+    link = tmp_path / "ttyTALLY"
+    receiver = SimTslReceiver(link)
+    rig = load_rig(rig_with_tally(tmp_path, str(link)))
+    service = TallyService(lambda: open_tally(rig), port_path=str(link)).start()
+    try:
+        service.set(TallyState(program=frozenset({"r1c1"}), preview=frozenset({"r0c2"})))
+        deadline = time.monotonic() + 5
+        while len(receiver.since(0)) < 18 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert len(receiver.since(0)) >= 18
+        receiver.unplug()
+        time.sleep(3.0)
+        replugged = time.monotonic()
+        receiver.plug()
+        deadline = time.monotonic() + 5
+        while receiver.first_after(replugged) is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        first = receiver.first_after(replugged)
+        assert first is not None and first - replugged < 1.0, "full state not back within 1 s of replug"
+        time.sleep(0.3)
+        frames = receiver.since(replugged)[:9]
+        assert [f.text for f in frames] == rig.camera_names  # the whole state, every camera
+        by = {f.text: f for f in frames}
+        assert by["r1c1"].tally[1] and by["r0c2"].tally[0]
+        assert service.connected
+    finally:
+        service.stop()
+        receiver.close()
