@@ -103,7 +103,12 @@ class SimArray:
         self._frames: dict[int, list[NDArray[np.uint8]]] = {}
         self._truth: dict[int, tuple[list[NDArray[np.float32]], list[NDArray[np.bool_]]]] = {}
         self._backgrounds: dict[tuple[str, bool], RenderResult] = {}
+        # camera state that camera control changes (the simulated bridge writes it; frames follow it)
         self.exposure_us = {n: self.settings.exposure_us for n in self.names}
+        self.sensor_gain = {n: 1.0 for n in self.names}
+        self.control_state: dict[str, dict[tuple[int, int], tuple[float, ...] | str]] = {n: {} for n in self.names}
+        ref = rig.model.reference.source if rig.model.reference else "external"
+        self.reference_source: dict[str, str] = dict.fromkeys(self.names, ref)
         self.stream_start_ns: int | None = None
         self._claimed: set[str] = set()
         self._prime_lock = threading.Lock()
@@ -351,8 +356,17 @@ class SimArray:
         return self._noise[(self.index[name] * 3 + sequence * 5) % NOISE_BANK]
 
     def gain_for(self, name: str) -> float:
-        """Brightness change from camera control (exposure set away from what was rendered)."""
-        return self.exposure_us[name] / self.settings.exposure_us
+        """Brightness change from camera control (exposure or sensor gain set away from what was rendered)."""
+        return self.exposure_us[name] / self.settings.exposure_us * self.sensor_gain[name]
+
+    def reference_locked(self, name: str) -> tuple[bool, str]:
+        """Whether the camera is locked to a reference, and how it is set."""
+        source = self.reference_source[name]
+        if source == "internal":
+            return False, "internal (free-running)"
+        if not self.settings.reference_present or name in self.settings.unlocked:
+            return False, f"{source}, NOT LOCKED"
+        return True, f"{source}, locked"
 
     # ---- ground truth on disk ---------------------------------------------------------------------
     def write_truth_for(

@@ -151,6 +151,7 @@ class SimCamera:
         t0 = self.array.stream_start_ns
         now_rel = time.monotonic_ns() - t0 if t0 is not None else 0
         present = self.array.signal_present(self.name, now_rel)
+        locked, reference = self.array.reference_locked(self.name)
         with self._lock:
             return CameraStatus(
                 signal_present=present,
@@ -158,6 +159,7 @@ class SimCamera:
                 measured_fps=self._fps if self._streaming else 0.0,
                 source_drops=self._source_drops,
                 frames=self._frames,
-                reference_locked=True,
+                reference_locked=locked,
                 detail=self.array.describe(),
+                extra={"reference": reference},
             )

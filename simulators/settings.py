@@ -69,13 +69,15 @@ class SimSettings(BaseModel):
     signal_loss: dict[str, tuple[NonNeg, NonNeg]] = Field(
         default_factory=dict, description="[start, end] seconds after stream start with no signal"
     )
+    reference_present: bool = Field(True, description="a reference (genlock) signal reaches the cameras")
+    unlocked: list[str] = Field(default_factory=list, description="cameras that fail to lock to the reference")
     exposure_us: Annotated[float, Field(gt=0, le=1e6)] = Field(
         20000.0, description="exposure time (camera control can change it; brightness scales with it)"
     )
 
-    @field_validator("skew_us", "drops", "signal_loss")
+    @field_validator("skew_us", "drops", "signal_loss", "unlocked")
     @classmethod
-    def _camera_keys(cls, value: dict[str, Any]) -> dict[str, Any]:
+    def _camera_keys(cls, value: dict[str, Any] | list[str]) -> dict[str, Any] | list[str]:
         for key in value:
             if not CAMERA_NAME.match(key):
                 raise ValueError(f"{key!r} is not a camera name r{{row}}c{{col}}")

@@ -11,12 +11,12 @@ import logging
 import sys
 
 from rigctl import __version__
-from rigctl.cli import args, devices, plan, record, take, tally
+from rigctl.cli import args, control, devices, plan, record, take, tally
 from rigctl.errors import RigctlError
 
 log = logging.getLogger(__name__)
 
-VERBS = (plan, devices, record, take, tally)
+VERBS = (plan, devices, record, take, tally, control)
 
 
 def build_parser() -> argparse.ArgumentParser:
