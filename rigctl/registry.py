@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
+from rigctl.camera_control import ControlPath
 from rigctl.errors import DeviceError, RigFileError
 from rigctl.interfaces import Camera
 from rigctl.rig import Rig
@@ -88,8 +89,56 @@ def sim_settings_help() -> str:
     return describe_settings()
 
 
+def usb_backend() -> Any:
+    """The pyusb backend to enumerate with: libusb, or the simulated backend when ``RIGCTL_SIM_USB`` names a
+    YAML list of simulated devices (vendor_id, product_id, serial, manufacturer, product, bus, ports)."""
+    import os
+
+    path = os.environ.get("RIGCTL_SIM_USB")
+    if not path:
+        return None
+    from rigctl.simulators.usb_backend import load_sim_usb
+
+    return load_sim_usb(Path(path))
+
+
+def _serial_ports() -> list[dict[str, Any]]:
+    from serial.tools import list_ports
+
+    out = []
+    for port in list_ports.comports():
+        out.append(
+            {
+                "device": port.device,
+                "description": port.description,
+                "usb": f"{port.vid:04x}:{port.pid:04x}" if port.vid is not None and port.pid is not None else None,
+                "serial": port.serial_number,
+                "location": port.location,
+            }
+        )
+    return out
+
+
+def rig_usb_identities(rig: Rig) -> dict[str, Any]:
+    """Every USB identity the rig file names, keyed by what it identifies (camera r0c0, tally, bridge)."""
+    out: dict[str, Any] = {f"camera {c.name}": c.usb for c in rig.model.cameras if c.usb is not None}
+    if rig.model.tally is not None and rig.model.tally.usb is not None:
+        out["tally"] = rig.model.tally.usb
+    if rig.model.camera_control is not None and rig.model.camera_control.usb is not None:
+        out["bridge"] = rig.model.camera_control.usb
+    return out
+
+
+def _line_state(address: str) -> str:
+    import os
+
+    if "://" in address:
+        return "simulated" if address.startswith("sim://") else "network"
+    return "found" if os.path.exists(address) else "MISSING"
+
+
 def describe_attached(rig: Rig) -> dict[str, Any]:
-    """Attached devices of every kind the rig uses, and each camera's device: found, missing or simulated."""
+    """Attached devices of every kind the rig uses, and each of the rig's devices: found, missing or simulated."""
     import os
 
     schemes = {c.name: scheme_of(c.device) for c in rig.cameras}
@@ -112,10 +161,48 @@ def describe_attached(rig: Rig) -> dict[str, Any]:
             if resolved not in known:
                 missing.append(f"{cam.name} ({cam.device})")
         cams.append(entry)
-    return {"v4l2": v4l2, "cameras": cams, "missing": missing}
+    lines = []
+    for role, address in (
+        ("tally", rig.model.tally.port if rig.model.tally else None),
+        ("bridge", rig.model.camera_control.bridge if rig.model.camera_control else None),
+    ):
+        if address is None:
+            continue
+        state = _line_state(address.partition("?")[0])
+        lines.append({"role": role, "address": address, "state": state})
+        if state == "MISSING":
+            missing.append(f"{role} line ({address})")
+    usb: list[dict[str, Any]] = []
+    identities: list[dict[str, Any]] = []
+    wanted = rig_usb_identities(rig)
+    try:
+        from rigctl.drivers.usb_identity import list_usb, resolve
+
+        attached = list_usb(usb_backend())
+        usb = [{"describe": d.describe(), **d.__dict__} for d in attached]
+        for role, ident in wanted.items():
+            try:
+                dev = resolve({role: ident}, attached)[role]
+                identities.append({"role": role, "state": "found", "device": dev.describe()})
+            except DeviceError as exc:
+                identities.append({"role": role, "state": "PROBLEM", "error": str(exc)})
+                missing.append(str(exc))
+    except DeviceError as exc:
+        if wanted:
+            missing.append(str(exc))
+        usb = [{"error": str(exc)}]
+    return {
+        "v4l2": v4l2,
+        "serial": _serial_ports(),
+        "usb": usb,
+        "cameras": cams,
+        "lines": lines,
+        "usb_identities": identities,
+        "missing": missing,
+    }
 
 
-def open_tally(rig: Rig) -> TallyOutput:
+def open_tally(rig: Rig, devices: DeviceSet | None = None) -> TallyOutput:
     """The rig's tally output, from its ``tally:`` section."""
     tally = rig.model.tally
     if tally is None:
@@ -124,4 +211,56 @@ def open_tally(rig: Rig) -> TallyOutput:
         from rigctl.drivers.tsl31_output import Tsl31Output
 
         return Tsl31Output(tally.port, tsl_addresses(rig), pad_with_nul=tally.pad_with_nul)
-    raise RigFileError(f"{rig.source}: tally protocol {tally.protocol} is not supported by this build yet")
+    if tally.protocol == "tsl-umd-5.0":
+        from rigctl.drivers.tsl50_output import Tsl50Output
+
+        return Tsl50Output(tally.port, tsl_addresses(rig))
+    from rigctl.camera_control import camera_ids
+    from rigctl.drivers.embedded_tally_output import EmbeddedTallyOutput
+
+    ids = camera_ids(rig) if rig.model.camera_control else {n: i + 1 for i, n in enumerate(rig.camera_names)}
+    return EmbeddedTallyOutput(open_bridge(rig, tally.port, devices), ids)
+
+
+def _bridge_url(url: str) -> tuple[str, dict[str, str]]:
+    base, _, query = url.partition("?")
+    opts = dict(part.partition("=")[::2] for part in query.split("&") if part)
+    return base, opts
+
+
+def open_bridge(rig: Rig, url: str, devices: DeviceSet | None = None) -> Any:
+    """An SDI bridge (``rigctl.drivers.sdi_bridge.SdiBridge``) at ``url``. ``sim://bridge`` starts a simulated
+    bridge on a pseudo-terminal in this process, applying what it is sent to ``devices``' simulated cameras;
+    ``sim://bridge?blind=1`` simulates a bridge that cannot read values back."""
+    from rigctl.drivers.sdi_bridge import SdiBridge
+
+    base, opts = _bridge_url(url)
+    if base != "sim://bridge":
+        if base.startswith("sim://"):
+            raise DeviceError(f"bridge address {url!r}: the simulated bridge is sim://bridge")
+        return SdiBridge(url)
+    from rigctl.camera_control import camera_ids
+    from rigctl.simulators.sdi_bridge import SimSdiBridge
+
+    ids = camera_ids(rig) if rig.model.camera_control else {n: i + 1 for i, n in enumerate(rig.camera_names)}
+    array = getattr(devices.truth, "array", None) if devices is not None else None
+    sim = SimSdiBridge(array, ids, readback=opts.get("blind", "0") in ("0", "false"))
+    try:
+        bridge = SdiBridge(sim.port)
+    except DeviceError:
+        sim.close()
+        raise
+    bridge.url = url
+    bridge.on_close.append(sim.close)
+    return bridge
+
+
+def open_control(rig: Rig, devices: DeviceSet | None = None) -> ControlPath:
+    """The rig's camera-control path, from its ``camera_control:`` section."""
+    from rigctl.camera_control import camera_ids
+    from rigctl.drivers.bmd_camera_control import BmdBridgeControl
+
+    cc = rig.model.camera_control
+    if cc is None:
+        raise RigFileError(f"{rig.source}: rig {rig.name} has no camera_control section (add camera_control: bridge)")
+    return BmdBridgeControl(open_bridge(rig, cc.bridge, devices), camera_ids(rig))

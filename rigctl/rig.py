@@ -96,6 +96,7 @@ class Tally(_Section):
     port: str = Field(min_length=1)
     addresses: dict[str, Annotated[int, Field(ge=0, le=126)]] | None = None
     pad_with_nul: bool = False
+    usb: UsbIdentity | None = None  # the USB-serial adapter behind ``port``
 
 
 class CameraControl(_Section):
@@ -103,6 +104,7 @@ class CameraControl(_Section):
 
     bridge: str = Field(min_length=1)
     camera_ids: dict[str, Annotated[int, Field(ge=0, le=254)]] | None = None
+    usb: UsbIdentity | None = None  # the bridge's USB-serial link
 
 
 class Reference(_Section):

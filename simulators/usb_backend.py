@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import array
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import usb.backend
+import yaml
 
 _GET_DESCRIPTOR = 6
 _STRING = 3
@@ -84,3 +86,24 @@ class SimUsbBackend(usb.backend.IBackend):
         n = min(len(payload), len(data))
         data[:n] = array.array("B", payload[:n])
         return n
+
+
+def load_sim_usb(path: Path) -> SimUsbBackend:
+    """Simulated devices from a YAML list (for ``RIGCTL_SIM_USB``); errors name the file and entry."""
+    from rigctl.errors import ParameterError
+
+    try:
+        items = yaml.safe_load(path.read_text(encoding="utf-8")) or []
+    except (OSError, yaml.YAMLError) as exc:
+        raise ParameterError(f"{path}: cannot read simulated USB devices: {exc}") from None
+    if not isinstance(items, list):
+        raise ParameterError(f"{path}: expected a list of simulated USB devices")
+    devices = []
+    for i, item in enumerate(items):
+        try:
+            if "ports" in item:
+                item = {**item, "ports": tuple(item["ports"])}
+            devices.append(SimUsbDevice(**item))
+        except TypeError as exc:
+            raise ParameterError(f"{path}: entry {i}: {exc}") from None
+    return SimUsbBackend(devices)

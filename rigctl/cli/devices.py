@@ -30,11 +30,24 @@ def run(ns: argparse.Namespace) -> int:
             continue
         fmts = ", ".join(d["formats"][:6]) + (" ..." if len(d["formats"]) > 6 else "")
         print(f"  {d['path']}: {d['card']} ({d['driver']}, {d['bus']}) signal {d['signal']}; formats {fmts}")
+    serial = attached["serial"]
+    print(f"serial ports: {len(serial) if serial else 'none'}")
+    for port in serial:
+        usb = f" USB {port['usb']} serial {port['serial'] or '-'} at {port['location'] or '?'}" if port["usb"] else ""
+        print(f"  {port['device']}: {port['description']}{usb}")
+    usb_devices = attached["usb"]
+    print(f"USB devices: {len(usb_devices) if usb_devices else 'none'}")
+    for dev in usb_devices:
+        print(f"  {dev.get('describe') or dev.get('error')}")
     print(f"rig {rig.name}:")
     for cam in attached["cameras"]:
         state = cam["state"]
         where = f" -> {cam['resolved']}" if cam.get("resolved") and cam["resolved"] != cam["device"] else ""
         print(f"  {cam['name']}: {cam['device']}{where}  {state}")
+    for line in attached["lines"]:
+        print(f"  {line['role']}: {line['address']}  {line['state']}")
+    for ident in attached["usb_identities"]:
+        print(f"  USB identity of {ident['role']}: {ident.get('device') or ident.get('error')}")
     if attached["missing"]:
         print(f"missing: {', '.join(attached['missing'])}")
         return 1

@@ -124,8 +124,12 @@ def test_line_settings_are_tsl_31(tmp_path: Path, pty_line) -> None:  # type: ig
         out.close()
 
 
-def test_rig_without_tally_says_so(run_cli) -> None:  # type: ignore[no-untyped-def]
-    res = run_cli("tally", "--program", "r1c1")
+def test_rig_without_tally_says_so(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    rig = yaml.safe_load((REPO / "rigs" / "sim-3x3.yaml").read_text())
+    del rig["tally"]
+    path = tmp_path / "rig.yaml"
+    path.write_text(yaml.safe_dump(rig))
+    res = run_cli("tally", str(path), "--program", "r1c1")
     assert res.returncode == 2 and "has no tally section" in res.stderr
 
 

@@ -10,7 +10,8 @@ from rigctl.errors import RigFileError, SpecVersionError
 from rigctl.rig import load_rig
 
 REPO = Path(__file__).resolve().parents[2]
-SIM = (REPO / "rigs" / "sim-3x3.yaml").read_text()
+# the shipped simulated rig without its optional rig-control sections
+SIM = (REPO / "rigs" / "sim-3x3.yaml").read_text().split("# Camera control through")[0]
 
 
 def write(tmp_path: Path, text: str) -> Path:
@@ -31,8 +32,10 @@ def test_shipped_rigs_load_by_path_and_by_name() -> None:
     assert sim.fov_deg() == pytest.approx(paper.fov_deg())
     assert load_rig().name == "sim-3x3"  # the default
     assert load_rig("rigs/sim-3x3.yaml").name == "sim-3x3"  # contract path works from any directory
-    # optional sections are absent, not empty
-    assert sim.model.tally is None and sim.model.camera_control is None and sim.model.storage is None
+    # optional sections are absent, not empty; the simulated rig's control goes through the simulated bridge
+    assert sim.model.storage is None and paper.model.storage is None
+    assert sim.model.camera_control is not None and sim.model.camera_control.bridge == "sim://bridge"
+    assert paper.model.tally is not None and paper.model.tally.protocol == "tsl-umd-3.1"
 
 
 def test_round_trip_through_snapshot() -> None:

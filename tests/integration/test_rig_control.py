@@ -1,0 +1,279 @@
+"""Camera control, reference and tally outputs through real lines: the SDI bridge on a pseudo-terminal (real
+pyserial and termios), TSL UMD 5.0 on a real UDP socket, USB identities through the real pyusb code path."""
+
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from rigctl.drivers.bmd_camera_control import BmdBridgeControl
+from rigctl.drivers.embedded_tally_output import EmbeddedTallyOutput
+from rigctl.drivers.protocols import bmd_control, tsl50
+from rigctl.drivers.sdi_bridge import SdiBridge
+from rigctl.simulators.sdi_bridge import SimSdiBridge
+
+from rigctl.camera_control import CONFIRMED, FAILED, MISMATCH, UNCONFIRMED
+from rigctl.errors import DeviceError
+from rigctl.pixfmt import luma
+from rigctl.registry import open_cameras, open_control
+from rigctl.rig import load_rig
+from rigctl.tally import TallyState
+
+REPO = Path(__file__).resolve().parents[2]
+IDS = {f"r{r}c{c}": 3 * r + c + 1 for r in range(3) for c in range(3)}
+
+
+def write_rig(tmp_path: Path, **sections: object) -> Path:
+    rig = yaml.safe_load((REPO / "rigs" / "sim-3x3.yaml").read_text())
+    rig.update(sections)
+    path = tmp_path / "rig.yaml"
+    path.write_text(yaml.safe_dump(rig))
+    return path
+
+
+def mean_luma(cam, rig) -> float:  # type: ignore[no-untyped-def]
+    frame = None
+    while frame is None:
+        frame = cam.read(2.0)
+    img = np.frombuffer(frame.data, np.uint8).reshape(rig.height_px, -1)
+    return float(luma(img, rig.model.format.pixel_format)[100:, :].mean())  # below the burnt-in ids
+
+
+@pytest.mark.parametrize("blind", [False, True])
+def test_exposure_through_the_bridge_changes_the_images(blind: bool) -> None:
+    rig = load_rig("sim-3x3")
+    devices = open_cameras(rig, ["noise=0", "motion=false"], ["r0c0", "r1c1", "r2c2"])
+    cams = devices.cameras
+    for cam in cams.values():
+        cam.open()
+        cam.start()
+    array = devices.truth.array  # type: ignore[union-attr]
+    sim = SimSdiBridge(array, IDS, readback=not blind)
+    control = BmdBridgeControl(SdiBridge(sim.port), IDS)
+    try:
+        before = {n: mean_luma(c, rig) for n, c in cams.items()}
+        results = control.apply({"exposure_us": 10_000}, list(cams))
+        after = {n: mean_luma(c, rig) for n, c in cams.items()}
+    finally:
+        control.close()
+        sim.close()
+        devices.close()
+    # half the exposure: the picture above black (16) halves
+    for n in cams:
+        assert (after[n] - 16) == pytest.approx((before[n] - 16) / 2, rel=0.05), n
+    assert {r.camera for r in results} == set(cams)
+    assert {r.state for r in results} == {UNCONFIRMED if blind else CONFIRMED}
+    assert all(r.reported == (None if blind else 10_000) for r in results)
+
+
+def test_cli_control_confirms_and_reports_reference_lock(run_cli) -> None:  # type: ignore[no-untyped-def]
+    res = run_cli("control", "--exposure-us", "8000", "--reference", "internal", "--camera", "r1c1", "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert [(r["setting"], r["state"], r["reported"]) for r in out["results"]] == [
+        ("exposure_us", "confirmed", 8000),
+        ("reference", "confirmed", "internal"),
+    ]
+    assert out["reference"] == {"r1c1": "internal (free-running)"}
+    res = run_cli("control", "--reference", "external", "--sim", "unlocked=[r0c2]", "--json")
+    locks = json.loads(res.stdout)["reference"]
+    assert locks["r0c2"] == "external, NOT LOCKED" and locks["r0c0"] == "external, locked"
+
+
+def test_cli_control_blind_bridge_is_unconfirmed(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    rig = write_rig(tmp_path, camera_control={"bridge": "sim://bridge?blind=1"})
+    res = run_cli("control", str(rig), "--gain", "2", "--white-balance-k", "5600")
+    assert res.returncode == 0, res.stderr
+    assert "blind" in res.stdout
+    rows = [line for line in res.stdout.splitlines() if line.startswith("r")]
+    assert len(rows) == 9 and all(line.count("unconfirmed") == 2 for line in rows)
+    assert "confirmed " not in res.stdout.replace("unconfirmed", "")
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--exposure-us", "0"], "exposure_us must be within 1..1e+06 us, got 0"),
+        (["--gain", "2.5"], "gain must be a whole number"),
+        (["--exposure-us", "nan"], "exposure_us must be within"),
+        ([], "no camera setting given"),
+        (["--gain", "2", "--camera", "r9c9"], "camera 'r9c9' is not in rig sim-3x3"),
+    ],
+)
+def test_cli_control_bad_input_is_one_line(run_cli, args: list[str], message: str) -> None:  # type: ignore[no-untyped-def]
+    res = run_cli("control", *args)
+    assert res.returncode == 2
+    assert message in res.stderr and len(res.stderr.strip().splitlines()) == 1
+
+
+def test_camera_that_ignores_a_setting_is_a_mismatch() -> None:
+    sim = SimSdiBridge(None, IDS)
+    sim.ignoring = {"r2c1"}
+    control = BmdBridgeControl(SdiBridge(sim.port), IDS, confirm_timeout_s=0.2)
+    try:
+        results = control.apply({"focus": 0.25}, ["r0c0", "r2c1"])
+    finally:
+        control.close()
+        sim.close()
+    assert [(r.camera, r.state) for r in results] == [("r0c0", CONFIRMED), ("r2c1", MISMATCH)]
+
+
+def test_retries_through_garbage_and_slow_replies_apply_once() -> None:
+    sim = SimSdiBridge(None, IDS)
+    bridge = SdiBridge(sim.port, reply_timeout_s=0.15)
+    try:
+        sim.garbage_before_reply = b"\xb5\x62\x01\xff\x00\x13junk"
+        sim.reply_delay_s = 0.2  # longer than the reply timeout: the host sends again, same sequence number
+        bridge.send_control([bmd_control.Message(1, 1, 5, bmd_control.INT32, bmd_control.OFFSET, (1000,))])
+        assert bridge.retries >= 1
+        assert len(sim.packets) == 1  # applied once although received more than once
+        sim.reply_delay_s = 0.0
+        back = bridge.query(1, 1, 5)
+        assert back is not None and back.values == (1000,)
+    finally:
+        bridge.close()
+        sim.close()
+
+
+def test_silent_bridge_and_unplugged_bridge_fail_clearly() -> None:
+    sim = SimSdiBridge(None, IDS)
+    control = BmdBridgeControl(SdiBridge(sim.port, reply_timeout_s=0.1), IDS)
+    try:
+        sim.mute = True
+        results = control.apply({"exposure_us": 5000}, ["r0c0"])
+        assert results[0].state == FAILED
+        assert "no reply from the SDI bridge to CONTROL within 0.10 s (3 tries)" in results[0].detail
+        sim.mute = False
+        sim.unplug()
+        results = control.apply({"exposure_us": 5000}, ["r0c0"])
+        assert results[0].state == FAILED and sim.port in results[0].detail
+    finally:
+        control.close()
+        sim.close()
+    with pytest.raises(DeviceError, match="no such serial port"):
+        SdiBridge(str(REPO / "no-such-tty"))
+
+
+def test_embedded_tally_through_the_bridge() -> None:
+    sim = SimSdiBridge(None, IDS)
+    out = EmbeddedTallyOutput(SdiBridge(sim.port), IDS)
+    try:
+        out.send(TallyState(program=frozenset({"r0c2"}), preview=frozenset({"r1c0"})))
+    finally:
+        out.close()
+        sim.close()
+    assert sim.tally is not None
+    assert sim.tally.program == {3} and sim.tally.preview == {4}  # cameras numbered from 1
+
+
+def test_sim_rig_tally_and_control_share_the_simulated_bridge(run_cli) -> None:  # type: ignore[no-untyped-def]
+    res = run_cli("tally", "--program", "r1c1")
+    assert res.returncode == 0, res.stderr
+    rig = load_rig("sim-3x3")
+    devices = open_cameras(rig, [], ["r0c0"])
+    control = open_control(rig, devices)
+    try:
+        assert control.can_confirm and "sim://bridge" in control.description
+    finally:
+        control.close()
+        devices.close()
+
+
+def test_tsl50_over_udp(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.settimeout(10)
+    port = rx.getsockname()[1]
+    rig = write_rig(tmp_path, tally={"protocol": "tsl-umd-5.0", "port": f"udp://127.0.0.1:{port}"})
+    try:
+        res = run_cli("tally", str(rig), "--program", "r0c1", "--preview", "r2c2")
+        assert res.returncode == 0, res.stderr
+        packet = tsl50.decode(rx.recv(2048))
+    finally:
+        rx.close()
+    assert [d.index for d in packet.displays] == list(range(1, 10))
+    by = {d.text: d for d in packet.displays}
+    assert by["r0c1"].left == by["r0c1"].right == tsl50.RED
+    assert by["r2c2"].text_tally == tsl50.GREEN
+    assert by["r0c0"].right == tsl50.OFF and by["r0c0"].brightness == 3
+
+
+def test_tsl50_bad_port_is_named(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    rig = write_rig(tmp_path, tally={"protocol": "tsl-umd-5.0", "port": "/dev/ttyUSB0"})
+    res = run_cli("tally", str(rig), "--program", "r0c1")
+    assert res.returncode == 2 and "TSL UMD 5.0 goes over UDP, write udp://HOST:PORT" in res.stderr
+
+
+FTDI = {"vendor_id": 0x0403, "product_id": 0x6001, "manufacturer": "FTDI", "product": "FT232R USB UART"}
+
+
+def usb_env(tmp_path: Path) -> Path:
+    devices = [
+        {**FTDI, "serial": "TALLY01", "bus": 1, "ports": [2, 1]},
+        {**FTDI, "serial": "BRIDGE01", "bus": 1, "ports": [2, 2]},
+    ]
+    path = tmp_path / "usb.yaml"
+    path.write_text(yaml.safe_dump(devices))
+    return path
+
+
+def run_devices(tmp_path: Path, rig: Path) -> tuple[int, str, str]:
+    import os
+    import subprocess
+
+    from tests_support import rigctl_exe
+
+    env = {**os.environ, "RIGCTL_SIM_USB": str(usb_env(tmp_path))}
+    res = subprocess.run([*rigctl_exe(), "devices", str(rig)], capture_output=True, text=True, env=env, timeout=60)
+    return res.returncode, res.stdout, res.stderr
+
+
+def test_devices_maps_usb_identities_onto_the_rig(tmp_path: Path) -> None:
+    ident = {"vendor_id": 0x0403, "product_id": 0x6001}
+    rig = write_rig(
+        tmp_path,
+        tally={"protocol": "tsl-umd-3.1", "port": "/dev/null", "usb": {**ident, "serial": "TALLY01"}},
+        camera_control={"bridge": "sim://bridge", "usb": {**ident, "bus_path": "1-2.2"}},
+    )
+    code, out, err = run_devices(tmp_path, rig)
+    assert code == 0, out + err
+    assert "USB devices: 2" in out
+    assert "USB identity of tally: 0403:6001 FTDI FT232R USB UART serial TALLY01 at 1-2.1" in out
+    assert "USB identity of bridge: 0403:6001 FTDI FT232R USB UART serial BRIDGE01 at 1-2.2" in out
+
+
+@pytest.mark.parametrize(
+    ("usb", "message"),
+    [
+        ({}, "tally: 2 attached USB devices match 0403:6001"),
+        ({"serial": "GONE"}, "tally: no attached USB device matches 0403:6001 serial GONE"),
+    ],
+)
+def test_devices_names_ambiguous_or_missing_identity(tmp_path: Path, usb: dict[str, str], message: str) -> None:
+    rig = write_rig(
+        tmp_path,
+        tally={
+            "protocol": "tsl-umd-3.1",
+            "port": "/dev/null",
+            "usb": {"vendor_id": 0x0403, "product_id": 0x6001, **usb},
+        },
+    )
+    code, out, _ = run_devices(tmp_path, rig)
+    assert code == 1
+    assert message in out
+
+
+def test_a_new_host_session_is_not_taken_for_a_retry() -> None:
+    sim = SimSdiBridge(None, IDS)
+    try:
+        for exposure in (1000, 2000):  # both sessions send HELLO (0) then CONTROL (1)
+            bridge = SdiBridge(sim.port)
+            bridge.send_control([bmd_control.Message(1, 1, 5, bmd_control.INT32, bmd_control.ASSIGN, (exposure,))])
+            bridge.close()
+        assert len(sim.packets) == 2 and sim.state["r0c0"][(1, 5)] == (2000,)
+    finally:
+        sim.close()
