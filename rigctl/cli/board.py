@@ -1,0 +1,59 @@
+"""``rigctl board``: a printable ChArUco calibration target and the file describing it."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import cv2
+
+from rigctl.board import DICTIONARIES, BoardSpec
+from rigctl.errors import ParameterError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "board",
+        help="write a printable ChArUco target (PNG) and its description (board.yaml)",
+        description="Write OUT.png, to be printed at 100 %% scale at --dpi, and OUT.yaml describing the board for "
+        "rigctl calibrate. Measure a printed square and correct square_m in the YAML if the print is off.",
+    )
+    p.add_argument("--out", type=Path, default=Path("board"), metavar="STEM", help="output stem (default: board)")
+    p.add_argument("--squares", default="8x6", metavar="XxY", help="squares across x down (default 8x6)")
+    p.add_argument("--square-mm", type=float, default=75.0, metavar="MM", help="square side (default 75)")
+    p.add_argument("--marker-mm", type=float, default=55.0, metavar="MM", help="marker side (default 55)")
+    p.add_argument("--dictionary", default="DICT_5X5_250", choices=sorted(DICTIONARIES))
+    p.add_argument("--dpi", type=float, default=150.0, help="print resolution (default 150)")
+    p.add_argument("--margin-mm", type=float, default=10.0, metavar="MM", help="white margin (default 10)")
+    p.set_defaults(func=run)
+
+
+def run(ns: argparse.Namespace) -> int:
+    try:
+        sx, sy = (int(v) for v in ns.squares.lower().split("x"))
+    except ValueError:
+        raise ParameterError(f"--squares {ns.squares!r}: expected COLUMNSxROWS such as 8x6") from None
+    if not (3 <= sx <= 40 and 3 <= sy <= 40):
+        raise ParameterError(f"--squares {ns.squares}: each count must be 3..40")
+    if not 0 < ns.marker_mm < ns.square_mm:
+        raise ParameterError(f"--marker-mm {ns.marker_mm} must be positive and smaller than --square-mm {ns.square_mm}")
+    if not 30 <= ns.dpi <= 2400 or ns.margin_mm < 0:
+        raise ParameterError("--dpi must be 30..2400 and --margin-mm at least 0")
+    spec = BoardSpec(sx, sy, ns.square_mm / 1000, ns.marker_mm / 1000, ns.dictionary)
+    px_per_square = round(ns.square_mm / 25.4 * ns.dpi)
+    if px_per_square < 20:
+        raise ParameterError(f"{ns.square_mm} mm at {ns.dpi} dpi is {px_per_square} px per square: raise --dpi")
+    margin = round(ns.margin_mm / 25.4 * ns.dpi)
+    image = spec.image(px_per_square, margin)
+    ns.out.parent.mkdir(parents=True, exist_ok=True)
+    png, yml = ns.out.with_suffix(".png"), ns.out.with_suffix(".yaml")
+    if not cv2.imwrite(str(png), image, [cv2.IMWRITE_PNG_COMPRESSION, 9]):
+        raise ParameterError(f"{png}: cannot write the image")
+    # the printed square size follows from the DPI: record it so a user can check the print with a ruler
+    spec.save(yml)
+    h, w = image.shape
+    print(
+        f"wrote {png} ({w}x{h} px = {w / ns.dpi * 25.4:.0f} x {h / ns.dpi * 25.4:.0f} mm at {ns.dpi:g} dpi; "
+        f"squares {sx}x{sy} of {ns.square_mm:g} mm, markers {ns.marker_mm:g} mm, {ns.dictionary}) and {yml}"
+    )
+    return 0

@@ -1,0 +1,131 @@
+"""``rigctl rectify`` on a recorded simulated take: the result is a take, its images line up with the true
+disparity as the contract defines it, tables come from the cache the second time, and bad input is refused."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+from warp_check import STEP, mae_against_neighbours
+
+from rigctl.calibration_model import load_calibration
+from rigctl.pfm import read_pfm
+from rigctl.take.reader import TakeReader
+
+SIM = ["motion=false", "noise=0", "exposure_spread=0", "colour_spread=0", "vignetting=0", "mount_position_mm=0.5"]
+
+
+@pytest.fixture(scope="module")
+def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from tests_support import run_rigctl
+
+    out = tmp_path_factory.mktemp("takes")
+    args = ["record", "--take", "t", "--frames", "2", "--out", str(out)]
+    res = run_rigctl(*args, *[a for s in SIM for a in ("--sim", s)])
+    assert res.returncode == 0, res.stderr
+    return out / "t"
+
+
+def grey(reader: TakeReader, name: str, i: int = 0) -> np.ndarray:
+    rgb = reader.frame_rgb(name, i)
+    return np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY) * 255, dtype=np.float32)
+
+
+def test_rectified_take_lines_up_with_the_truth(take: Path, tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "rect"
+    res = run_cli(
+        "rectify", str(take), "--calibration", str(take / "truth" / "calibration.yaml"), "--out", str(out), "--json"
+    )
+    assert res.returncode == 0, res.stderr
+    summary = json.loads(res.stdout)
+    assert summary["frames"] == 18 and summary["remap_s"] > 0
+    rect = TakeReader(out)
+    assert rect.pixel_format == "BGR3" and rect.names == TakeReader(take).names
+    assert len(rect.complete_sets()) == 2
+    record = rect.raw["rectification"]
+    assert record["calibration_sha256"] and np.asarray(record["K"]).shape == (3, 3)
+    # the contract: a point at x in r1c1 is at x - d * (k - j) in its horizontal neighbours, and at
+    # y - d * dy/dx * (m - i) below, with the cameras' true positions in the rectified frame
+    truth = take / "truth" / "disparity"
+    frame_dir = sorted(truth.iterdir())[0]
+    disps = {n: read_pfm(frame_dir / f"{n}.pfm") for n in ("r1c1", *STEP)}
+    images = {n: grey(rect, n) for n in disps}
+    pos = {n: np.asarray(p) for n, p in record["positions_m"].items()}
+    offsets = {n: tuple((pos[n] - pos["r1c1"])[:2] / record["spacing_x_m"]) for n in STEP}
+    result = mae_against_neighbours(images, disps, offsets)  # type: ignore[arg-type]
+    for name, (mae, pixels) in result.items():
+        assert pixels > 15000 and mae < 3.0, (name, mae, pixels)
+    # the unrectified take does not line up: rectification did the work
+    raw = {n: grey(TakeReader(take), n) for n in disps}
+    unrect = mae_against_neighbours(raw, disps, offsets)  # type: ignore[arg-type]
+    assert np.mean([v[0] for v in unrect.values()]) > 2 * np.mean([v[0] for v in result.values()])
+    # the rectified take is a take like any other
+    assert run_cli("take", "check", str(out)).returncode == 0
+
+
+def test_tables_are_cached_by_calibration_hash(take: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from rigctl.rectify import Rectifier
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    calib = load_calibration(take / "truth" / "calibration.yaml")
+    first = Rectifier(calib)
+    assert not first.cache_hit and len(list((tmp_path / "rigctl" / "remap").glob("*.npz"))) == 1
+    second = Rectifier(calib)
+    assert second.cache_hit and second.hash == first.hash
+    for n in calib.names:
+        assert np.array_equal(first.maps[n][0], second.maps[n][0])
+    # a damaged cache entry is rebuilt, not trusted
+    (tmp_path / "rigctl" / "remap" / f"{first.hash}.npz").write_bytes(b"not a table")
+    third = Rectifier(calib)
+    assert not third.cache_hit and np.array_equal(third.maps["r0c0"][0], first.maps["r0c0"][0])
+
+
+def test_swapped_cameras_are_an_error(take: Path, tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    data = yaml.safe_load((take / "truth" / "calibration.yaml").read_text())
+    cams = data["cameras"]
+    cams["r1c0"], cams["r1c2"] = cams["r1c2"], cams["r1c0"]
+    bad = tmp_path / "swapped.yaml"
+    bad.write_text(yaml.safe_dump(data))
+    res = run_cli("rectify", str(take), "--calibration", str(bad), "--out", str(tmp_path / "r"))
+    assert res.returncode == 2
+    assert "camera order does not match the geometry" in res.stderr
+    assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("problem", ["missing_camera", "wrong_size", "existing_out"])
+def test_bad_input_is_one_line(take: Path, tmp_path: Path, run_cli, problem: str) -> None:  # type: ignore[no-untyped-def]
+    data = yaml.safe_load((take / "truth" / "calibration.yaml").read_text())
+    out = tmp_path / "r"
+    if problem == "missing_camera":
+        del data["cameras"]["r2c2"]
+        message = "no calibration for camera(s) r2c2"
+    elif problem == "wrong_size":
+        for cam in data["cameras"].values():
+            cam["image_size"] = [1920, 1080]
+        message = "does not match take"
+    else:
+        out.mkdir()
+        message = "already exists"
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(data))
+    res = run_cli("rectify", str(take), "--calibration", str(path), "--out", str(out))
+    assert res.returncode == 2 and message in res.stderr and len(res.stderr.strip().splitlines()) == 1
+
+
+def test_board_writes_a_detectable_target(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    from rigctl.board import BoardSpec
+
+    res = run_cli("board", "--out", str(tmp_path / "b"), "--squares", "6x4", "--square-mm", "40", "--marker-mm", "30")
+    assert res.returncode == 0, res.stderr
+    spec = BoardSpec.load(tmp_path / "b.yaml")
+    assert (spec.squares_x, spec.squares_y, spec.square_m) == (6, 4, 0.04)
+    img = cv2.imread(str(tmp_path / "b.png"), cv2.IMREAD_GRAYSCALE)
+    detector = cv2.aruco.CharucoDetector(spec.board())
+    _, ids, _, _ = detector.detectBoard(img)
+    assert ids is not None and len(ids) == 5 * 3  # every inner corner
+    res = run_cli("board", "--out", str(tmp_path / "c"), "--marker-mm", "80")
+    assert res.returncode == 2 and "--marker-mm 80.0 must be positive and smaller" in res.stderr
