@@ -59,7 +59,7 @@ class Rectifier:
             m1, m2 = cv2.initUndistortRectifyMap(
                 cam.K, cam.dist, self.grid.rectifying_rotation(cam), self.grid.K, self.grid.image_size, cv2.CV_16SC2
             )
-            out[name] = (m1, m2)
+            out[name] = (np.asarray(m1, np.int16), np.asarray(m2, np.uint16))
         return out
 
     def _load_or_build(self, cache: Path) -> dict[str, tuple[NDArray[np.int16], NDArray[np.uint16]]]:
@@ -76,7 +76,9 @@ class Rectifier:
         try:
             cache.mkdir(parents=True, exist_ok=True)
             tmp = cache / f"{self.hash}.{os.getpid()}.tmp.npz"
-            np.savez(tmp, **{f"{n}_xy": m[0] for n, m in maps.items()}, **{f"{n}_frac": m[1] for n, m in maps.items()})
+            arrays: dict[str, Any] = {f"{n}_xy": m[0] for n, m in maps.items()}
+            arrays.update({f"{n}_frac": m[1] for n, m in maps.items()})
+            np.savez(tmp, **arrays)
             tmp.replace(path)
         except OSError:
             pass  # no cache (read-only home): tables are rebuilt next time
@@ -159,7 +161,7 @@ def rectify_take(
                     int(rec["capture_ns"]),
                     int(rec["host_ns"]),
                     FrameFlags(int(rec["flags"])) & ~FrameFlags.TIMECODE,
-                    memoryview(res).cast("B"),
+                    memoryview(np.ascontiguousarray(res).reshape(-1).data),
                 )
                 writer.write(frame, int(rec["set"]))
                 done += 1

@@ -11,12 +11,12 @@ import logging
 import sys
 
 from rigctl import __version__
-from rigctl.cli import args, board, control, devices, plan, record, rectify, take, tally
+from rigctl.cli import args, board, calibrate, control, devices, plan, record, rectify, take, tally
 from rigctl.errors import RigctlError
 
 log = logging.getLogger(__name__)
 
-VERBS = (plan, devices, record, take, tally, control, board, rectify)
+VERBS = (plan, devices, record, take, tally, control, board, calibrate, rectify)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,102 @@
+"""``rigctl calibrate``: joint calibration of every camera from a take or a folder of frame sets."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+from rigctl.cli.progress import Progress
+from rigctl.errors import CalibrationError, ParameterError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "calibrate",
+        help="calibrate all cameras jointly from a board take or a folder of frame sets",
+        description="INPUT is a take, a folder of frame sets (<frame>/<camera>.png) or a folder of images named "
+        "<camera><frame>.png (left01.jpg, right01.jpg: a stereo pair). Corners are detected with sub-pixel "
+        "refinement; all cameras are solved jointly (OpenCV 5 multiview calibration, then a bundle adjustment); "
+        "views far above the median error are rejected and named; the result is cross-validated on two halves "
+        "and its rectification residuals measured on held-out frames. A take that cannot constrain a "
+        "calibration ends with a diagnosis naming the camera and what to shoot, and nothing is written.",
+    )
+    p.add_argument("input", type=Path, metavar="INPUT")
+    p.add_argument("--out", type=Path, required=True, metavar="FILE", help="calibration.yaml to write")
+    target = p.add_mutually_exclusive_group()
+    target.add_argument("--board", type=Path, metavar="FILE", help="board description (rigctl board writes one)")
+    target.add_argument("--chessboard", metavar="CxR", help="a plain chessboard of C x R inner corners")
+    p.add_argument("--square", type=float, default=1.0, help="chessboard square size (default 1: one square)")
+    p.add_argument(
+        "--subpix-window", type=int, default=0, metavar="PX", help="chessboard corner refinement half-window (0: auto)"
+    )
+    p.add_argument("--distortion", choices=("k1k2", "k1k2k3", "full"), default="k1k2", help="lens model (default k1k2)")
+    p.add_argument("--reject", type=float, default=2.5, metavar="X", help="reject views above X times the median error")
+    p.add_argument("--opencv", type=Path, metavar="FILE", help="also write OpenCV FileStorage YAML")
+    p.add_argument("--colmap", type=Path, metavar="DIR", help="also write a COLMAP text model (with rigs.txt)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots next to --out")
+    p.add_argument("--force", action="store_true", help="write the calibration even when the diagnosis finds problems")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.set_defaults(func=run)
+
+
+def run(ns: argparse.Namespace) -> int:
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # threaded BLAS is far slower for these small solves
+    from rigctl.calib.detect import Chessboard, Target, load_target
+    from rigctl.calib.export import write_colmap, write_opencv_yaml
+    from rigctl.calib.report import format_table, write_plots
+    from rigctl.calib.run import Options, calibrate
+
+    if ns.chessboard:
+        try:
+            cols, rows = (int(v) for v in ns.chessboard.lower().split("x"))
+        except ValueError:
+            raise ParameterError(f"--chessboard {ns.chessboard!r}: expected inner corners such as 9x6") from None
+        if cols < 3 or rows < 3 or not ns.square > 0 or ns.subpix_window < 0:
+            raise ParameterError("--chessboard needs at least 3x3 inner corners, --square > 0, --subpix-window >= 0")
+        target: Target | None = Chessboard(cols, rows, ns.square, ns.subpix_window)
+    elif ns.board:
+        target = load_target(ns.board)
+    else:
+        target = None
+    if not ns.reject > 1:
+        raise ParameterError(f"--reject must be above 1 (times the median view error), got {ns.reject}")
+    bar = Progress(f"calibrating {ns.input.name}")
+    log = (lambda m: print(m, file=sys.stderr)) if not ns.json else None
+    try:
+        result = calibrate(
+            ns.input,
+            target,
+            Options(model=ns.distortion, reject_factor=ns.reject),
+            progress=lambda label, d, n: bar(d / max(n, 1), label),
+            log=log,
+        )
+    finally:
+        bar.close()
+    report = result.report
+    problems = result.diagnosis
+    if ns.json:
+        print(json.dumps(report, default=float))
+    else:
+        print(format_table(result))
+    for line in problems:
+        print(f"diagnosis: {line}", file=sys.stderr)
+    if problems and not ns.force:
+        raise CalibrationError(
+            f"calibration not written to {ns.out}: {len(problems)} problem(s) found "
+            "(see the diagnosis; --force writes it)"
+        )
+    result.calibration.save(ns.out)
+    written = [ns.out]
+    if not ns.no_plots:
+        written += write_plots(result, ns.out.with_suffix(""))
+    if ns.opencv:
+        write_opencv_yaml(result.calibration, ns.opencv)
+        written.append(ns.opencv)
+    if ns.colmap:
+        written += write_colmap(result.calibration, ns.colmap)
+    if not ns.json:
+        print("wrote " + ", ".join(str(p) for p in written))
+    return 0
