@@ -264,3 +264,12 @@ def open_control(rig: Rig, devices: DeviceSet | None = None) -> ControlPath:
     if cc is None:
         raise RigFileError(f"{rig.source}: rig {rig.name} has no camera_control section (add camera_control: bridge)")
     return BmdBridgeControl(open_bridge(rig, cc.bridge, devices), camera_ids(rig))
+
+
+def simulated_array(rig: Rig, sim: list[str]) -> Any:
+    """A simulated array (``rigctl.simulators.array.SimArray``) with ``--sim`` settings, for benchmarks and
+    the demo that need the simulator's scenes and truth without recording a take."""
+    from rigctl.simulators.array import SimArray
+    from rigctl.simulators.settings import parse_sim_args
+
+    return SimArray(rig, parse_sim_args(sim))

@@ -415,6 +415,10 @@ class SimArray:
             doc = {"board": self.board.as_dict(), "poses": poses}
             (folder / "board_poses.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
 
+    def near_far(self) -> tuple[float, float]:
+        """Where the presenter's surfaces lie: what a plan for this scene would give."""
+        return nominal_near_far(self.settings)
+
     def frame_period_s(self) -> float:
         return 1.0 / self.fps
 

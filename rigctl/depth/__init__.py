@@ -1,0 +1,1 @@
+"""Depth across a rectified camera grid: keying, multi-baseline matching, outputs, and the benchmark."""

@@ -1,0 +1,185 @@
+"""``rigctl bench depth``: error against run time for every preset and for OpenCV baselines, measured in the
+same run on the same grids and disparity ranges: the simulated presenter (ideal, and realistic: rectified
+with its true calibration so the truth is exact) and Middlebury's Motorcycle pair shipped inside
+scikit-image (a 1x2 grid). Metrics on pixels with ground truth (the subject only for the presenter)."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from rigctl.depth.baselines import BASELINES
+from rigctl.depth.grid import Grid, grid_from_arrays
+from rigctl.depth.key import Keyer
+from rigctl.depth.multibaseline import PRESETS, estimate
+from rigctl.depth.run import score
+
+# the Middlebury 2014 Motorcycle calibration (REFERENCE.md): quarter resolution of f, doffs as shipped
+MOTORCYCLE = {"focal_px": 994.978, "spacing": 0.193001, "doffs": 31.086}
+
+
+@dataclass
+class Dataset:
+    name: str
+    grid: Grid
+    camera: str
+    truth: Any
+    d_range: tuple[float, float]
+    key: bool
+
+
+def motorcycle() -> Dataset:
+    from skimage import data
+
+    left, right, disp = data.stereo_motorcycle()
+    grid = grid_from_arrays(
+        {"r0c0": np.asarray(left, np.float32) / 255.0, "r0c1": np.asarray(right, np.float32) / 255.0},
+        MOTORCYCLE["focal_px"],
+        MOTORCYCLE["spacing"],
+        MOTORCYCLE["spacing"],
+        MOTORCYCLE["doffs"],
+    )
+    truth = np.asarray(disp, np.float32)
+    return Dataset("motorcycle (1x2)", grid, "r0c0", truth, (0.0, 64.0), key=False)
+
+
+def dataset_from_array(array: Any, name: str, camera: str = "r1c1") -> Dataset:
+    from rigctl.pixfmt import from_rgb, to_rgb
+    from rigctl.rectify import Rectifier
+
+    fmt = array.format
+    raw = array.frames(0)
+    disp, _ = array.truth(0)
+    rect = Rectifier(array.calibration)
+    images = {}
+    for i, n in enumerate(array.names):
+        rgb = to_rgb(raw[i], fmt.pixel_format, fmt.width, fmt.height)
+        bgr = np.ascontiguousarray(from_rgb(rgb, "BGR3").reshape(fmt.height, fmt.width, 3))
+        out = rect.frame(n, bgr)
+        images[n] = np.ascontiguousarray(out[..., ::-1], dtype=np.float32) / 255.0
+    g = rect.grid
+    origin = np.mean([g.position_m(n) for n in array.names], axis=0)
+    offsets = {n: tuple(((g.position_m(n) - origin)[:2] / g.spacing_x_m).tolist()) for n in array.names}
+    grid = Grid(list(array.names), images, offsets, g.focal_px, g.spacing_x_m)
+    near, far = array.near_far()
+    d_range = (g.focal_px * g.spacing_x_m / far - 2, g.focal_px * g.spacing_x_m / near + 2)
+    truth = disp[array.names.index(camera)]
+    return Dataset(name, grid, camera, truth, d_range, key=True)
+
+
+def run_bench(
+    datasets: list[Dataset],
+    methods: list[str] | None = None,
+    repeats: int = 1,
+    progress: Callable[[float, str], None] | None = None,
+) -> dict[str, Any]:
+    """Every method on every dataset: metrics and seconds (the median of ``repeats`` runs)."""
+    cv2.setNumThreads(2)
+    names = methods or [*PRESETS, *BASELINES]
+    rows = []
+    total = len(datasets) * len(names)
+    k = 0
+    for ds in datasets:
+        mask = np.isfinite(ds.truth)
+        for m in names:
+            if progress:
+                progress(k / total, f"{ds.name}: {m}")
+            k += 1
+            if m in PRESETS and len(ds.grid.names) < 2:
+                continue
+            times = []
+            disp = None
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                if m in PRESETS:
+                    disp = estimate(ds.grid, ds.camera, ds.d_range, PRESETS[m], Keyer() if ds.key else None).disparity
+                else:
+                    disp = BASELINES[m](ds.grid, ds.camera, ds.d_range)
+                times.append(time.perf_counter() - t0)
+            assert disp is not None
+            rows.append(
+                {"dataset": ds.name, "method": m, "seconds": float(np.median(times)), **score(disp, ds.truth, mask)}
+            )
+    if progress:
+        progress(1.0, "done")
+    return {"rows": rows, "datasets": [d.name for d in datasets], "repeats": repeats}
+
+
+def comparisons(result: dict[str, Any]) -> list[dict[str, Any]]:
+    """Per dataset: the best OpenCV baseline on bad 1.0, and every preset against it (relative improvement,
+    time ratio)."""
+    out = []
+    for ds in result["datasets"]:
+        rows = [r for r in result["rows"] if r["dataset"] == ds]
+        base = [r for r in rows if r["method"] in BASELINES]
+        ours = [r for r in rows if r["method"] in PRESETS]
+        if not base or not ours:
+            continue
+        best = min(base, key=lambda r: r["bad_1.0"])
+        for r in ours:
+            out.append(
+                {
+                    "dataset": ds,
+                    "preset": r["method"],
+                    "baseline": best["method"],
+                    "bad1_improvement": (best["bad_1.0"] - r["bad_1.0"]) / best["bad_1.0"] if best["bad_1.0"] else 0.0,
+                    "time_ratio": r["seconds"] / best["seconds"] if best["seconds"] else math.inf,
+                }
+            )
+    return out
+
+
+def better(rel: float) -> str:
+    """A relative improvement as words: "31 % better" or "12 % worse"."""
+    return f"{rel * 100:.0f} % better" if rel >= 0 else f"{-rel * 100:.0f} % worse"
+
+
+def format_table(result: dict[str, Any]) -> str:
+    lines = []
+    for ds in result["datasets"]:
+        lines.append(f"{ds}")
+        lines.append("  method               bad0.5  bad1.0  bad2.0   MAE px  RMS px  no est %  seconds")
+        for r in (r for r in result["rows"] if r["dataset"] == ds):
+            mae = "-" if r["mae_px"] is None else f"{r['mae_px']:.3f}"
+            rms = "-" if r["rms_px"] is None else f"{r['rms_px']:.3f}"
+            lines.append(
+                f"  {r['method']:<20} {r['bad_0.5']:6.2f}  {r['bad_1.0']:6.2f}  {r['bad_2.0']:6.2f}  {mae:>7}  {rms:>6}"
+                f"  {r['no_estimate_pct']:8.2f}  {r['seconds']:7.3f}"
+            )
+    for c in comparisons(result):
+        lines.append(
+            f"{c['dataset']}: {c['preset']} vs {c['baseline']}: bad 1.0 {better(c['bad1_improvement'])}, "
+            f"{c['time_ratio']:.2f}x the time"
+        )
+    return "\n".join(lines)
+
+
+def plot(result: dict[str, Any], path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(result["datasets"]), figsize=(4.6 * len(result["datasets"]), 3.8), squeeze=False)
+    for ax, ds in zip(axes[0], result["datasets"], strict=True):
+        for r in (r for r in result["rows"] if r["dataset"] == ds):
+            ours = r["method"] in PRESETS
+            ax.scatter(r["seconds"], r["bad_1.0"], marker="o" if ours else "s", c="tab:red" if ours else "tab:blue")
+            ax.annotate(r["method"].removeprefix("opencv-"), (r["seconds"], r["bad_1.0"]), fontsize=7)
+        ax.set_xscale("log")
+        ax.set_xlabel("seconds (one camera)")
+        ax.set_ylabel("bad 1.0 (%)")
+        ax.set_title(ds, fontsize=9)
+        ax.grid(alpha=0.3)
+    fig.suptitle("error against run time: rigctl presets (red) and OpenCV (blue)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path

@@ -1,0 +1,191 @@
+"""Rectified camera grids as depth input: a rectified take, an ``ideal=true`` simulated take (already
+rectified), or a grid folder (``r{row}c{col}.png`` + ``grid.yaml``, ARCHITECTURE.md)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import yaml
+from numpy.typing import NDArray
+
+from rigctl.errors import ParameterError, RigFileError, TakeError
+from rigctl.rig import CAMERA_NAME
+
+F32 = NDArray[np.float32]
+
+
+@dataclass
+class Grid:
+    """One frame of a rectified grid. ``offsets`` are each camera's position relative to the grid origin in
+    units of the horizontal spacing (x right, y down): a point with disparity d at (x, y) in camera a lies at
+    (x - d (ox_b - ox_a), y - d (oy_b - oy_a)) in camera b."""
+
+    names: list[str]
+    images: dict[str, F32]  # H x W x 3 RGB in [0, 1]
+    offsets: dict[str, tuple[float, float]]
+    focal_px: float
+    spacing: float  # horizontal spacing, in the unit depth is reported in (metres for takes)
+    doffs: float = 0.0
+    disparity_range: tuple[float, float] | None = None
+    truth: dict[str, F32] | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        h, w = next(iter(self.images.values())).shape[:2]
+        return h, w
+
+    def depth(self, disparity: F32) -> F32:
+        """Z = f * spacing / (d + doffs); +inf where there is no estimate or d + doffs <= 0."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            den = disparity + np.float32(self.doffs)
+            z = np.where(np.isfinite(den) & (den > 0), self.focal_px * self.spacing / den, np.inf)
+        return np.asarray(z, dtype=np.float32)
+
+
+def _check_image(img: NDArray[Any], where: str) -> F32:
+    arr = np.asarray(img, dtype=np.float32)
+    if arr.ndim == 2:
+        arr = np.repeat(arr[..., None], 3, axis=2)
+    if arr.ndim != 3 or arr.shape[2] != 3:
+        raise ParameterError(f"{where}: expected an RGB or grey image, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ParameterError(f"{where}: image holds NaN or infinite values: refused")
+    return arr
+
+
+def grid_from_arrays(
+    images: dict[str, NDArray[Any]],
+    focal_px: float,
+    spacing_x: float,
+    spacing_y: float,
+    doffs: float = 0.0,
+    disparity_range: tuple[float, float] | None = None,
+) -> Grid:
+    """A grid from images named r{row}c{col} on a regular lattice (spacings in one unit)."""
+    if not images:
+        raise ParameterError("a grid needs at least one camera")
+    for n in images:
+        if not CAMERA_NAME.match(n):
+            raise ParameterError(f"camera {n!r} is not a grid position r{{row}}c{{col}}")
+    if not (math.isfinite(focal_px) and focal_px > 0 and math.isfinite(spacing_x) and spacing_x > 0):
+        raise ParameterError(f"focal_px and spacing_x must be positive and finite, got {focal_px}, {spacing_x}")
+    if not (math.isfinite(spacing_y) and spacing_y >= 0):
+        raise ParameterError(f"spacing_y must be finite and >= 0, got {spacing_y}")
+    imgs = {n: _check_image(v, f"camera {n}") for n, v in images.items()}
+    shapes = {v.shape for v in imgs.values()}
+    if len(shapes) != 1:
+        raise ParameterError(f"grid images differ in size: {sorted(shapes)}")
+    offsets = {}
+    for n in imgs:
+        m = CAMERA_NAME.match(n)
+        assert m is not None
+        r, c = int(m[1]), int(m[2])
+        offsets[n] = (float(c), r * spacing_y / spacing_x)
+    names = sorted(imgs, key=lambda n: (offsets[n][1], offsets[n][0]))
+    return Grid(names, imgs, offsets, float(focal_px), float(spacing_x), float(doffs), disparity_range)
+
+
+def load_grid_folder(folder: Path) -> Grid:
+    path = folder / "grid.yaml"
+    try:
+        spec = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise RigFileError(f"{path}: cannot read grid description: {exc}") from None
+    if not isinstance(spec, dict):
+        raise RigFileError(f"{path}: expected spacing_x, spacing_y, focal_px")
+    for key in ("spacing_x", "focal_px"):
+        if key not in spec:
+            raise RigFileError(f"{path}: {key} is required")
+    images = {}
+    for p in sorted(folder.glob("r*c*.png")):
+        img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        if img is None:
+            raise RigFileError(f"{p}: cannot read the image")
+        scale = 65535.0 if img.dtype == np.uint16 else 255.0
+        img = img.astype(np.float32) / scale
+        images[p.stem] = img[..., ::-1][..., :3] if img.ndim == 3 else img
+    if not images:
+        raise RigFileError(f"{folder}: no r{{row}}c{{col}}.png images")
+    rng = spec.get("disparity_range_px")
+    try:
+        return grid_from_arrays(
+            images,
+            float(spec["focal_px"]),
+            float(spec["spacing_x"]),
+            float(spec.get("spacing_y") or spec["spacing_x"]),
+            float(spec.get("doffs") or 0.0),
+            (float(rng[0]), float(rng[1])) if rng else None,
+        )
+    except (TypeError, ValueError, IndexError):
+        raise RigFileError(f"{path}: spacing_x, spacing_y, focal_px, doffs must be numbers") from None
+
+
+class TakeGrid:
+    """Frame sets of a rectified take (or an ideal simulated take) as grids."""
+
+    def __init__(self, folder: Path) -> None:
+        from rigctl.calibration_model import load_calibration
+        from rigctl.rectgeom import common_plane
+        from rigctl.take.reader import TakeReader
+
+        self.reader = TakeReader(folder)
+        raw = self.reader.raw
+        rect = raw.get("rectification")
+        settings = (raw.get("devices") or {}).get("settings") or {}
+        if rect:
+            positions = {n: np.asarray(p, float) for n, p in rect["positions_m"].items()}
+            self.focal_px = float(rect["focal_px"])
+            self.spacing = float(rect["spacing_x_m"])
+        elif settings.get("ideal") and (folder / "truth" / "calibration.yaml").exists():
+            cal = load_calibration(folder / "truth" / "calibration.yaml")
+            g = common_plane(cal)
+            positions = {n: g.position_m(n) for n in cal.names}
+            self.focal_px, self.spacing = g.focal_px, g.spacing_x_m
+        else:
+            raise TakeError(
+                f"{folder}: not a rectified take (run rigctl rectify first; only ideal=true simulated takes are "
+                "rectified as recorded)"
+            )
+        names = self.reader.names
+        missing = [n for n in names if n not in positions]
+        if missing:
+            raise TakeError(f"{folder}: no rectified position for camera(s) {', '.join(missing)}")
+        origin = np.mean([positions[n] for n in names], axis=0)
+        self.offsets = {
+            n: (float((positions[n] - origin)[0] / self.spacing), float((positions[n] - origin)[1] / self.spacing))
+            for n in names
+        }
+        self.names = sorted(names, key=lambda n: (self.offsets[n][1], self.offsets[n][0]))
+        self.folder = folder
+        self.settings = settings
+
+    def frame_numbers(self) -> list[int]:
+        return [s.number for s in self.reader.complete_sets()]
+
+    def grid(self, number: int, cameras: list[str] | None = None) -> Grid:
+        sets = {s.number: s for s in self.reader.complete_sets()}
+        if number not in sets:
+            raise ParameterError(f"{self.folder}: frame set {number} is not complete or does not exist")
+        s = sets[number]
+        images = {n: self.reader.frame_rgb(n, s.members[n]) for n in self.names}
+        truth = None
+        tdir = self.folder / "truth" / "disparity" / f"{number:06d}"
+        if tdir.is_dir():
+            from rigctl.pfm import read_pfm
+
+            truth = {n: read_pfm(tdir / f"{n}.pfm") for n in self.names if (tdir / f"{n}.pfm").exists()}
+        return Grid(
+            list(self.names),
+            images,
+            dict(self.offsets),
+            self.focal_px,
+            self.spacing,
+            truth=truth,
+            meta={"take": str(self.folder), "frame": number},
+        )

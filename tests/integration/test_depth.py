@@ -1,0 +1,225 @@
+"""Depth: stability on degenerate and extreme inputs (synthetic grids with known disparity), the CLI on a
+simulated take with its outputs, the two-view path on Middlebury's Motorcycle against OpenCV, the benchmark
+and the demo."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from tests_support import run_rigctl
+
+from rigctl.depth.grid import grid_from_arrays
+from rigctl.depth.multibaseline import PRESETS, estimate
+from rigctl.errors import ParameterError
+
+
+def texture(h: int, w: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    noise = rng.random((h + 40, w + 400)).astype(np.float32)
+    return np.asarray(cv2.GaussianBlur(noise, (0, 0), 1.2), np.float32)
+
+
+def plane_grid(d: float, h: int = 120, w: int = 160, rows: int = 3, cols: int = 3, ratio: float = 0.65, tex=None):  # type: ignore[no-untyped-def]
+    """A fronto-parallel textured plane at disparity d, seen by a rows x cols grid (exact sub-pixel shifts)."""
+    base = texture(h, w) if tex is None else tex
+    images = {}
+    for r in range(rows):
+        for c in range(cols):
+            ox, oy = c - (cols - 1) / 2, (r - (rows - 1) / 2) * ratio
+            M = np.array([[1, 0, 200 + d * ox], [0, 1, 20 + d * oy]], np.float32)
+            img = cv2.warpAffine(base, M, (w, h), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP)
+            images[f"r{r}c{c}"] = np.repeat(np.clip(img, 0, 1)[..., None], 3, axis=2)
+    return grid_from_arrays(images, 1000.0, 0.12, 0.12 * ratio)
+
+
+@pytest.mark.parametrize("preset", list(PRESETS))
+def test_a_textured_plane_is_recovered(preset: str) -> None:
+    g = plane_grid(12.3)
+    r = estimate(g, "r1c1", (5.0, 20.0), PRESETS[preset], keyer=None)
+    d = r.disparity[10:-10, 10:-10]
+    assert np.all(np.isfinite(d))
+    assert np.median(np.abs(d - 12.3)) < (0.3 if preset != "fast" else 0.6)
+
+
+def test_textureless_and_saturated_regions_are_flagged_not_nan() -> None:
+    tex = texture(120, 160)
+    tex[:, :280] = 0.5  # no texture at all in the reference's left half (it sees the texture from x = 200)
+    tex[:60, 280:] = 1.0  # saturated at the top right (it sees the texture from y = 20)
+    g = plane_grid(8.0, tex=tex)
+    r = estimate(g, "r1c1", (2.0, 14.0), PRESETS["balanced"], keyer=None)
+    assert not np.isnan(r.disparity).any() and not np.isnan(r.confidence).any()
+    assert r.unreliable[40:80, 10:50].mean() > 0.9  # the flat region
+    assert r.unreliable[5:30, 100:150].mean() > 0.9  # the saturated region
+    assert r.confidence[r.unreliable].max() == 0.0
+    assert r.stats["unreliable_pixels"] > 0
+
+
+def test_true_disparity_at_the_edge_of_the_planned_range_is_flagged() -> None:
+    g = plane_grid(20.0)
+    r = estimate(g, "r1c1", (5.0, 20.0), PRESETS["balanced"], keyer=None)
+    inner = r.bound_hit[10:-10, 10:-10]
+    assert inner.mean() > 0.8 and r.stats["bound_hit_pixels"] > 0
+    ok = estimate(g, "r1c1", (5.0, 30.0), PRESETS["balanced"], keyer=None)
+    assert ok.bound_hit[10:-10, 10:-10].mean() < 0.05
+
+
+def test_every_view_keyed_gives_no_estimate_and_says_so() -> None:
+    green = np.zeros((60, 80, 3), np.float32)
+    green[..., 1] = 0.8
+    g = grid_from_arrays({"r0c0": green, "r0c1": green}, 1000.0, 0.1, 0.1)
+    r = estimate(g, "r0c0", (0.0, 10.0), PRESETS["balanced"])
+    assert np.all(np.isinf(r.disparity)) and r.stats["note"] == "every pixel keyed as background"
+    assert r.stats["keyed_background_share"] == 1.0
+
+
+def test_zero_baseline_and_identical_views() -> None:
+    tex = np.repeat(texture(60, 80)[:60, :80, None], 3, axis=2)
+    same_place = grid_from_arrays({"r0c0": tex}, 1000.0, 0.1, 0.1)
+    r = estimate(same_place, "r0c0", (0.0, 10.0), PRESETS["balanced"], keyer=None)
+    assert np.all(np.isinf(r.disparity)) and "no camera at a different position" in r.stats["note"]
+    identical = grid_from_arrays({"r0c0": tex, "r0c1": tex}, 1000.0, 0.1, 0.1)
+    r = estimate(identical, "r0c0", (-3.0, 5.0), PRESETS["balanced"], keyer=None)
+    assert np.median(np.abs(r.disparity[5:-5, 5:-5])) < 0.3  # identical views: the point is at infinity
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_nan_or_inf_input_is_refused(bad: float) -> None:
+    img = np.ones((20, 20, 3), np.float32) * 0.5
+    img[3, 4, 1] = bad
+    with pytest.raises(ParameterError, match="NaN or infinite values: refused"):
+        grid_from_arrays({"r0c0": img, "r0c1": img}, 1000.0, 0.1, 0.1)
+
+
+def test_a_one_pixel_image_and_a_range_larger_than_the_image() -> None:
+    px = np.full((1, 1, 3), 0.4, np.float32)
+    g = grid_from_arrays({"r0c0": px, "r0c1": px}, 1000.0, 0.1, 0.1)
+    r = estimate(g, "r0c0", (0.0, 5.0), PRESETS["balanced"], keyer=None)
+    assert r.disparity.shape == (1, 1) and not np.isnan(r.disparity).any()
+    g = plane_grid(3.0, h=40, w=60)
+    r = estimate(g, "r1c1", (0.0, 5000.0), PRESETS["fast"], keyer=None)
+    assert r.stats["levels"] <= 4 * 60 and not np.isnan(r.disparity).any()
+    with pytest.raises(ParameterError, match="disparity range must be finite"):
+        estimate(g, "r1c1", (0.0, float("inf")), PRESETS["fast"], keyer=None)
+
+
+def test_a_light_field_with_negative_disparities() -> None:
+    g = plane_grid(-4.5)
+    r = estimate(g, "r1c1", (-10.0, 2.0), PRESETS["balanced"], keyer=None)
+    assert np.median(np.abs(r.disparity[10:-10, 10:-10] + 4.5)) < 0.3
+
+
+def test_motorcycle_two_view_no_worse_than_sgbm_3way_on_bad_2() -> None:
+    from rigctl.depth.bench import motorcycle, run_bench
+
+    result = run_bench([motorcycle()], methods=["balanced", "opencv-sgbm-3way"])
+    rows = {r["method"]: r for r in result["rows"]}
+    assert rows["balanced"]["bad_2.0"] <= rows["opencv-sgbm-3way"]["bad_2.0"], rows
+
+
+@pytest.fixture(scope="module")
+def ideal_take(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("depth")
+    res = run_rigctl(
+        "record", "--take", "ideal", "--frames", "1", "--out", str(out), "--sim", "ideal=true", "--sim", "motion=false"
+    )
+    assert res.returncode == 0, res.stderr
+    return out / "ideal"
+
+
+def test_cli_depth_writes_every_output(ideal_take: Path, tmp_path: Path) -> None:
+    from rigctl.exr import read_exr
+    from rigctl.pfm import read_pfm
+
+    out = tmp_path / "depth"
+    res = run_rigctl(
+        "depth",
+        str(ideal_take),
+        "--out",
+        str(out),
+        "--near",
+        "1.95",
+        "--far",
+        "3.0",
+        "--cameras",
+        "r1c1",
+        "r1c0",
+        "--json",
+    )
+    assert res.returncode == 0, res.stderr
+    report = json.loads(res.stdout)
+    frame = report["frames"]["0"]
+    assert frame["range_source"].startswith("planned from near 1.95")
+    assert frame["levels_skipped_by_plan"] > 100 and 0.5 < frame["keyed_background_share"] < 0.9
+    truth = frame["cameras"]["r1c1"]["against_truth"]
+    assert truth["bad_2.0"] < 10.0 and truth["no_estimate_pct"] < 2.0
+    channels, header = read_exr(out / "000000" / "r1c1.exr")
+    assert {"RGB", "disparityL.x", "disparityR.x", "disparityV.y", "depth.Z"} <= set(channels)
+    assert "disparityL.x" not in read_exr(out / "000000" / "r1c0.exr")[0]  # no camera to its left
+    d = read_pfm(out / "000000" / "r1c1.pfm")
+    fg = np.isfinite(d)
+    assert np.allclose(channels["depth.Z"][fg], d[fg] / (header_focal(header) * 0.12), rtol=1e-4)
+    assert not np.isnan(d).any() and np.isinf(d[~fg]).all()
+    preview = cv2.imread(str(out / "000000" / "r1c1.png"))
+    assert preview.shape[:2] == d.shape and (preview[~fg] == 0).all()
+    near = np.unravel_index(np.nanargmax(np.where(fg, d, np.nan)), d.shape)
+    assert preview[near][2] > preview[near][0]  # red near
+    assert (out / "report.json").exists()
+
+
+def header_focal(header: dict) -> float:  # type: ignore[type-arg]
+    value = header["rigctl.focal_px"]
+    return float(value.decode() if isinstance(value, bytes) else value)
+
+
+def test_cli_depth_refuses_unrectified_takes_and_bad_options(tmp_path: Path) -> None:
+    res = run_rigctl("record", "--take", "raw", "--frames", "1", "--out", str(tmp_path), "--sim", "motion=false")
+    assert res.returncode == 0, res.stderr
+    res = run_rigctl("depth", str(tmp_path / "raw"), "--out", str(tmp_path / "d"))
+    assert res.returncode == 2 and "not a rectified take (run rigctl rectify first" in res.stderr
+    res = run_rigctl("depth", str(tmp_path / "nothing"), "--out", str(tmp_path / "d"))
+    assert res.returncode == 2 and "not a take (take.yaml) or a grid folder" in res.stderr
+
+
+def test_grid_folder_input(tmp_path: Path) -> None:
+    g = plane_grid(6.0, rows=1, cols=2)
+    for n, img in g.images.items():
+        cv2.imwrite(str(tmp_path / f"{n}.png"), (img[..., ::-1] * 255).astype(np.uint8))
+    (tmp_path / "grid.yaml").write_text(
+        "spacing_x: 0.12\nspacing_y: 0.12\nfocal_px: 1000\ndisparity_range_px: [0, 12]\n"
+    )
+    res = run_rigctl("depth", str(tmp_path), "--out", str(tmp_path / "out"), "--no-key", "--json")
+    assert res.returncode == 0, res.stderr
+    from rigctl.pfm import read_pfm
+
+    d = read_pfm(tmp_path / "out" / "r0c0.pfm")
+    assert np.median(np.abs(d[10:-10, 10:-10] - 6.0)) < 0.5
+
+
+def test_bench_depth_quick(tmp_path: Path) -> None:
+    res = run_rigctl("bench", "depth", "--quick", "--json", "--plot", str(tmp_path / "p.png"), timeout=600)
+    assert res.returncode == 0, res.stderr
+    result = json.loads(res.stdout)
+    methods = {r["method"] for r in result["rows"]}
+    assert {"fast", "balanced", "best", "opencv-sgbm-3way", "opencv-sgbm-wls", "opencv-sgbm-fused"} <= methods
+    for r in result["rows"]:
+        assert r["seconds"] > 0 and 0 <= r["bad_1.0"] <= 100
+    assert (tmp_path / "p.png").exists()
+
+
+def test_demo_runs_end_to_end_and_its_report_opens_with_figures(tmp_path: Path) -> None:
+    res = run_rigctl("demo", "--out", str(tmp_path / "demo"), timeout=900)
+    assert res.returncode == 0, res.stderr
+    report = tmp_path / "demo" / "report.md"
+    assert f"report: {report}" in res.stdout
+    text = report.read_text().splitlines()
+    assert text[0].startswith("# rigctl demo")
+    figures = [line for line in text[:6] if line.startswith("![")]
+    assert len(figures) == 2
+    for name in ("depth-previews.png", "error-vs-time.png", "calibration_coverage.png", "calibration_residuals.png"):
+        assert (tmp_path / "demo" / name).stat().st_size > 1000
+    res = run_rigctl("demo", "--out", str(tmp_path / "demo"))
+    assert res.returncode == 2 and "exists and is not empty" in res.stderr
