@@ -209,10 +209,13 @@ def _combine(costs: F32, keep: int, groups: list[list[int]] | None = None) -> F3
         for g in groups[1:]:
             np.minimum(out, costs[g].mean(0), out=out)
         return np.asarray(out, dtype=np.float32)
-    if keep >= costs.shape[0]:
-        return np.asarray(costs.mean(0), dtype=np.float32)
-    part = np.partition(costs, keep - 1, axis=0)[:keep]
-    return np.asarray(part.mean(0), dtype=np.float32)
+    part = costs if keep >= costs.shape[0] else np.partition(costs, keep - 1, axis=0)[:keep]
+    # views that cannot see the point (outside their image) do not count; a pixel only one view sees
+    # is matched with that view alone
+    seen = part < INVALID_COST * 0.5
+    n = seen.sum(0)
+    total = np.where(seen, part, 0).sum(0)
+    return np.asarray(np.where(n > 0, total / np.maximum(n, 1), INVALID_COST), dtype=np.float32)
 
 
 def _sgm_path(C: F32, p1: float, p2: float, reverse: bool) -> F32:
