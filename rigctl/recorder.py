@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from rigctl import __version__
 from rigctl.errors import DeviceError, RigctlError, TakeError
@@ -120,6 +121,16 @@ class Recorder:
         self._lock = threading.Lock()
         self._finished = threading.Event()
         self.sync_interval_s = 1.0
+        self.preview_every_ns = 0  # > 0: keep a small luma thumbnail per camera this often (the shoot UI)
+
+    def _thumbnail(self, frame: Frame, width: int = 48) -> NDArray[np.uint8] | None:
+        fmt = self.format
+        if fmt.pixel_format not in ("UYVY", "YUYV") or len(frame.data) < fmt.bytes_per_frame:
+            return None
+        step = max(1, fmt.width // width)
+        packed = np.frombuffer(frame.data, np.uint8, count=fmt.bytes_per_frame).reshape(fmt.height, fmt.width * 2)
+        start = 1 if fmt.pixel_format == "UYVY" else 0
+        return np.ascontiguousarray(packed[:: 2 * step, start :: 2 * step])
 
     @staticmethod
     def default_buffers(fmt: CaptureFormat, budget_bytes: int = 3 << 30, cameras: int = 9) -> int:
@@ -293,6 +304,9 @@ class Recorder:
             where = self._in_window(frame.capture_ns)
             self._account_gap(st, frame)
             st.last_capture_ns, st.last_host_ns, st.last_sequence = frame.capture_ns, frame.host_ns, frame.sequence
+            if self.preview_every_ns and frame.host_ns - st.preview_ns >= self.preview_every_ns:
+                st.thumbnail = self._thumbnail(frame)  # a few hundred bytes, copied before the buffer is reused
+                st.preview_ns = frame.host_ns
             if where != 0:
                 if slot is not None:
                     pool.give(slot)

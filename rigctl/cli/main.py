@@ -17,12 +17,27 @@ import logging
 import sys
 
 from rigctl import __version__
-from rigctl.cli import args, bench, board, calibrate, control, demo, depth, devices, plan, record, rectify, take, tally
+from rigctl.cli import (
+    args,
+    bench,
+    board,
+    calibrate,
+    control,
+    demo,
+    depth,
+    devices,
+    plan,
+    record,
+    rectify,
+    take,
+    tally,
+    tui,
+)
 from rigctl.errors import RigctlError
 
 log = logging.getLogger(__name__)
 
-VERBS = (plan, devices, record, take, tally, control, board, calibrate, rectify, depth, bench, demo)
+VERBS = (plan, devices, record, take, tally, control, board, calibrate, rectify, depth, bench, demo, tui)
 
 
 def build_parser() -> argparse.ArgumentParser:

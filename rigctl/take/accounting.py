@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 
 @dataclass
@@ -25,6 +26,8 @@ class CameraStats:
     done: bool = False
     ended: str = ""  # why the stream ended early, if it did
     format_changes: list[int] = field(default_factory=list)
+    thumbnail: Any = None  # a small luma image for the shoot UI (uint8 array), when asked for
+    preview_ns: int = 0
 
     @property
     def frames_written(self) -> int:

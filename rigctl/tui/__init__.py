@@ -1,0 +1,1 @@
+"""The shoot-time terminal UI (Textual)."""

@@ -1,0 +1,310 @@
+"""The shoot, without the screen: the rig's devices kept streaming, takes started and stopped, preflight,
+tally, camera settings, take marks, and a plain-data snapshot of everything the crew looks at. The UI reads
+snapshots; it never touches devices, and nothing here waits on the UI."""
+
+from __future__ import annotations
+
+import collections
+import shutil
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rigctl.camera_control import SettingResult, check_settings
+from rigctl.errors import RigctlError
+from rigctl.plan_report import plan_rig
+from rigctl.preflight import LOW_TIME_S, PreflightError, check_destinations
+from rigctl.recorder import Recorder, TakePlan
+from rigctl.registry import DeviceSet, open_cameras, open_control, open_tally
+from rigctl.rig import Rig
+from rigctl.take.manifest import read_manifest, write_manifest
+from rigctl.tally import TallyService, TallyState
+
+
+@dataclass
+class TileStatus:
+    name: str
+    row: int
+    column: int
+    signal: bool = False
+    format: str = ""
+    format_ok: bool = False
+    lock: str = "not reported"
+    locked: bool | None = None
+    fps: float = 0.0
+    source_drops: int = 0
+    writer_drops: int = 0
+    queue_fill: float = 0.0
+    age_ms: float | None = None
+    stale: bool = False
+    tally: str = ""
+    mb_s: float = 0.0
+    settings: dict[str, str] = field(default_factory=dict)
+    thumbnail: Any = None
+
+
+@dataclass
+class Snapshot:
+    rig: str
+    tiles: list[TileStatus]
+    take: str
+    scene: str
+    shot: str
+    take_number: int
+    recording: bool
+    busy: str  # "" or what is happening ("arming", "starting", "stopping")
+    duration_s: float
+    timecode: str
+    skew_p50_us: float | None
+    skew_p99_us: float | None
+    disk_free_gb: float | None
+    minutes_left: float | None
+    disk_warning: bool
+    planner: str
+    pair_lights: list[tuple[str, bool]]
+    message: str = ""
+    last_take: str = ""
+
+
+def timecode(seconds: float, fps: float) -> str:
+    frames = round(seconds * fps)
+    f = frames % max(1, round(fps))
+    s = frames // max(1, round(fps))
+    return f"{s // 3600:02d}:{(s // 60) % 60:02d}:{s % 60:02d}:{f:02d}"
+
+
+class Session:
+    """One shooting session on one rig; takes are named ``<scene>-<shot>-T<nn>`` in ``out``."""
+
+    def __init__(self, rig: Rig, out: Path, sim: list[str] | None = None, scene: str = "S01", shot: str = "01") -> None:
+        self.rig = rig
+        self.out = Path(out)
+        self.scene = scene
+        self.shot = shot
+        self.take_number = 1
+        self.devices: DeviceSet = open_cameras(rig, sim or [])
+        self.names = sorted(self.devices.cameras, key=rig.camera_names.index)
+        self.period_s = 1.0 / rig.fps
+        self.recorder: Recorder | None = None
+        self.recording = False
+        self.busy = ""
+        self.message = ""
+        self.last_take = ""
+        self.settings: dict[str, dict[str, str]] = {n: {} for n in self.names}
+        self.tally_state = TallyState()
+        self._lock = threading.Lock()
+        self._skew: collections.deque[float] = collections.deque(maxlen=250)
+        self._bytes: dict[str, tuple[float, int]] = {}
+        self._disk_t = 0.0
+        self._disk_cache: tuple[float | None, float | None] = (None, None)
+        plan = plan_rig(rig)
+        self.planner = (
+            f"subject {plan.subject_depth_m:.2f} m deep from {plan.near_m:.2f} m to {plan.far_m:.2f} m; "
+            f"every pair within budget from {plan.near_m_all_pairs:.2f} m"
+        )
+        self.pair_lights = [(p.name, p.within_budget) for p in plan.pairs]
+        self.tally: TallyService | None = None
+        if rig.model.tally is not None:
+            self.tally = TallyService(lambda: open_tally(rig, self.devices), rig.model.tally.port).start()
+
+    # ---- the take ------------------------------------------------------------------------------------
+    @property
+    def take_name(self) -> str:
+        return f"{self.scene}-{self.shot}-T{self.take_number:02d}"
+
+    def arm(self) -> None:
+        """Open the cameras and keep frames flowing (discarded) so tiles are live before anyone records."""
+        self.busy = "arming"
+        try:
+            rec = Recorder(self.rig, self.devices, TakePlan.spread(self.take_name, [self.out], self.names))
+            rec.preview_every_ns = 200_000_000
+            rec.arm()
+            self.recorder = rec
+        finally:
+            self.busy = ""
+
+    def preflight(self) -> list[str]:
+        """Reasons not to record; empty when everything is ready."""
+        problems = []
+        if self.recorder is None:
+            return ["the cameras are not streaming (arming failed: see the message line)"]
+        want = self.recorder.format
+        for name in self.names:
+            st = self.devices.cameras[name].status()
+            if not st.signal_present:
+                problems.append(f"{name}: no signal")
+            elif st.format is not None and st.format != want:
+                problems.append(f"{name}: delivers {st.format.describe()}, the take needs {want.describe()}")
+            if st.reference_locked is False:
+                problems.append(f"{name}: reference not locked ({st.extra.get('reference', 'unlocked')})")
+        bps = want.bytes_per_frame * want.fps
+        self.out.mkdir(parents=True, exist_ok=True)
+        report = check_destinations({self.out: self.names}, bps, None)
+        problems += report.problems
+        if (self.out / self.take_name).exists():
+            problems.append(f"{self.out / self.take_name}: exists; takes are never overwritten")
+        return problems
+
+    def start(self) -> None:
+        """Preflight, then record from the next common frame instant. Raises PreflightError with every reason."""
+        problems = self.preflight()
+        if problems:
+            raise PreflightError("; ".join(problems))
+        assert self.recorder is not None
+        self.busy = "starting"
+        try:
+            self.recorder.start()
+            self.recording = True
+            self._set_tally(TallyState.recording(self.rig))
+            self.message = f"recording {self.take_name}"
+        finally:
+            self.busy = ""
+
+    def stop(self) -> str:
+        """Stop, finalise the take, and arm again for the next one. Returns the take's folder."""
+        assert self.recorder is not None
+        self.busy = "stopping"
+        try:
+            self.recorder.stop()
+            self.recorder.finish()
+            folder = self.recorder.plan.folder
+            err = self.recorder.error
+            self.recording = False
+            self.last_take = str(folder)
+            self.message = f"{self.take_name} written to {folder}" + (f" ({err})" if err else "")
+            self.take_number += 1
+            self._set_tally(TallyState())
+        finally:
+            self.busy = ""
+        self.arm()
+        return self.last_take
+
+    def mark(self, verdict: str, note: str = "") -> str:
+        """Mark the last take circled or no-good, with a note, in its manifest."""
+        if not self.last_take:
+            raise RigctlError("no take to mark yet")
+        folder = Path(self.last_take)
+        _, raw = read_manifest(folder)
+        raw["verdict"] = verdict
+        raw.setdefault("notes", []).append(f"{verdict}: {note}" if note else verdict)
+        write_manifest(folder, raw)
+        self.message = f"{folder.name} marked {verdict}"
+        return self.message
+
+    # ---- rig control ----------------------------------------------------------------------------------
+    def _set_tally(self, state: TallyState) -> None:
+        self.tally_state = state
+        if self.tally is not None:
+            self.tally.set(state)
+
+    def set_tally(self, program: list[str], preview: list[str]) -> None:
+        if self.recording:
+            raise RigctlError("tally follows the take while recording")
+        self._set_tally(TallyState(frozenset(program), frozenset(preview)))
+
+    def apply_settings(self, values: dict[str, float | str]) -> list[SettingResult]:
+        checked = check_settings(values)
+        path = open_control(self.rig, self.devices)
+        try:
+            results = path.apply(checked, self.names)
+        finally:
+            path.close()
+        for r in results:
+            self.settings[r.camera][r.setting] = f"{r.requested} {r.state}"
+        self.message = f"camera settings: {sum(r.state == 'confirmed' for r in results)} of {len(results)} confirmed"
+        return results
+
+    # ---- what the screen shows --------------------------------------------------------------------------
+    def _disk(self) -> tuple[float | None, float | None]:
+        now = time.monotonic()
+        if now - self._disk_t > 2.0:
+            self._disk_t = now
+            try:
+                self.out.mkdir(parents=True, exist_ok=True)
+                free = shutil.disk_usage(self.out).free
+                fmt = self.recorder.format if self.recorder else None
+                bps = (fmt.bytes_per_frame * fmt.fps * len(self.names)) if fmt else 0
+                self._disk_cache = (free / 1e9, free / bps / 60 if bps else None)
+            except OSError:
+                self._disk_cache = (None, None)
+        return self._disk_cache
+
+    def snapshot(self) -> Snapshot:
+        rec = self.recorder
+        now_ns = time.monotonic_ns()
+        tiles = []
+        lasts = []
+        for name in self.names:
+            r, c = self.rig.camera(name).row, self.rig.camera(name).col
+            t = TileStatus(name, r, c)
+            try:
+                st = self.devices.cameras[name].status()
+                t.signal = st.signal_present
+                t.fps = st.measured_fps
+                t.format = st.format.describe() if st.format else "no signal"
+                t.format_ok = rec is not None and st.format == rec.format
+                t.locked = st.reference_locked
+                t.lock = st.extra.get("reference", "locked" if st.reference_locked else "not reported")
+            except RigctlError as exc:
+                t.format = str(exc)
+            if rec is not None:
+                cs = rec.stats[name]
+                t.source_drops = len(cs.source_drops)
+                t.writer_drops = len(cs.writer_drops)
+                t.queue_fill = cs.queue_fill
+                if cs.last_host_ns:
+                    t.age_ms = (now_ns - cs.last_host_ns) / 1e6
+                    t.stale = t.age_ms > 2000 * self.period_s
+                    lasts.append(cs.last_capture_ns)
+                t.thumbnail = cs.thumbnail
+                prev = self._bytes.get(name)
+                now_s = now_ns / 1e9
+                if prev is not None and now_s > prev[0]:
+                    t.mb_s = (cs.bytes_written - prev[1]) / (now_s - prev[0]) / 1e6
+                self._bytes[name] = (now_s, cs.bytes_written)
+            t.tally = "PGM" if name in self.tally_state.program else "PVW" if name in self.tally_state.preview else ""
+            t.settings = dict(self.settings[name])
+            tiles.append(t)
+        if len(lasts) > 1:
+            period = self.period_s * 1e9
+            phases = np.array(lasts, dtype=np.float64) % period
+            phases = (phases - phases[0] + period / 2) % period
+            self._skew.append(float(phases.max() - phases.min()) / 1e3)
+        skew = np.array(self._skew) if self._skew else None
+        duration = (now_ns - rec.t0_ns) / 1e9 if (self.recording and rec and rec.t0_ns) else 0.0
+        free_gb, minutes = self._disk()
+        return Snapshot(
+            rig=self.rig.name,
+            tiles=tiles,
+            take=self.take_name,
+            scene=self.scene,
+            shot=self.shot,
+            take_number=self.take_number,
+            recording=self.recording,
+            busy=self.busy,
+            duration_s=max(0.0, duration),
+            timecode=timecode(max(0.0, duration), self.rig.fps),
+            skew_p50_us=float(np.percentile(skew, 50)) if skew is not None else None,
+            skew_p99_us=float(np.percentile(skew, 99)) if skew is not None else None,
+            disk_free_gb=free_gb,
+            minutes_left=minutes,
+            disk_warning=minutes is not None and minutes * 60 < LOW_TIME_S,
+            planner=self.planner,
+            pair_lights=self.pair_lights,
+            message=self.message,
+            last_take=self.last_take,
+        )
+
+    def close(self) -> None:
+        if self.recorder is not None:
+            if self.recording:
+                self.recorder.stop()
+            self.recorder.finish()
+            self.recorder = None
+        if self.tally is not None:
+            self.tally.stop()
+        self.devices.close()

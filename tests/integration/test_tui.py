@@ -1,0 +1,321 @@
+"""The shoot UI on the simulated rig, driven by Textual's pilot (real session, real cameras, real takes on
+disk), snapshots of its screens with fixed data, and a run in a real terminal (tmux)."""
+
+from __future__ import annotations
+
+import asyncio
+import shutil
+import subprocess
+import tempfile
+import time
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from tests_support import rigctl_exe
+
+from rigctl.rig import load_rig
+from rigctl.take.reader import TakeReader
+from rigctl.tui.app import CameraTile, Confirm, HelpScreen, Notice, PlannerScreen, ShootApp
+from rigctl.tui.session import Session, Snapshot, TileStatus
+
+RIG = load_rig("sim-3x3")
+SIM = ["motion=false", "noise=0"]
+
+
+def run(app: ShootApp, script: Callable[[Any], Awaitable[None]], size: tuple[int, int] = (170, 60)) -> None:
+    async def main() -> None:
+        async with app.run_test(size=size) as pilot:
+            await script(pilot)
+
+    asyncio.run(main())
+
+
+async def until(pilot: Any, cond: Callable[[], bool], timeout: float = 60.0, what: str = "") -> None:
+    t0 = time.monotonic()
+    while not cond():
+        if time.monotonic() - t0 > timeout:
+            raise AssertionError(f"timed out waiting for {what}")
+        await pilot.pause(0.1)
+
+
+@pytest.fixture
+def fast_out(tmp_path: Path):  # type: ignore[no-untyped-def]
+    """Takes go to memory (tmpfs): the UI's preflight measures the disk, and a shared CI disk can be too slow
+    for nine cameras, which is a refusal these tests do not mean to test."""
+    shm = Path("/dev/shm")
+    folder = Path(tempfile.mkdtemp(dir=shm)) if shm.is_dir() else tmp_path / "takes"
+    yield folder
+    shutil.rmtree(folder, ignore_errors=True)
+
+
+def live_app(out: Path, sim: list[str] | None = None) -> ShootApp:
+    return ShootApp(lambda: Session(RIG, out, [*SIM, *(sim or [])]))
+
+
+async def armed(pilot: Any) -> None:
+    app = pilot.app
+    await until(pilot, lambda: app.session is not None and app.session.recorder is not None, what="arming")
+    await until(pilot, lambda: app.snapshots_shown > 2, what="the first snapshots")
+
+
+async def record(pilot: Any, seconds: float, stall_s: float = 0.0) -> None:
+    app = pilot.app
+    await pilot.press("r")
+    await until(pilot, lambda: app.session.recording, what="recording to start")
+    await pilot.pause(seconds)
+    if stall_s:
+        time.sleep(stall_s)  # the UI's own thread stops dead: no events, no redraws
+    await pilot.press("r")
+    await until(pilot, lambda: not app.session.recording and not app.session.busy, what="the take to end")
+
+
+def test_r_records_a_take_of_every_camera(fast_out: Path) -> None:
+    tmp_path = fast_out
+    app = live_app(tmp_path)
+
+    async def script(pilot: Any) -> None:
+        await armed(pilot)
+        await record(pilot, 1.5)
+        assert "S01-01-T01 written to" in app.session.message and app.session.take_number == 2
+        await pilot.press("q")
+
+    run(app, script)
+    take = TakeReader(tmp_path / "S01-01-T01")
+    counts = {n: len(take.index[n]) for n in take.names}
+    assert sorted(counts) == sorted(RIG.camera_names)
+    assert len(set(counts.values())) == 1 and next(iter(counts.values())) >= 20, counts
+    assert len(take.complete_sets()) == next(iter(counts.values()))
+
+
+def test_a_drop_on_one_camera_shows_on_its_tile(fast_out: Path) -> None:
+    tmp_path = fast_out
+    drops = list(range(30, 2000, 7))
+    app = live_app(tmp_path, [f"drops.r1c2={drops}"])
+
+    async def script(pilot: Any) -> None:
+        await armed(pilot)
+        await pilot.press("r")
+        await until(pilot, lambda: app.session.recording, what="recording")
+        tile = app.query_one("#tile-r1c2", CameraTile)
+        await until(pilot, lambda: tile.last is not None and tile.last.source_drops > 0, what="drops on r1c2")
+        assert tile.has_class("problem")
+        others = [app.query_one(f"#tile-{n}", CameraTile) for n in RIG.camera_names if n != "r1c2"]
+        assert all(t.last is not None and t.last.source_drops == 0 for t in others)
+        assert "drops src" in str(tile.render())
+        await pilot.press("r")
+        await until(pilot, lambda: not app.session.recording and not app.session.busy, what="the take to end")
+        await pilot.press("q")
+
+    run(app, script)
+    take = TakeReader(tmp_path / "S01-01-T01")
+    assert take.manifest.cameras["r1c2"].source_drops and not take.manifest.cameras["r0c0"].source_drops
+
+
+def test_preflight_failure_blocks_recording_and_says_why(fast_out: Path) -> None:
+    tmp_path = fast_out
+    app = live_app(tmp_path, ["unlocked=[r0c1]"])
+
+    async def script(pilot: Any) -> None:
+        await armed(pilot)
+        await pilot.press("r")
+        await until(pilot, lambda: isinstance(app.screen, Notice), what="the refusal")
+        assert "preflight failed" in app.screen.title_text
+        assert any("r0c1: reference not locked" in line for line in app.screen.lines)
+        assert not app.session.recording
+        await pilot.press("escape")
+        await pilot.press("q")
+
+    run(app, script)
+    assert not (tmp_path / "S01-01-T01").exists()
+
+
+def test_quitting_while_recording_asks_first(fast_out: Path) -> None:
+    tmp_path = fast_out
+    app = live_app(tmp_path)
+
+    async def script(pilot: Any) -> None:
+        await armed(pilot)
+        await pilot.press("r")
+        await until(pilot, lambda: app.session.recording, what="recording")
+        await pilot.press("q")
+        await until(pilot, lambda: isinstance(app.screen, Confirm), what="the question")
+        await pilot.press("n")
+        await pilot.pause(0.3)
+        assert app.session.recording and app.is_running  # still recording
+        await pilot.press("q")
+        await until(pilot, lambda: isinstance(app.screen, Confirm), what="the question again")
+        await pilot.press("y")
+
+    run(app, script)
+    take = TakeReader(tmp_path / "S01-01-T01")  # quitting kept what was recorded
+    assert take.status in ("ended", "complete") and len(take.complete_sets()) > 0
+
+
+def test_a_stalled_ui_drops_no_frame(fast_out: Path) -> None:
+    tmp_path = fast_out
+    app = live_app(tmp_path)
+
+    async def script(pilot: Any) -> None:
+        await armed(pilot)
+        await record(pilot, 1.0, stall_s=0.5)
+        await pilot.press("q")
+
+    run(app, script)
+    take = TakeReader(tmp_path / "S01-01-T01")
+    for name, cam in take.manifest.cameras.items():
+        assert not cam.source_drops and not cam.writer_drops and not cam.not_written, name
+    counts = {len(take.index[n]) for n in take.names}
+    assert len(counts) == 1 and counts.pop() >= 30  # 1.5 s of 25 fps, the stall included
+
+
+def test_keys_for_devices_the_rig_lacks_are_not_offered(tmp_path: Path) -> None:
+    import yaml
+
+    data = yaml.safe_load((Path(__file__).resolve().parents[2] / "rigs" / "sim-3x3.yaml").read_text())
+    del data["tally"], data["camera_control"]
+    from rigctl.rig import rig_from_dict
+
+    bare = rig_from_dict(data)
+    app = ShootApp(snapshot_source=lambda: fixed_snapshot(), rig=bare)
+
+    async def script(pilot: Any) -> None:
+        await pilot.pause(0.2)
+        assert app.check_action("tally", ()) is None and app.check_action("settings", ()) is None
+        assert app.check_action("record", ()) is True
+
+    run(app, script)
+
+
+# ---- snapshots of the screens, with fixed data --------------------------------------------------------------
+def fixed_snapshot() -> Snapshot:
+    ramp = np.tile(np.linspace(16, 235, 48, dtype=np.uint8), (27, 1))
+    tiles = []
+    for i, n in enumerate(RIG.camera_names):
+        c = RIG.camera(n)
+        tiles.append(
+            TileStatus(
+                n,
+                c.row,
+                c.col,
+                signal=True,
+                format="960x540 UYVY 25 fps",
+                format_ok=True,
+                lock="external, locked",
+                locked=True,
+                fps=25.0,
+                source_drops=2 if n == "r1c2" else 0,
+                queue_fill=0.1,
+                age_ms=35.0 if n != "r2c0" else 120.0,
+                stale=n == "r2c0",
+                tally="PGM",
+                mb_s=25.9,
+                settings={"exposure_us": "10000 confirmed"} if i % 2 == 0 else {"exposure_us": "10000 unconfirmed"},
+                thumbnail=np.roll(ramp, 4 * i, axis=1),
+            )
+        )
+    return Snapshot(
+        rig="sim-3x3",
+        tiles=tiles,
+        take="S01-01-T03",
+        scene="S01",
+        shot="01",
+        take_number=3,
+        recording=True,
+        busy="",
+        duration_s=12.4,
+        timecode="00:00:12:10",
+        skew_p50_us=152.0,
+        skew_p99_us=230.0,
+        disk_free_gb=412.5,
+        minutes_left=9.0,
+        disk_warning=True,
+        planner="subject 1.00 m deep from 1.95 m to 2.95 m; every pair within budget from 3.18 m",
+        pair_lights=[("r1c1-r1c2", True), ("r1c1-r2c1", False), ("r1c1-r2c2", False)],
+        message="recording S01-01-T03",
+    )
+
+
+def fixed_app() -> ShootApp:
+    return ShootApp(snapshot_source=fixed_snapshot, rig=RIG)
+
+
+def test_snapshot_main_screen(snap_compare: Any) -> None:
+    assert snap_compare(fixed_app(), terminal_size=(170, 60))
+
+
+def test_snapshot_help_screen(snap_compare: Any) -> None:
+    assert snap_compare(fixed_app(), press=["question_mark"], terminal_size=(170, 60))
+
+
+def test_snapshot_planner_screen(snap_compare: Any) -> None:
+    assert snap_compare(fixed_app(), press=["p"], terminal_size=(170, 60))
+
+
+def test_planner_recomputes_as_values_are_typed() -> None:
+    app = fixed_app()
+
+    async def script(pilot: Any) -> None:
+        await pilot.press("p")
+        await until(pilot, lambda: isinstance(app.screen, PlannerScreen), what="the planner")
+        plan = app.screen.query_one("#plan")
+        before = str(plan.render())
+        assert "1.948" in before or "1.95" in before
+        app.screen.query_one("#depth").value = "0.5"
+        await pilot.pause(0.2)
+        after = str(plan.render())
+        assert after != before
+        app.screen.query_one("#depth").value = "-1"
+        await pilot.pause(0.2)
+        assert "not a plan" in str(plan.render())
+        await pilot.press("escape")
+        await pilot.press("question_mark")
+        assert isinstance(app.screen, HelpScreen)
+
+    run(app, script)
+
+
+# ---- a real terminal ------------------------------------------------------------------------------------------
+def tmux(*args: str) -> str:
+    return subprocess.run(["tmux", *args], capture_output=True, text=True, check=True).stdout
+
+
+def test_in_a_real_terminal(tmp_path: Path) -> None:
+    assert shutil.which("tmux"), "tmux is needed (.ci/run installs it)"
+    name = f"rigctl-tui-{tmp_path.name}"
+    cmd = " ".join([*rigctl_exe(), "tui", "--out", str(tmp_path), "--sim", "motion=false"])
+    tmux("new-session", "-d", "-s", name, "-x", "200", "-y", "60", cmd)
+
+    def screen() -> str:
+        return tmux("capture-pane", "-p", "-t", name)
+
+    def wait_for(text: str, timeout: float = 90.0) -> None:
+        t0 = time.monotonic()
+        while text not in screen():
+            if time.monotonic() - t0 > timeout:
+                raise AssertionError(f"{text!r} never appeared:\n{screen()}")
+            time.sleep(0.2)
+
+    try:
+        wait_for("STANDBY")
+        assert "r2c2" in screen() and "r0c0" in screen()
+        tmux("send-keys", "-t", name, "r")
+        wait_for("REC")
+        time.sleep(1.5)
+        tmux("send-keys", "-t", name, "r")
+        wait_for("take 02")  # the take was written and the next one is up
+        tmux("send-keys", "-t", name, "q")
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 20:
+            alive = subprocess.run(["tmux", "has-session", "-t", name], capture_output=True).returncode == 0
+            if not alive:  # q quit the UI, which ended the terminal's session
+                break
+            time.sleep(0.2)
+        else:
+            raise AssertionError(f"the UI did not quit:\n{screen()}")
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", name], capture_output=True)
+    take = TakeReader(tmp_path / "S01-01-T01")
+    assert len(take.names) == 9 and len(take.complete_sets()) >= 20
