@@ -43,6 +43,7 @@ class Preset:
     median: int = 0  # median filter of the result (0: none)
     sgm: tuple[float, float] | None = None  # semi-global smoothing at half resolution: (P1, P2) penalties
     sgm_fine: tuple[float, float] | None = None  # the same over the full-resolution refinement candidates
+    propagate: tuple[int, ...] = ()  # pixel steps at which neighbours' disparities are tried (silhouettes)
     description: str = ""
 
 
@@ -71,7 +72,9 @@ PRESETS = {
             median=3,
             sgm=(0.05, 0.4),
             sgm_fine=(0.05, 0.3),
-            description="as balanced, every camera, cross-checked between cameras, holes filled",
+            propagate=(8, 3),
+            description="as balanced, plus neighbours' disparities tried at silhouettes, every camera, "
+            "cross-checked between cameras, holes filled",
         ),
     )
 }
@@ -354,6 +357,15 @@ def estimate(
         fine = _Level(grid, ref, moving, 1.0, box)
         r = preset.radius
         groups_f = _groups(fine) if preset.keep == 0 else None
+        for step in preset.propagate:
+            # a pixel near a silhouette may have taken the foreground's disparity at half resolution: try the
+            # disparities found a few pixels away on each side, keep whichever matches best at full resolution
+            seeds = [D0]
+            for axis in (0, 1):
+                for sign in (-1, 1):
+                    seeds.append(np.roll(D0, sign * step, axis=axis))
+            seed_costs = np.stack([_combine(fine.cost_map(sd, preset.window), keep, groups_f) for sd in seeds])
+            D0 = np.take_along_axis(np.stack(seeds), np.argmin(seed_costs, axis=0)[None], 0)[0]
         costs = np.stack(
             [_combine(fine.cost_map(D0 + np.float32(k), preset.window), keep, groups_f) for k in range(-r, r + 1)]
         )

@@ -125,6 +125,8 @@ def _rig(tmp_path: Path, devices: list[str]) -> Path:
     rig = yaml.safe_load((REPO / "rigs" / "bmd-micro-studio-4k-3x3.yaml").read_text())
     rig["name"] = "vivid-3x3"
     rig["format"].update(width_px=1920, height_px=1080, fps=25)
+    for section in ("tally", "camera_control"):  # the VM has the capture devices only, no serial lines
+        rig.pop(section, None)
     for cam, dev in zip(rig["cameras"], devices, strict=True):
         cam["device"] = f"v4l2://{dev}"
     path = tmp_path / "vivid.yaml"
