@@ -267,7 +267,6 @@ def estimate(
     preset: Preset,
     keyer: Keyer | None = DEFAULT_KEYER,
     matte: F32 | None = None,
-    initial: F32 | None = None,
 ) -> DepthResult:
     """Disparity of camera ``ref``. ``keyer`` None: no keying (every pixel is searched)."""
     t_start = time.perf_counter()
@@ -349,23 +348,20 @@ def estimate(
     crop_h, crop_w = y1 - y0, x1 - x0
     t0 = time.perf_counter()
     if preset.refine and scale != 1.0:
-        D0 = cv2.resize(best_d / scale, (crop_w, crop_h), interpolation=cv2.INTER_LINEAR)
-        if initial is not None:
-            init = initial[y0:y1, x0:x1]
-            D0 = np.where(np.isfinite(init), init, D0)
-        D0 = np.clip(D0, lo, hi).astype(np.float32)
+        up = cv2.resize(best_d / scale, (crop_w, crop_h), interpolation=cv2.INTER_LINEAR)
+        D0: F32 = np.asarray(np.clip(up, lo, hi), dtype=np.float32)
         fine = _Level(grid, ref, moving, 1.0, box)
         r = preset.radius
         groups_f = _groups(fine) if preset.keep == 0 else None
         for step in preset.propagate:
             # a pixel near a silhouette may have taken the foreground's disparity at half resolution: try the
             # disparities found a few pixels away on each side, keep whichever matches best at full resolution
-            seeds = [D0]
+            seeds: list[F32] = [D0]
             for axis in (0, 1):
                 for sign in (-1, 1):
-                    seeds.append(np.roll(D0, sign * step, axis=axis))
+                    seeds.append(np.asarray(np.roll(D0, sign * step, axis=axis), dtype=np.float32))
             seed_costs = np.stack([_combine(fine.cost_map(sd, preset.window), keep, groups_f) for sd in seeds])
-            D0 = np.take_along_axis(np.stack(seeds), np.argmin(seed_costs, axis=0)[None], 0)[0]
+            D0 = np.asarray(np.take_along_axis(np.stack(seeds), np.argmin(seed_costs, axis=0)[None], 0)[0], np.float32)
         costs = np.stack(
             [_combine(fine.cost_map(D0 + np.float32(k), preset.window), keep, groups_f) for k in range(-r, r + 1)]
         )
