@@ -259,7 +259,6 @@ def rectification_residuals(
                 rect[n, f] = dict(zip(obs.pt[m].tolist(), p, strict=True))
     pairs: dict[str, Any] = {}
     pooled: dict[str, list[F64]] = {"h_raw": [], "h_net": [], "v_raw": [], "v_net": []}
-    ratios = []
     for a in names:
         for b in names:
             (ra, ca), (rb, cb) = pos[a], pos[b]
@@ -268,7 +267,7 @@ def rectification_residuals(
             if not (horizontal or vertical):
                 continue
             base = grid.position_m(b) - grid.position_m(a)
-            raw, net, along = [], [], []
+            raw, net = [], []
             for f in frames:
                 if (a, f) not in rect or (b, f) not in rect:
                     continue
@@ -282,7 +281,6 @@ def rectification_residuals(
                     main, cross, ratio = d[:, 1], d[:, 0], base[0] / base[1]
                 raw.append(cross)
                 net.append(cross - main * ratio)
-                along.append(main)
             if not raw:
                 continue
             r, nt = np.concatenate(raw), np.concatenate(net)
@@ -294,8 +292,6 @@ def rectification_residuals(
                 "raw": _stats(r),
                 "net": _stats(nt),
             }
-            if vertical:
-                ratios.append((a, b, np.concatenate(along)))
     out: dict[str, Any] = {
         "frames": len(frames),
         "vertical_between_horizontal_neighbours": {

@@ -376,7 +376,8 @@ def bundle_adjust(
     t0 = time.perf_counter()
     x, res, nit, status = _levenberg_marquardt(fun, jac, pack(sol), max_iter=max_iter)
     out = unpack(x)
-    A = (jac(x).T @ jac(x)).toarray()
+    J = jac(x)
+    A = (J.T @ J).toarray()
     dof = max(1, len(res) - len(x))
     sigma2 = float(res @ res) / dof
     try:
