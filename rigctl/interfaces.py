@@ -6,6 +6,7 @@ interface, and the rig file's device address alone decides which implementation 
 
 from __future__ import annotations
 
+import collections
 import enum
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
@@ -99,3 +100,25 @@ class Camera(Protocol):
 
     def status(self) -> CameraStatus:
         """Signal, format, measured rate and drops, without blocking capture."""
+
+
+class RateMeter:
+    """Frames per second over the last ``window`` capture timestamps: frames / time spanned. Unlike an average
+    of instantaneous rates seeded by one interval, a burst of queued buffers at stream start cannot skew it
+    for long."""
+
+    def __init__(self, window: int = 25) -> None:
+        self._stamps: collections.deque[int] = collections.deque(maxlen=window)
+
+    def add(self, timestamp_ns: int) -> None:
+        if not self._stamps or timestamp_ns > self._stamps[-1]:
+            self._stamps.append(timestamp_ns)
+
+    def reset(self) -> None:
+        self._stamps.clear()
+
+    @property
+    def fps(self) -> float:
+        if len(self._stamps) < 2:
+            return 0.0
+        return (len(self._stamps) - 1) * 1e9 / (self._stamps[-1] - self._stamps[0])

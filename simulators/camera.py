@@ -19,7 +19,7 @@ from rigctl.simulators import burnin
 from rigctl.simulators.array import FrameTiming, SimArray
 
 from rigctl.errors import DeviceError
-from rigctl.interfaces import CameraStatus, CaptureFormat, Frame, FrameFlags
+from rigctl.interfaces import CameraStatus, CaptureFormat, Frame, FrameFlags, RateMeter
 
 log = logging.getLogger(__name__)
 
@@ -39,8 +39,7 @@ class SimCamera:
         self._lock = threading.Lock()
         self._source_drops = 0
         self._frames = 0
-        self._fps = 0.0
-        self._last_capture: int | None = None
+        self._rate = RateMeter()
         self.delivered: dict[int, int] = {}  # sequence -> scene frame, for the ground truth
 
     # lifecycle -------------------------------------------------------------------------------------
@@ -66,6 +65,7 @@ class SimCamera:
         now = time.monotonic_ns()
         first_grid = max(0, -(-(now - t0) // self.array.period_ns))
         self._timings = self.array.timing(self.name, first_grid=first_grid)
+        self._rate.reset()
         self._pending = None
         self._source_drops = 0
         self._frames = 0
@@ -137,10 +137,7 @@ class SimCamera:
             burnin.burn(buf, arr.format.width, arr.index[self.name], timing.sequence, timing.scene_frame)
         capture = t0 + timing.capture_ns
         with self._lock:
-            if self._last_capture is not None and capture > self._last_capture:
-                inst = 1e9 / (capture - self._last_capture)
-                self._fps = inst if self._fps == 0 else 0.9 * self._fps + 0.1 * inst
-            self._last_capture = capture
+            self._rate.add(capture)
             self._frames += 1
             self.delivered[timing.sequence] = timing.scene_frame
         flags = FrameFlags.TIMESTAMP_MONOTONIC | FrameFlags.TIMESTAMP_SOE
@@ -156,7 +153,7 @@ class SimCamera:
             return CameraStatus(
                 signal_present=present,
                 format=self.array.format if present else None,
-                measured_fps=self._fps if self._streaming else 0.0,
+                measured_fps=self._rate.fps if self._streaming else 0.0,
                 source_drops=self._source_drops,
                 frames=self._frames,
                 reference_locked=locked,

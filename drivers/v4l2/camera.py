@@ -9,7 +9,7 @@ from rigctl.drivers.v4l2 import structs as S
 from rigctl.drivers.v4l2.device import V4L2Device
 
 from rigctl.errors import DeviceError
-from rigctl.interfaces import CameraStatus, CaptureFormat, Frame, FrameFlags
+from rigctl.interfaces import CameraStatus, CaptureFormat, Frame, FrameFlags, RateMeter
 
 log = logging.getLogger(__name__)
 
@@ -28,8 +28,7 @@ class V4L2Camera:
         self._frames = 0
         self._drops = 0
         self._last_seq: int | None = None
-        self._fps = 0.0
-        self._last_ts: int | None = None
+        self._rate = RateMeter()
         self._next_signal_check = 0.0
         self._format_changed = False
         self._signal: str = ""
@@ -59,8 +58,8 @@ class V4L2Camera:
         if self.format is None:
             raise DeviceError(f"{self.address}: start before configure")
         self._frames = self._drops = self._repeats = 0
-        self._last_seq = self._last_ts = None
-        self._fps = 0.0
+        self._last_seq = None
+        self._rate.reset()
         self.device.start(self.buffers)
 
     def read(self, timeout_s: float, into: memoryview | None = None) -> Frame | None:
@@ -96,10 +95,7 @@ class V4L2Camera:
         if self._last_seq is not None and seq > self._last_seq + 1:
             self._drops += seq - self._last_seq - 1
         self._last_seq = seq
-        if self._last_ts is not None and got.timestamp_ns > self._last_ts:
-            inst = 1e9 / (got.timestamp_ns - self._last_ts)
-            self._fps = inst if not self._fps else 0.9 * self._fps + 0.1 * inst
-        self._last_ts = got.timestamp_ns
+        self._rate.add(got.timestamp_ns)
         self._frames += 1
         self._check_signal()
         if self._format_changed:
@@ -141,7 +137,7 @@ class V4L2Camera:
         return CameraStatus(
             signal_present=present,
             format=self.format if present else None,
-            measured_fps=self._fps if dev.streaming else 0.0,
+            measured_fps=self._rate.fps if dev.streaming else 0.0,
             source_drops=self._drops,
             frames=self._frames,
             reference_locked=None,  # V4L2 does not say; the camera's reference comes from camera control
