@@ -21,6 +21,10 @@ LOW_TIME_S = 600.0
 class PreflightError(RigctlError):
     """Preflight found a reason not to record; ``--force`` records anyway where that is safe to try."""
 
+    def __init__(self, message: str, problems: list[str] | None = None) -> None:
+        super().__init__(message)
+        self.problems = problems or [message]
+
 
 @dataclass
 class DestinationCheck:

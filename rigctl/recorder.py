@@ -120,6 +120,8 @@ class Recorder:
         self._writer_threads: dict[str, threading.Thread] = {}
         self._lock = threading.Lock()
         self._finished = threading.Event()
+        self._finish_lock = threading.Lock()
+        self._final: dict[str, Any] | None = None
         self.sync_interval_s = 1.0
         self.preview_every_ns = 0  # > 0: keep a small luma thumbnail per camera this often (the shoot UI)
 
@@ -379,7 +381,14 @@ class Recorder:
     # ---- ending -----------------------------------------------------------------------------------
     def finish(self) -> dict[str, Any]:
         """Stop capture, drain writers (bounded in time), assemble frame sets, write sidecars, truth and
-        the final manifest. Returns the manifest."""
+        the final manifest. Returns the manifest. Safe to call again, from any thread: a second caller waits
+        for the first and gets the same manifest (the shoot UI's stop and its quit can meet here)."""
+        with self._finish_lock:
+            if self._final is None:
+                self._final = self._finish()
+            return self._final
+
+    def _finish(self) -> dict[str, Any]:
         self._capturing.clear()
         for t in self._threads:
             t.join(timeout=2.0)
@@ -460,7 +469,12 @@ class Recorder:
                 self.notes.append("ground truth not written: the destination is full")
                 extras_failed = True
             else:
-                members = [(s.number, {c: self.stats[c].written[i][0] for c, i in s.members.items()}) for s in sets]
+                # a slot every camera missed has nothing to have truth for
+                members = [
+                    (s.number, {c: self.stats[c].written[i][0] for c, i in s.members.items()})
+                    for s in sets
+                    if s.members
+                ]
                 try:
                     self.devices.truth.write_truth(folder / "truth", members)
                 except OSError as exc:

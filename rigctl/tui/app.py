@@ -21,6 +21,7 @@ from textual.screen import ModalScreen, Screen
 from textual.widgets import Footer, Input, Static
 
 from rigctl.errors import RigctlError
+from rigctl.preflight import PreflightError
 from rigctl.tui.session import Session, Snapshot, TileStatus
 
 KEYS = [
@@ -388,22 +389,22 @@ class ShootApp(App[None]):
     @work(thread=True, exclusive=True, group="take")
     def start_take(self) -> None:
         assert self.session is not None
-        problems = self.session.preflight()
-        if problems:
-            self.call_from_thread(self.push_screen, Notice("Recording refused: preflight failed", problems))
-            return
         try:
             self.session.start()
+        except PreflightError as exc:
+            self.call_from_thread(self.push_screen, Notice("Recording refused: preflight failed", exc.problems))
         except RigctlError as exc:
             self.call_from_thread(self.push_screen, Notice("Recording refused", [str(exc)]))
 
     @work(thread=True, exclusive=True, group="take")
     def stop_take(self) -> None:
-        assert self.session is not None
+        session = self.session
+        assert session is not None
         try:
-            self.session.stop()
-        except RigctlError as exc:
-            self.session.message = f"stopping failed: {exc}"
+            session.stop()
+        except Exception as exc:  # the crew must see it; the session has left the recording state
+            lines = [session.message, f"{type(exc).__name__}: {exc}"]
+            self.call_from_thread(self.push_screen, Notice("The take did not finish cleanly", lines))
 
     def action_quit_app(self) -> None:
         if self.session is not None and self.session.recording:

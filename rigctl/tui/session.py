@@ -5,6 +5,7 @@ snapshots; it never touches devices, and nothing here waits on the UI."""
 from __future__ import annotations
 
 import collections
+import logging
 import shutil
 import threading
 import time
@@ -23,6 +24,10 @@ from rigctl.registry import DeviceSet, open_cameras, open_control, open_tally
 from rigctl.rig import Rig
 from rigctl.take.manifest import read_manifest, write_manifest
 from rigctl.tally import TallyService, TallyState
+
+log = logging.getLogger(__name__)
+
+STOP_WAIT_S = 12.0  # the recorder gives up on a silent camera after 4 periods, on a lagging one after 10 s
 
 
 @dataclass
@@ -96,7 +101,8 @@ class Session:
         self.last_take = ""
         self.settings: dict[str, dict[str, str]] = {n: {} for n in self.names}
         self.tally_state = TallyState()
-        self._lock = threading.Lock()
+        self._take_lock = threading.Lock()  # start, stop and close one at a time (stop's worker meets quit)
+        self.closed = False
         self._skew: collections.deque[float] = collections.deque(maxlen=250)
         self._bytes: dict[str, tuple[float, int]] = {}
         self._disk_t = 0.0
@@ -151,37 +157,50 @@ class Session:
 
     def start(self) -> None:
         """Preflight, then record from the next common frame instant. Raises PreflightError with every reason."""
-        problems = self.preflight()
-        if problems:
-            raise PreflightError("; ".join(problems))
-        assert self.recorder is not None
-        self.busy = "starting"
-        try:
-            self.recorder.start()
-            self.recording = True
-            self._set_tally(TallyState.recording(self.rig))
-            self.message = f"recording {self.take_name}"
-        finally:
-            self.busy = ""
+        with self._take_lock:
+            if self.closed:
+                raise RigctlError("the session is closed")
+            problems = self.preflight()
+            if problems:
+                raise PreflightError("; ".join(problems), problems)
+            assert self.recorder is not None
+            self.busy = "starting"
+            try:
+                self.recorder.start()
+                self.recording = True
+                self._set_tally(TallyState.recording(self.rig))
+                self.message = f"recording {self.take_name}"
+            finally:
+                self.busy = ""
 
     def stop(self) -> str:
-        """Stop, finalise the take, and arm again for the next one. Returns the take's folder."""
-        assert self.recorder is not None
-        self.busy = "stopping"
-        try:
-            self.recorder.stop()
-            self.recorder.finish()
+        """Stop, finalise the take, and arm again for the next one. Returns the take's folder. Whatever
+        happens while finalising, the session leaves the recording state and says what went wrong."""
+        with self._take_lock:
+            if self.recorder is None or not self.recording:
+                return self.last_take
+            self.busy = "stopping"
             folder = self.recorder.plan.folder
-            err = self.recorder.error
-            self.recording = False
-            self.last_take = str(folder)
-            self.message = f"{self.take_name} written to {folder}" + (f" ({err})" if err else "")
-            self.take_number += 1
-            self._set_tally(TallyState())
-        finally:
-            self.busy = ""
-        self.arm()
-        return self.last_take
+            try:
+                self.recorder.stop()
+                # every camera's frames up to the common end instant, not only those already read
+                self.recorder.wait(timeout_s=STOP_WAIT_S)
+                self.recorder.finish()
+                err = self.recorder.error
+                self.message = f"{self.take_name} written to {folder}" + (f" ({err})" if err else "")
+            except Exception as exc:
+                log.exception("finishing %s", folder)
+                self.message = f"{self.take_name}: finishing failed ({exc}); frames on disk are kept in {folder}"
+                raise
+            finally:
+                self.recording = False
+                self.last_take = str(folder)
+                self.take_number += 1
+                self._set_tally(TallyState())
+                self.busy = ""
+            if not self.closed:
+                self.arm()
+            return self.last_take
 
     def mark(self, verdict: str, note: str = "") -> str:
         """Mark the last take circled or no-good, with a note, in its manifest."""
@@ -300,11 +319,15 @@ class Session:
         )
 
     def close(self) -> None:
-        if self.recorder is not None:
-            if self.recording:
-                self.recorder.stop()
-            self.recorder.finish()
-            self.recorder = None
-        if self.tally is not None:
-            self.tally.stop()
-        self.devices.close()
+        """Stop a take still recording (it is finalised, never lost), the cameras and the tally."""
+        with self._take_lock:
+            self.closed = True
+            if self.recorder is not None:
+                if self.recording:
+                    self.recorder.stop()
+                    self.recording = False
+                self.recorder.finish()
+                self.recorder = None
+            if self.tally is not None:
+                self.tally.stop()
+            self.devices.close()

@@ -207,3 +207,19 @@ def test_cameras_spread_over_destinations(tmp_path: Path, run_cli) -> None:  # t
     reader = TakeReader(a / "spread")
     assert all(len(reader.index[n]) == 5 for n in reader.names)
     assert run_cli("take", "check", str(a / "spread")).returncode == 0
+
+
+def test_a_slot_every_camera_missed_keeps_its_gap_and_the_truth_of_the_rest(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    """Under load every camera can miss the same instant: the frame set has no members, and the take (its
+    manifest, sidecars and ground truth) still finishes."""
+    everyone = [
+        f"--sim=drops.{n}=[14,15]" for n in ("r0c0", "r0c1", "r0c2", "r1c0", "r1c1", "r1c2", "r2c0", "r2c1", "r2c2")
+    ]
+    res = run_cli("record", "--take", "gap", "--frames", "20", "--out", str(tmp_path), *FAST, *everyone)
+    assert res.returncode == 0, res.stderr
+    reader = TakeReader(tmp_path / "gap")
+    empty = [s.number for s in reader.frame_sets if not s.members]
+    assert len(empty) == 2 and empty[1] == empty[0] + 1
+    assert len(reader.complete_sets()) == len(reader.frame_sets) - 2
+    sets_with_truth = sorted(p.name for p in (tmp_path / "gap" / "truth" / "disparity").iterdir())
+    assert sets_with_truth == [f"{s.number:06d}" for s in reader.frame_sets if s.members]
