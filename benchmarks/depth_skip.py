@@ -2,7 +2,7 @@
 planned disparity range, against the same run with keying off and the whole plausible range (0 to a quarter
 of the image width), in one run. Prints seconds, the ratio, and the error of both against the truth.
 
-    python benchmarks/depth_skip.py [--preset balanced] [--repeats 3]
+    python benchmarks/depth_skip.py [--preset best] [--repeats 3]
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from rigctl.depth.run import score, unplanned_range
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--preset", default="balanced", choices=list(PRESETS))
+    parser.add_argument("--preset", default="best", choices=list(PRESETS))
     parser.add_argument("--repeats", type=int, default=3)
     ns = parser.parse_args()
     ds = presenter(ideal=False)

@@ -25,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("input", type=Path, metavar="INPUT", help="rectified take, ideal simulated take, or grid folder")
     p.add_argument("--out", type=Path, required=True, metavar="DIR")
-    p.add_argument("--preset", choices=list(PRESETS), default="balanced")
+    p.add_argument("--preset", choices=list(PRESETS), default="best")
     p.add_argument("--near", type=distance, metavar="M", help="nearest subject distance (planner range)")
     p.add_argument("--far", type=far_distance, metavar="M", help="farthest subject distance (inf allowed)")
     p.add_argument("--cameras", nargs="+", metavar="CAM", help="cameras to compute (default: all)")

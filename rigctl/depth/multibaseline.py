@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -23,12 +24,15 @@ from numpy.typing import NDArray
 
 from rigctl.depth.grid import Grid
 from rigctl.depth.key import Keyer, subject_box
+from rigctl.depth.pairs import nan_median, neighbour, pair_disparity
 from rigctl.errors import ParameterError
 
 F32 = NDArray[np.float32]
 INVALID_COST = 1e3
 DEFAULT_KEYER = Keyer()
 TRUNCATE = 1.5  # normalised-intensity difference above this is an occlusion or a mismatch, not more
+MIN_PAIR_SIZE = 16  # OpenCV's semi-global matcher needs room for its windows and paths
+CONFLICT_PX = 1.5  # pair estimates further apart than this: every view decides between them
 
 
 @dataclass(frozen=True)
@@ -43,7 +47,7 @@ class Preset:
     median: int = 0  # median filter of the result (0: none)
     sgm: tuple[float, float] | None = None  # semi-global smoothing at half resolution: (P1, P2) penalties
     sgm_fine: tuple[float, float] | None = None  # the same over the full-resolution refinement candidates
-    propagate: tuple[int, ...] = ()  # pixel steps at which neighbours' disparities are tried (silhouettes)
+    engine: str = "sweep"  # "sweep": our plane sweep; "pairs": OpenCV SGBM per pair, fused by every view
     description: str = ""
 
 
@@ -66,15 +70,13 @@ PRESETS = {
             "best",
             "all",
             0.375,
-            3,
+            7,
             refine=True,
+            median=5,
             cross_check=True,
-            median=3,
-            sgm=(0.05, 0.4),
-            sgm_fine=(0.05, 0.3),
-            propagate=(8, 3),
-            description="as balanced, plus neighbours' disparities tried at silhouettes, every camera, "
-            "cross-checked between cameras, holes filled",
+            engine="pairs",
+            description="OpenCV's semi-global matcher on every neighbouring pair, every camera decides where the "
+            "pairs disagree, cross-checked between cameras",
         ),
     )
 }
@@ -190,6 +192,49 @@ class _Level:
             out[i] = agg
         return out
 
+    def costs_where(self, candidates: list[F32], where: NDArray[np.bool_], win: int, keep: int) -> F32:
+        """(candidates, pixels) combined cost of each candidate disparity map at the pixels of ``where`` only:
+        each view is sampled at those pixels and their ``win`` neighbourhood, not over the whole crop."""
+        y0, _, x0, _ = self.box
+        need = np.asarray(cv2.dilate(where.astype(np.uint8), np.ones((win, win), np.uint8)), bool)
+        ys, xs = np.nonzero(need)
+        n = ys.size
+        width = 4096  # cv2.remap takes maps below 32767 in each dimension: lay the pixels out in rows
+        rows = -(-n // width) if n else 1
+        pad = rows * width - n
+        gx = np.pad((xs + x0).astype(np.float32), (0, pad)).reshape(rows, width)
+        gy = np.pad((ys + y0).astype(np.float32), (0, pad)).reshape(rows, width)
+        ref_vals = self.ref[ys, xs]
+        qy, qx = np.nonzero(where)
+        nv = len(self.views)
+        out = np.empty((len(candidates), qy.size), np.float32)
+        # views in groups of four channels: one scatter and one box filter aggregates four views at once
+        dense = [np.zeros((*where.shape, 4), np.float32) for _ in range(0, nv, 4)]
+        ad = np.empty((n, 4 * len(dense)), np.float32)
+        per_view = np.empty((nv, qy.size), np.float32)
+        for ci, cand in enumerate(candidates):
+            d = np.pad(cand[ys, xs], (0, pad)).reshape(rows, width)
+            dq = cand[qy, qx]
+            for vi, name in enumerate(self.views):
+                rx, ry = self.rel[name]
+                mx, my = gx - d * np.float32(rx), gy - d * np.float32(ry)
+                warped = cv2.remap(self.norm[name], mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+                ad[:, vi] = warped.reshape(-1)[:n]
+            np.subtract(ad, ref_vals[:, None], out=ad)
+            np.abs(ad, out=ad)
+            np.minimum(ad, TRUNCATE, out=ad)
+            for gi, img in enumerate(dense):
+                img[ys, xs] = ad[:, 4 * gi : 4 * gi + 4]
+                agg = cv2.boxFilter(img, -1, (win, win), borderType=cv2.BORDER_REFLECT)[qy, qx]
+                take = min(4, nv - 4 * gi)
+                per_view[4 * gi : 4 * gi + take] = agg[:, :take].T
+            for vi, name in enumerate(self.views):
+                rx, ry = self.rel[name]
+                cx, cy = qx + x0 - dq * np.float32(rx), qy + y0 - dq * np.float32(ry)
+                per_view[vi][(cx < 0) | (cx > self.w - 1) | (cy < 0) | (cy > self.h - 1)] = INVALID_COST
+            out[ci] = _combine(per_view, keep)
+        return out
+
 
 def _groups(level: _Level) -> list[list[int]]:
     """Views on each side of the reference (left, right, above, below): a point hidden by a foreground edge
@@ -260,54 +305,48 @@ def _odd(n: float) -> int:
     return k if k % 2 else k + 1
 
 
-def estimate(
-    grid: Grid,
-    ref: str,
-    d_range: tuple[float, float],
-    preset: Preset,
-    keyer: Keyer | None = DEFAULT_KEYER,
-    matte: F32 | None = None,
-) -> DepthResult:
-    """Disparity of camera ``ref``. ``keyer`` None: no keying (every pixel is searched)."""
-    t_start = time.perf_counter()
-    if ref not in grid.images:
-        raise ParameterError(f"camera {ref} is not in the grid (it has {', '.join(grid.names)})")
-    lo, hi = float(d_range[0]), float(d_range[1])
-    if not (math.isfinite(lo) and math.isfinite(hi)) or hi < lo:
-        raise ParameterError(f"disparity range must be finite with min <= max, got {d_range}")
-    h, w = grid.shape
-    stats: dict[str, Any] = {"camera": ref, "preset": preset.name}
-    t0 = time.perf_counter()
-    if matte is None:
-        matte = keyer.matte(grid.images[ref]) if keyer is not None else np.ones((h, w), np.float32)
-    fg = matte > 0.5
-    stats["key_s"] = time.perf_counter() - t0
-    stats["keyed_background_share"] = float(1.0 - fg.mean())
-    empty = DepthResult(
-        np.full((h, w), np.inf, np.float32),
-        np.zeros((h, w), np.float32),
-        np.zeros((h, w), bool),
-        np.zeros((h, w), bool),
-        matte,
-        np.zeros((h, w), bool),
-        stats,
-    )
-    views = _views(grid, ref, preset.views)
-    moving = [
-        n
-        for n in views
-        if max(abs(grid.offsets[n][0] - grid.offsets[ref][0]), abs(grid.offsets[n][1] - grid.offsets[ref][1])) > 1e-9
-    ]
-    stats["views"] = moving
-    if not fg.any() or not moving:
-        stats["note"] = "every pixel keyed as background" if not fg.any() else "no camera at a different position"
-        stats["seconds"] = time.perf_counter() - t_start
-        return empty
-    box = subject_box(fg, margin=preset.window)
-    assert box is not None
-    stats["searched_share"] = float((box[1] - box[0]) * (box[3] - box[2]) / (h * w))
-    keep = max(1, math.ceil(preset.keep * len(moving)))
+@dataclass
+class _Crop:
+    """What an engine found inside the searched box (all arrays box-sized)."""
 
+    disparity: F32
+    cost: F32  # the chosen match's aggregated cost (0 perfect, TRUNCATE no match)
+    distinct: F32  # 0..1: how clearly the match stands out (or how well the estimates agree)
+    texture: F32
+    bright: F32
+    bound: NDArray[np.bool_]  # the coarse search's best lay at the planned range's edge
+    no_view: NDArray[np.bool_]  # no other camera sees the point
+    filled: NDArray[np.bool_] | None = None  # no match found: filled from the background side
+
+
+@dataclass
+class _Search:
+    """One camera's search: the views it matches with, the box searched, the range, the preset."""
+
+    grid: Grid
+    ref: str
+    moving: list[str]
+    box: tuple[int, int, int, int]
+    d_range: tuple[float, float]
+    keep: int
+    preset: Preset
+    stats: dict[str, Any]
+    region: NDArray[np.bool_]  # box-sized: the pixels to estimate (the keyed subject)
+
+
+def _sweep_engine(job: _Search) -> _Crop:
+    """Our own plane sweep over the planned range at half resolution, refined at full resolution."""
+    grid, ref, moving, box, keep, preset, stats = (
+        job.grid,
+        job.ref,
+        job.moving,
+        job.box,
+        job.keep,
+        job.preset,
+        job.stats,
+    )
+    lo, hi = job.d_range
+    h, w = grid.shape
     # coarse: stream over the planned range at half resolution
     t0 = time.perf_counter()
     scale = 0.5 if min(h, w) >= 64 else 1.0
@@ -353,15 +392,6 @@ def estimate(
         fine = _Level(grid, ref, moving, 1.0, box)
         r = preset.radius
         groups_f = _groups(fine) if preset.keep == 0 else None
-        for step in preset.propagate:
-            # a pixel near a silhouette may have taken the foreground's disparity at half resolution: try the
-            # disparities found a few pixels away on each side, keep whichever matches best at full resolution
-            seeds: list[F32] = [D0]
-            for axis in (0, 1):
-                for sign in (-1, 1):
-                    seeds.append(np.asarray(np.roll(D0, sign * step, axis=axis), dtype=np.float32))
-            seed_costs = np.stack([_combine(fine.cost_map(sd, preset.window), keep, groups_f) for sd in seeds])
-            D0 = np.asarray(np.take_along_axis(np.stack(seeds), np.argmin(seed_costs, axis=0)[None], 0)[0], np.float32)
         costs = np.stack(
             [_combine(fine.cost_map(D0 + np.float32(k), preset.window), keep, groups_f) for k in range(-r, r + 1)]
         )
@@ -398,30 +428,144 @@ def estimate(
         )
         uniq = cv2.resize(second / np.maximum(best, 1e-6), (crop_w, crop_h), interpolation=cv2.INTER_LINEAR)
     stats["refine_s"] = time.perf_counter() - t0
+    distinct = np.clip((np.nan_to_num(uniq, posinf=4.0) - 1.0) / 0.5, 0, 1).astype(np.float32)
+    return _Crop(
+        np.asarray(disp, np.float32), np.asarray(cost, np.float32), distinct, texture, bright, bound_full, no_view_full
+    )
+
+
+def _pairs_engine(job: _Search) -> _Crop:
+    """OpenCV's semi-global matcher on each neighbouring pair (left, right, above, below), then every view
+    decides: where the pairs agree their median stands; where they disagree (a silhouette, a point one pair
+    cannot see, a thin strip one pair smooths away) each pixel takes the pair estimate that the best
+    ``keep`` of all views agree with, in a ``window`` around it. Only those pixels cost more than the pairs."""
+    grid, ref, box, d_range, preset, stats = job.grid, job.ref, job.box, job.d_range, job.preset, job.stats
+    region = job.region
+    if min(grid.shape) < MIN_PAIR_SIZE:
+        stats["note"] = f"image smaller than {MIN_PAIR_SIZE} px: matched by the plane sweep instead of pairs"
+        return _sweep_engine(job)
+    t0 = time.perf_counter()
+    maps = []
+    u8: dict[str, NDArray[np.uint8]] = {}
+    searched: list[int] = []
+    for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        other = neighbour(grid, ref, dx, dy)
+        if other is not None:
+            maps.append(pair_disparity(grid, ref, other, d_range, box=box, u8=u8, searched=searched))
+    if not maps:  # no neighbour along a row or column: match with the nearest camera along its own line
+        raise ParameterError(f"camera {ref} has no neighbour along its row or column for preset {preset.name}")
+    stack = np.stack(maps)
+    stack[~np.isfinite(stack)] = np.nan
+    have = np.isfinite(stack).any(0)
+    med, spread = nan_median(stack)
+    # a point no pair matched (hidden from each, or outside each pair's search) takes the background side
+    base = fill_from_background(np.where(have, med, np.inf).astype(np.float32), np.asarray(~have, bool))
+    base = np.where(np.isfinite(base), base, 0.5 * (d_range[0] + d_range[1])).astype(np.float32)
+    stats["pairs"] = len(maps)
+    stats["levels"] = max(searched)  # disparities the widest pair searched, in its own pixels
+    stats["pairs_s"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    fine = _Level(grid, ref, job.moving, 1.0, box)
+    candidates = [base] + [np.where(np.isfinite(m), m, base).astype(np.float32) for m in stack]
+    conflict = ((np.nan_to_num(spread, nan=0.0) > CONFLICT_PX) | ~have) & region
+    costs = fine.costs_where(candidates, conflict, preset.window, job.keep)
+    k = np.argmin(costs, axis=0)
+    disp = base.copy()
+    disp[conflict] = np.take_along_axis(np.stack([c[conflict] for c in candidates]), k[None], 0)[0]
+    cost = np.zeros(disp.shape, np.float32)  # where the pairs agree, they are the evidence: cost 0
+    cost[conflict] = np.take_along_axis(costs, k[None], 0)[0]
+    stats["conflict_share"] = float(conflict.sum() / max(1, region.sum()))
+    stats["select_s"] = time.perf_counter() - t0
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        agree = (np.abs(stack - disp[None]) <= 1.0).sum(0) / np.float32(len(maps))
+    zeros = np.zeros(disp.shape, bool)
+    no_view = cost >= INVALID_COST * 0.5
+    return _Crop(disp, cost, agree.astype(np.float32), fine.texture, fine.bright, zeros, no_view, ~have & region)
+
+
+def estimate(
+    grid: Grid,
+    ref: str,
+    d_range: tuple[float, float],
+    preset: Preset,
+    keyer: Keyer | None = DEFAULT_KEYER,
+    matte: F32 | None = None,
+) -> DepthResult:
+    """Disparity of camera ``ref``. ``keyer`` None: no keying (every pixel is searched)."""
+    t_start = time.perf_counter()
+    if ref not in grid.images:
+        raise ParameterError(f"camera {ref} is not in the grid (it has {', '.join(grid.names)})")
+    lo, hi = float(d_range[0]), float(d_range[1])
+    if not (math.isfinite(lo) and math.isfinite(hi)) or hi < lo:
+        raise ParameterError(f"disparity range must be finite with min <= max, got {d_range}")
+    h, w = grid.shape
+    stats: dict[str, Any] = {"camera": ref, "preset": preset.name}
+    t0 = time.perf_counter()
+    if matte is None:
+        matte = keyer.matte(grid.images[ref]) if keyer is not None else np.ones((h, w), np.float32)
+    fg = matte > 0.0  # the soft edge too: compositing needs depth under a partly transparent edge
+    stats["key_s"] = time.perf_counter() - t0
+    stats["keyed_background_share"] = float(1.0 - fg.mean())
+    empty = DepthResult(
+        np.full((h, w), np.inf, np.float32),
+        np.zeros((h, w), np.float32),
+        np.zeros((h, w), bool),
+        np.zeros((h, w), bool),
+        matte,
+        np.zeros((h, w), bool),
+        stats,
+    )
+    views = _views(grid, ref, preset.views)
+    moving = [
+        n
+        for n in views
+        if max(abs(grid.offsets[n][0] - grid.offsets[ref][0]), abs(grid.offsets[n][1] - grid.offsets[ref][1])) > 1e-9
+    ]
+    stats["views"] = moving
+    if not fg.any() or not moving:
+        stats["note"] = "every pixel keyed as background" if not fg.any() else "no camera at a different position"
+        stats["seconds"] = time.perf_counter() - t_start
+        return empty
+    box = subject_box(fg, margin=preset.window)
+    assert box is not None
+    stats["searched_share"] = float((box[1] - box[0]) * (box[3] - box[2]) / (h * w))
+    keep = max(1, math.ceil(preset.keep * len(moving)))
+
+    y0, y1, x0, x1 = box
+    job = _Search(grid, ref, moving, box, (lo, hi), keep, preset, stats, fg[y0:y1, x0:x1])
+    crop = _pairs_engine(job) if preset.engine == "pairs" else _sweep_engine(job)
+    disp = crop.disparity
     if preset.median:
-        disp = cv2.medianBlur(np.ascontiguousarray(disp, dtype=np.float32), preset.median)
+        disp = np.asarray(cv2.medianBlur(np.ascontiguousarray(disp, dtype=np.float32), preset.median), np.float32)
 
     out = np.full((h, w), np.inf, np.float32)
     region = fg[y0:y1, x0:x1]
-    valid = region & ~no_view_full & np.isfinite(disp)
+    valid = region & ~crop.no_view & np.isfinite(disp)
     out[y0:y1, x0:x1] = np.where(valid, disp, np.inf)
     conf = np.zeros((h, w), np.float32)
-    c_local = np.clip(1.0 - cost / TRUNCATE, 0, 1) * np.clip((np.nan_to_num(uniq, posinf=4.0) - 1.0) / 0.5, 0, 1)
-    unreliable_local = (texture < 0.01) | (bright > 0.98)
+    c_local = np.clip(1.0 - crop.cost / TRUNCATE, 0, 1) * crop.distinct
+    unreliable_local = (crop.texture < 0.01) | (crop.bright > 0.98)
     conf[y0:y1, x0:x1] = np.where(valid & ~unreliable_local, c_local, 0.0)
     unreliable = np.zeros((h, w), bool)
     unreliable[y0:y1, x0:x1] = valid & unreliable_local
     bound_hit = np.zeros((h, w), bool)
     # the match lies at the edge of the planned range: the truth may lie beyond it
     at_edge = (disp >= hi - 0.5) | (disp <= lo + 0.5)
-    bound_hit[y0:y1, x0:x1] = valid & (bound_full | at_edge)
+    bound_hit[y0:y1, x0:x1] = valid & (crop.bound | at_edge)
     stats.update(
         seconds=time.perf_counter() - t_start,
         estimated_share_of_subject=float(valid.sum() / max(1, fg.sum())),
         bound_hit_pixels=int(bound_hit.sum()),
         unreliable_pixels=int(unreliable.sum()),
     )
-    return DepthResult(out, conf, unreliable, bound_hit, matte, np.zeros((h, w), bool), stats)
+    filled = np.zeros((h, w), bool)
+    if crop.filled is not None:
+        filled[y0:y1, x0:x1] = valid & crop.filled
+        stats["filled_from_background_pixels"] = int(filled.sum())
+    return DepthResult(out, conf, unreliable, bound_hit, matte, filled, stats)
 
 
 def fill_from_background(disp: F32, holes: NDArray[np.bool_]) -> F32:

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from rigctl.depth.grid import Grid, TakeGrid, load_grid_folder
 from rigctl.depth.key import Keyer
-from rigctl.depth.multibaseline import PRESETS, DepthResult, cross_check, estimate, fill_from_background
+from rigctl.depth.multibaseline import PRESETS, DepthResult, cross_check, estimate
 from rigctl.errors import ParameterError
 from rigctl.exr import write_exr
 from rigctl.pfm import write_pfm
@@ -28,7 +28,7 @@ F32 = NDArray[np.float32]
 
 @dataclass(frozen=True)
 class DepthOptions:
-    preset: str = "balanced"
+    preset: str = "best"
     near_m: float | None = None
     far_m: float | None = None
     disparity_range: tuple[float, float] | None = None
@@ -83,13 +83,12 @@ def depth_grid(grid: Grid, opt: DepthOptions, progress: Callable[[str], None] | 
             t0 = time.perf_counter()
             others = [c for c in out if c != cam]
             nearest = min(others, key=lambda c: math.hypot(*_rel(grid, cam, c)))
-            bad = cross_check(res, out[nearest], _rel(grid, cam, nearest))
-            inside = res.matte > 0.5
-            holes = bad & inside
-            res.disparity = fill_from_background(res.disparity, holes)
-            res.confidence[holes] = 0.0
-            res.filled = holes
-            res.stats["cross_check_failed_pixels"] = int(holes.sum())
+            # a point where two cameras disagree is not trusted (confidence 0); it is not replaced, because
+            # either camera may be the one that is wrong there
+            bad = cross_check(res, out[nearest], _rel(grid, cam, nearest)) & (res.matte > 0)
+            res.confidence[bad] = 0.0
+            res.stats["cross_check_with"] = nearest
+            res.stats["cross_check_failed_pixels"] = int(bad.sum())
             res.stats["cross_check_s"] = time.perf_counter() - t0
     return out
 

@@ -45,12 +45,13 @@ def test_a_textured_plane_is_recovered(preset: str) -> None:
     assert np.median(np.abs(d - 12.3)) < (0.3 if preset != "fast" else 0.6)
 
 
-def test_textureless_and_saturated_regions_are_flagged_not_nan() -> None:
+@pytest.mark.parametrize("preset", list(PRESETS))
+def test_textureless_and_saturated_regions_are_flagged_not_nan(preset: str) -> None:
     tex = texture(120, 160)
     tex[:, :280] = 0.5  # no texture at all in the reference's left half (it sees the texture from x = 200)
     tex[:60, 280:] = 1.0  # saturated at the top right (it sees the texture from y = 20)
     g = plane_grid(8.0, tex=tex)
-    r = estimate(g, "r1c1", (2.0, 14.0), PRESETS["balanced"], keyer=None)
+    r = estimate(g, "r1c1", (2.0, 14.0), PRESETS[preset], keyer=None)
     assert not np.isnan(r.disparity).any() and not np.isnan(r.confidence).any()
     assert r.unreliable[40:80, 10:50].mean() > 0.9  # the flat region
     assert r.unreliable[5:30, 100:150].mean() > 0.9  # the saturated region
@@ -58,31 +59,34 @@ def test_textureless_and_saturated_regions_are_flagged_not_nan() -> None:
     assert r.stats["unreliable_pixels"] > 0
 
 
-def test_true_disparity_at_the_edge_of_the_planned_range_is_flagged() -> None:
+@pytest.mark.parametrize("preset", list(PRESETS))
+def test_true_disparity_at_the_edge_of_the_planned_range_is_flagged(preset: str) -> None:
     g = plane_grid(20.0)
-    r = estimate(g, "r1c1", (5.0, 20.0), PRESETS["balanced"], keyer=None)
+    r = estimate(g, "r1c1", (5.0, 20.0), PRESETS[preset], keyer=None)
     inner = r.bound_hit[10:-10, 10:-10]
     assert inner.mean() > 0.8 and r.stats["bound_hit_pixels"] > 0
-    ok = estimate(g, "r1c1", (5.0, 30.0), PRESETS["balanced"], keyer=None)
+    ok = estimate(g, "r1c1", (5.0, 30.0), PRESETS[preset], keyer=None)
     assert ok.bound_hit[10:-10, 10:-10].mean() < 0.05
 
 
-def test_every_view_keyed_gives_no_estimate_and_says_so() -> None:
+@pytest.mark.parametrize("preset", list(PRESETS))
+def test_every_view_keyed_gives_no_estimate_and_says_so(preset: str) -> None:
     green = np.zeros((60, 80, 3), np.float32)
     green[..., 1] = 0.8
     g = grid_from_arrays({"r0c0": green, "r0c1": green}, 1000.0, 0.1, 0.1)
-    r = estimate(g, "r0c0", (0.0, 10.0), PRESETS["balanced"])
+    r = estimate(g, "r0c0", (0.0, 10.0), PRESETS[preset])
     assert np.all(np.isinf(r.disparity)) and r.stats["note"] == "every pixel keyed as background"
     assert r.stats["keyed_background_share"] == 1.0
 
 
-def test_zero_baseline_and_identical_views() -> None:
+@pytest.mark.parametrize("preset", list(PRESETS))
+def test_zero_baseline_and_identical_views(preset: str) -> None:
     tex = np.repeat(texture(60, 80)[:60, :80, None], 3, axis=2)
     same_place = grid_from_arrays({"r0c0": tex}, 1000.0, 0.1, 0.1)
-    r = estimate(same_place, "r0c0", (0.0, 10.0), PRESETS["balanced"], keyer=None)
+    r = estimate(same_place, "r0c0", (0.0, 10.0), PRESETS[preset], keyer=None)
     assert np.all(np.isinf(r.disparity)) and "no camera at a different position" in r.stats["note"]
     identical = grid_from_arrays({"r0c0": tex, "r0c1": tex}, 1000.0, 0.1, 0.1)
-    r = estimate(identical, "r0c0", (-3.0, 5.0), PRESETS["balanced"], keyer=None)
+    r = estimate(identical, "r0c0", (-3.0, 5.0), PRESETS[preset], keyer=None)
     assert np.median(np.abs(r.disparity[5:-5, 5:-5])) < 0.3  # identical views: the point is at infinity
 
 
@@ -94,22 +98,24 @@ def test_nan_or_inf_input_is_refused(bad: float) -> None:
         grid_from_arrays({"r0c0": img, "r0c1": img}, 1000.0, 0.1, 0.1)
 
 
-def test_a_one_pixel_image_and_a_range_larger_than_the_image() -> None:
+@pytest.mark.parametrize("preset", list(PRESETS))
+def test_a_one_pixel_image_and_a_range_larger_than_the_image(preset: str) -> None:
     px = np.full((1, 1, 3), 0.4, np.float32)
     g = grid_from_arrays({"r0c0": px, "r0c1": px}, 1000.0, 0.1, 0.1)
-    r = estimate(g, "r0c0", (0.0, 5.0), PRESETS["balanced"], keyer=None)
+    r = estimate(g, "r0c0", (0.0, 5.0), PRESETS[preset], keyer=None)
     assert r.disparity.shape == (1, 1) and not np.isnan(r.disparity).any()
     g = plane_grid(3.0, h=40, w=60)
-    r = estimate(g, "r1c1", (0.0, 5000.0), PRESETS["fast"], keyer=None)
+    r = estimate(g, "r1c1", (0.0, 5000.0), PRESETS[preset], keyer=None)
     assert r.stats["levels"] <= 4 * 60 and not np.isnan(r.disparity).any()
     with pytest.raises(ParameterError, match="disparity range must be finite"):
-        estimate(g, "r1c1", (0.0, float("inf")), PRESETS["fast"], keyer=None)
+        estimate(g, "r1c1", (0.0, float("inf")), PRESETS[preset], keyer=None)
 
 
-def test_a_light_field_with_negative_disparities() -> None:
+@pytest.mark.parametrize("preset", list(PRESETS))
+def test_a_light_field_with_negative_disparities(preset: str) -> None:
     g = plane_grid(-4.5)
-    r = estimate(g, "r1c1", (-10.0, 2.0), PRESETS["balanced"], keyer=None)
-    assert np.median(np.abs(r.disparity[10:-10, 10:-10] + 4.5)) < 0.3
+    r = estimate(g, "r1c1", (-10.0, 2.0), PRESETS[preset], keyer=None)
+    assert np.median(np.abs(r.disparity[10:-10, 10:-10] + 4.5)) < (0.3 if preset != "fast" else 0.6)
 
 
 def test_motorcycle_two_view_no_worse_than_sgbm_3way_on_bad_2() -> None:
@@ -223,3 +229,60 @@ def test_demo_runs_end_to_end_and_its_report_opens_with_figures(tmp_path: Path) 
         assert (tmp_path / "demo" / name).stat().st_size > 1000
     res = run_rigctl("demo", "--out", str(tmp_path / "demo"))
     assert res.returncode == 2 and "exists and is not empty" in res.stderr
+
+
+def test_best_beats_the_best_opencv_baseline_on_the_realistic_presenter_by_30_percent() -> None:
+    """The accuracy half of the bar (the time half is measured by ``rigctl bench depth``, not in a test)."""
+    from rigctl.benchdata import presenter
+    from rigctl.depth.baselines import BASELINES
+    from rigctl.depth.bench import comparisons, run_bench
+
+    result = run_bench([presenter(ideal=False)], methods=["best", *BASELINES])
+    (cmp,) = comparisons(result)
+    rows = {r["method"]: r for r in result["rows"]}
+    assert cmp["baseline"] == min(BASELINES, key=lambda m: rows[m]["bad_1.0"])
+    assert cmp["bad1_improvement"] >= 0.30, rows
+    assert rows["best"]["bad_2.0"] < rows[cmp["baseline"]]["bad_2.0"], rows
+
+
+def occlusion_grid(d_back: float = 5.0, d_front: float = 15.0, h: int = 120, w: int = 160):  # type: ignore[no-untyped-def]
+    """A textured square in front of a textured wall, seen by a 3x3 grid: each camera's view is composited
+    from the two planes, so the square hides a different strip of the wall in every camera."""
+    back, front = texture(h, w, seed=1), texture(h, w, seed=2)
+    square = np.zeros((h + 40, w + 400), np.float32)
+    square[40:90, 250:320] = 1.0
+    images, truth = {}, {}
+    for r in range(3):
+        for c in range(3):
+            ox, oy = c - 1, (r - 1) * 0.65
+
+            def warp(img: np.ndarray, d: float, ox: float = ox, oy: float = oy) -> np.ndarray:
+                M = np.array([[1, 0, 200 + d * ox], [0, 1, 20 + d * oy]], np.float32)
+                return np.asarray(cv2.warpAffine(img, M, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP))
+
+            a = warp(square, d_front)
+            img = warp(back, d_back) * (1 - a) + warp(front, d_front) * a
+            images[f"r{r}c{c}"] = np.repeat(np.clip(img, 0, 1)[..., None], 3, axis=2).astype(np.float32)
+            truth[f"r{r}c{c}"] = np.where(a > 0.5, d_front, d_back).astype(np.float32)
+    return grid_from_arrays(images, 1000.0, 0.12, 0.12 * 0.65), truth
+
+
+def test_best_decides_at_an_occlusion_and_cross_checks_between_cameras() -> None:
+    from rigctl.depth.run import DepthOptions, depth_grid
+
+    g, truth = occlusion_grid()
+    opt = DepthOptions(preset="best", key=False, cameras=("r1c1", "r1c2"), disparity_range=(2.0, 20.0))
+    out = depth_grid(g, opt)
+    res, t = out["r1c1"], truth["r1c1"]
+    inner = (slice(8, -8), slice(8, -8))
+    err = np.abs(res.disparity - t)[inner]
+    # the square's edges included; without the views deciding where the pairs disagree this is 0.4 %
+    assert np.mean(err > 1.0) < 0.002, np.mean(err > 1.0)
+    assert res.stats["conflict_share"] > 0  # the pairs disagreed somewhere: the views decided there
+    # the cross-check with r1c2 flags pixels (the strip r1c2 cannot see) and never trusts them
+    failed = res.stats["cross_check_failed_pixels"]
+    assert failed > 0 and res.stats["cross_check_with"] == "r1c2"
+    edge = cv2.dilate((np.abs(cv2.Sobel(t, cv2.CV_32F, 1, 0)) > 0).astype(np.uint8), np.ones((1, 25), np.uint8))
+    flagged = (res.confidence == 0) & ~res.unreliable
+    assert flagged[edge == 0].mean() < 0.01  # away from the square's vertical edges the cameras agree
+    assert not np.isnan(res.disparity).any() and not np.isnan(res.confidence).any()

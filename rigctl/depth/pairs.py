@@ -1,0 +1,136 @@
+"""OpenCV's semi-global matcher on one neighbouring pair of a rectified grid (flipped and transposed so every
+pair is a left-right pair), as disparity of the horizontal spacing for the reference camera. The OpenCV
+baselines use it alone; the ``best`` preset uses it per pair and then fuses the pairs with every view."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from rigctl.depth.grid import Grid
+
+F32 = NDArray[np.float32]
+BLOCK = 3
+
+
+def to_u8(img: F32) -> NDArray[np.uint8]:
+    return np.ascontiguousarray(np.clip(img[..., ::-1] * 255 + 0.5, 0, 255).astype(np.uint8))
+
+
+def make_sgbm(lo: float, hi: float, block: int = BLOCK) -> cv2.StereoSGBM:
+    min_d = math.floor(lo)
+    num = max(16, math.ceil((hi - min_d + 1) / 16.0) * 16)
+    return cv2.StereoSGBM.create(
+        minDisparity=min_d,
+        numDisparities=num,
+        blockSize=block,
+        P1=8 * 3 * block * block,
+        P2=32 * 3 * block * block,
+        uniquenessRatio=10,
+        speckleWindowSize=100,
+        speckleRange=2,
+        disp12MaxDiff=1,
+        mode=cv2.STEREO_SGBM_MODE_SGBM_3WAY,
+    )
+
+
+def _to_float(raw: NDArray[Any], matcher: cv2.StereoSGBM) -> F32:
+    d = raw.astype(np.float32) / 16.0
+    d[raw < (matcher.getMinDisparity() - 1) * 16 + 16] = np.inf  # OpenCV marks "no estimate" below the range
+    return d
+
+
+def neighbour(grid: Grid, ref: str, dx: int, dy: int) -> str | None:
+    """The nearest camera from ``ref`` in direction (dx, dy) along a row or a column, if there is one."""
+    ox, oy = grid.offsets[ref]
+    best, best_dist = None, math.inf
+    for n in grid.names:
+        rx, ry = grid.offsets[n][0] - ox, grid.offsets[n][1] - oy
+        along, across = (rx * dx, ry) if dy == 0 else (ry * dy, rx)
+        if along > 1e-6 and abs(across) < 0.25 * along and along < best_dist:
+            best, best_dist = n, along
+    return best
+
+
+def _capped(d_range: tuple[float, float], scale: float, extent: int) -> tuple[float, float]:
+    """The pair's search range in its own pixels, no wider than the image it searches (a wider range cannot
+    match anything and makes the matcher allocate for nothing)."""
+    lo, hi = d_range[0] * scale, d_range[1] * scale
+    return lo, min(hi, lo + max(16, extent - 16))
+
+
+def nan_median(stack: F32) -> tuple[F32, F32]:
+    """Median over axis 0 ignoring NaN, and the spread (largest minus smallest); NaN where nothing is finite.
+    The few layers are sorted by compare-and-swap over whole images (odd-even transposition), many times
+    faster than ``np.nanmedian`` (masked arrays) or a sort along a strided axis."""
+    layers = [np.where(np.isfinite(x), x, np.float32(np.inf)).astype(np.float32) for x in stack]
+    n = len(layers)
+    for p in range(n):
+        for i in range(p % 2, n - 1, 2):
+            lo, hi = np.minimum(layers[i], layers[i + 1]), np.maximum(layers[i], layers[i + 1])
+            layers[i], layers[i + 1] = lo, hi
+    srt = np.stack(layers)
+    k = np.isfinite(srt).sum(0)
+    lo_i = np.clip((k - 1) // 2, 0, None)[None]
+    hi_i = np.clip(k // 2, 0, None)[None]
+    med = 0.5 * (np.take_along_axis(srt, lo_i, 0)[0] + np.take_along_axis(srt, hi_i, 0)[0])
+    top = np.take_along_axis(srt, np.clip(k - 1, 0, None)[None], 0)[0]
+    none = k == 0
+    with np.errstate(invalid="ignore"):
+        spread = np.where(none, np.nan, top - srt[0])
+    med = np.where(none, np.nan, med)
+    return np.asarray(med, np.float32), np.asarray(spread, np.float32)
+
+
+def pair_disparity(
+    grid: Grid,
+    ref: str,
+    other: str,
+    d_range: tuple[float, float],
+    block: int = BLOCK,
+    box: tuple[int, int, int, int] | None = None,
+    u8: dict[str, NDArray[np.uint8]] | None = None,
+    searched: list[int] | None = None,
+) -> F32:
+    """SGBM between ``ref`` and one neighbour, returned as disparity of the horizontal spacing for ``ref``.
+    ``box`` (y0, y1, x0, x1): only that part of ``ref`` is wanted; a horizontal pair then matches only those
+    rows (all columns: the match may lie outside the box), a vertical pair only those columns."""
+    rx = grid.offsets[other][0] - grid.offsets[ref][0]
+    ry = grid.offsets[other][1] - grid.offsets[ref][1]
+    h, w = grid.shape
+    y0, y1, x0, x1 = box if box is not None else (0, h, 0, w)
+    if u8 is None:
+        u8 = {}
+    for n in (ref, other):  # 8-bit BGR once per image, however many pairs use it
+        if n not in u8:
+            u8[n] = to_u8(grid.images[n])
+    a, b = u8[ref], u8[other]
+    if abs(ry) < abs(rx):
+        a, b = a[y0:y1], b[y0:y1]
+    else:
+        a, b = a[:, x0:x1], b[:, x0:x1]
+    if abs(ry) < abs(rx):  # horizontal: the other camera to the right is the "right" image
+        scale = abs(rx)
+        flip = rx < 0
+        if flip:
+            a, b = a[:, ::-1], b[:, ::-1]
+        m = make_sgbm(*_capped(d_range, scale, a.shape[1]), block)
+        d = _to_float(m.compute(np.ascontiguousarray(a), np.ascontiguousarray(b)), m)
+        d = d[:, ::-1] if flip else d
+    else:  # vertical: transposed, the camera below is the "right" image
+        scale = abs(ry)
+        a, b = np.ascontiguousarray(a.transpose(1, 0, 2)), np.ascontiguousarray(b.transpose(1, 0, 2))
+        flip = ry < 0
+        if flip:
+            a, b = a[:, ::-1], b[:, ::-1]
+        m = make_sgbm(*_capped(d_range, scale, a.shape[1]), block)
+        d = _to_float(m.compute(np.ascontiguousarray(a), np.ascontiguousarray(b)), m)
+        d = (d[:, ::-1] if flip else d).T
+    d = d[:, x0:x1] if abs(ry) < abs(rx) else d[y0:y1]
+    if searched is not None:
+        searched.append(int(m.getNumDisparities()))
+    return np.ascontiguousarray(d / np.float32(scale), dtype=np.float32)
