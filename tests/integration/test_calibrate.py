@@ -75,7 +75,8 @@ def test_board_in_millimetres_gives_the_same_result(tmp_path: Path) -> None:
 # ---- a simulated 3x3 array ------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def charuco_take(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return record(tmp_path_factory.mktemp("calib"), "board", 40)
+    """120 board poses: enough for every camera's rotation to 0.01 degree (40 leave it at about 0.014)."""
+    return record(tmp_path_factory.mktemp("calib"), "board", 120)
 
 
 def detection_noise_floor(take: Path, report: dict) -> float:  # type: ignore[type-arg]
@@ -100,6 +101,20 @@ def detection_noise_floor(take: Path, report: dict) -> float:  # type: ignore[ty
     return float(np.sqrt((e**2).sum(1).mean()))
 
 
+def raw_residuals_of_the_truth(take: Path, frames: list[str]) -> dict[str, dict[str, float]]:
+    from rigctl.calib import metrics
+    from rigctl.calib.detect import detect
+    from rigctl.calib.inputs import load_views
+
+    views = load_views(take)
+    views.frames = [f for f in views.frames if f in set(frames)]
+    obs = detect(views, BoardSpec())
+    truth = load_calibration(take / "truth" / "calibration.yaml")
+    res = metrics.rectification_residuals(truth, obs, views.names, list(range(len(views.frames))))
+    keys = ("vertical_between_horizontal_neighbours", "horizontal_between_vertical_neighbours")
+    return {k: res[k]["raw"] for k in keys}
+
+
 def test_simulated_array_against_the_truth(charuco_take: Path, tmp_path: Path) -> None:
     out = tmp_path / "calibration.yaml"
     code, rep, err = calibrate(str(charuco_take), "--out", str(out), "--colmap", str(tmp_path / "colmap"))
@@ -110,8 +125,9 @@ def test_simulated_array_against_the_truth(charuco_take: Path, tmp_path: Path) -
     truth = {n: c["truth"] for n, c in rep["cameras"].items()}
     assert max(t["centre_mm"] for t in truth.values()) < 1.0
     assert max(t["ray_deg"] for t in truth.values()) < 0.005
-    # R alone trades off against the principal point (0.01 deg = 0.32 px here): at the take's noise limit
-    assert max(t["rotation_deg"] for t in truth.values()) < 0.015
+    # R alone trades off against the principal point (0.01 deg = 0.32 px here), so it needs more views than
+    # the rays: 0.014 deg at 40 poses, 0.008 at 120, 0.006 at 160 (benchmarks/calibration_views.py)
+    assert max(t["rotation_deg"] for t in truth.values()) < 0.01
     res = rep["rectification_residuals"]
     for key in ("vertical_between_horizontal_neighbours", "horizontal_between_vertical_neighbours"):
         net = res[key]["net"]
@@ -120,6 +136,12 @@ def test_simulated_array_against_the_truth(charuco_take: Path, tmp_path: Path) -
         # rectification can remove; it is reported, and larger
         assert res[key]["raw"]["rms"] >= net["rms"]
     assert res["disparity_ratio"]["relative"] == pytest.approx(1.0, abs=0.01)
+    # the true calibration, rectified the same way, leaves the same raw figures on the same corners: they
+    # measure how the rig was machined, not how well it was calibrated
+    true_raw = raw_residuals_of_the_truth(charuco_take, res["held_out_frames"])
+    for key, raw in true_raw.items():
+        assert abs(res[key]["raw"]["rms"] - raw["rms"]) <= 0.1 * raw["rms"], (key, res[key]["raw"], raw)
+    assert true_raw["horizontal_between_vertical_neighbours"]["rms"] > 0.3
     assert all(c["cross_validation_px"] < 0.3 for c in rep["cameras"].values())
     assert all(c["distortion_monotonic"] for c in rep["cameras"].values())
     # the file is the same schema as the simulator's truth, and the exports exist
