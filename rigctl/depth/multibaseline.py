@@ -210,7 +210,7 @@ class _Level:
         out = np.empty((len(candidates), qy.size), np.float32)
         # views in groups of four channels: one scatter and one box filter aggregates four views at once
         dense = [np.zeros((*where.shape, 4), np.float32) for _ in range(0, nv, 4)]
-        ad = np.empty((n, 4 * len(dense)), np.float32)
+        ad = np.zeros((n, 4 * len(dense)), np.float32)  # channels past the last view stay 0
         per_view = np.empty((nv, qy.size), np.float32)
         for ci, cand in enumerate(candidates):
             d = np.pad(cand[ys, xs], (0, pad)).reshape(rows, width)
@@ -452,8 +452,11 @@ def _pairs_engine(job: _Search) -> _Crop:
         other = neighbour(grid, ref, dx, dy)
         if other is not None:
             maps.append(pair_disparity(grid, ref, other, d_range, box=box, u8=u8, searched=searched))
-    if not maps:  # no neighbour along a row or column: match with the nearest camera along its own line
-        raise ParameterError(f"camera {ref} has no neighbour along its row or column for preset {preset.name}")
+    if not maps:  # pairs need a camera on the same row or column; the plane sweep does not
+        raise ParameterError(
+            f"camera {ref} has no other camera on its row or column, which preset {preset.name} matches with; "
+            "use --preset balanced"
+        )
     stack = np.stack(maps)
     stack[~np.isfinite(stack)] = np.nan
     have = np.isfinite(stack).any(0)

@@ -286,3 +286,12 @@ def test_best_decides_at_an_occlusion_and_cross_checks_between_cameras() -> None
     flagged = (res.confidence == 0) & ~res.unreliable
     assert flagged[edge == 0].mean() < 0.01  # away from the square's vertical edges the cameras agree
     assert not np.isnan(res.disparity).any() and not np.isnan(res.confidence).any()
+
+
+def test_best_names_the_preset_to_use_when_no_camera_shares_a_row_or_column() -> None:
+    g0 = plane_grid(6.0, rows=2, cols=2)
+    g = grid_from_arrays({"r0c0": g0.images["r0c0"], "r1c1": g0.images["r1c1"]}, 1000.0, 0.12, 0.12 * 0.65)
+    with pytest.raises(ParameterError, match=r"no other camera on its row or column.*--preset balanced"):
+        estimate(g, "r0c0", (2.0, 10.0), PRESETS["best"], keyer=None)
+    r = estimate(g, "r0c0", (2.0, 10.0), PRESETS["balanced"], keyer=None)  # the plane sweep takes any layout
+    assert np.median(np.abs(r.disparity[20:-20, 20:-20] - 6.0)) < 0.5
