@@ -74,13 +74,18 @@ def measure_write_speed(folder: Path, nbytes: int = TEST_BYTES) -> float:
 
 
 def check_destinations(
-    folders: dict[Path, list[str]], bytes_per_second_per_camera: float, duration_s: float | None
+    folders: dict[Path, list[str]],
+    bytes_per_second_per_camera: float,
+    duration_s: float | None,
+    speeds: dict[Path, float] | None = None,
 ) -> PreflightReport:
-    """Speed and space per destination for the cameras that write to it."""
+    """Speed and space per destination for the cameras that write to it. ``speeds``: write speeds measured
+    earlier (a destination measured while cameras stream in this process would be measured slow: the test
+    writes wait for the interpreter between blocks); a destination not in it is measured now."""
     report = PreflightReport()
     for folder, cams in folders.items():
         try:
-            speed = measure_write_speed(folder)
+            speed = speeds[folder] if speeds and folder in speeds else measure_write_speed(folder)
             free = shutil.disk_usage(folder).free
         except OSError as exc:
             report.problems.append(f"{folder}: cannot write: {exc.strerror}")

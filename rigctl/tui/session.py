@@ -5,6 +5,7 @@ snapshots; it never touches devices, and nothing here waits on the UI."""
 from __future__ import annotations
 
 import collections
+import contextlib
 import logging
 import shutil
 import threading
@@ -18,7 +19,7 @@ import numpy as np
 from rigctl.camera_control import SettingResult, check_settings
 from rigctl.errors import RigctlError
 from rigctl.plan_report import plan_rig
-from rigctl.preflight import LOW_TIME_S, PreflightError, check_destinations
+from rigctl.preflight import LOW_TIME_S, PreflightError, check_destinations, measure_write_speed
 from rigctl.recorder import Recorder, TakePlan
 from rigctl.registry import DeviceSet, open_cameras, open_control, open_tally
 from rigctl.rig import Rig
@@ -103,6 +104,7 @@ class Session:
         self.tally_state = TallyState()
         self._take_lock = threading.Lock()  # start, stop and close one at a time (stop's worker meets quit)
         self.closed = False
+        self._speeds: dict[Path, float] = {}  # destination write speed, measured before the cameras stream
         self._skew: collections.deque[float] = collections.deque(maxlen=250)
         self._bytes: dict[str, tuple[float, int]] = {}
         self._disk_t = 0.0
@@ -123,9 +125,14 @@ class Session:
         return f"{self.scene}-{self.shot}-T{self.take_number:02d}"
 
     def arm(self) -> None:
-        """Open the cameras and keep frames flowing (discarded) so tiles are live before anyone records."""
+        """Open the cameras and keep frames flowing (discarded) so tiles are live before anyone records. The
+        destination's write speed is measured once, before the first cameras stream: measured later, the
+        test competes with the capture threads for the interpreter and reads slow (a false refusal)."""
         self.busy = "arming"
         try:
+            if self.out not in self._speeds:
+                with contextlib.suppress(OSError):  # preflight measures again and names the problem
+                    self._speeds[self.out] = measure_write_speed(self.out)
             rec = Recorder(self.rig, self.devices, TakePlan.spread(self.take_name, [self.out], self.names))
             rec.preview_every_ns = 200_000_000
             rec.arm()
@@ -149,7 +156,7 @@ class Session:
                 problems.append(f"{name}: reference not locked ({st.extra.get('reference', 'unlocked')})")
         bps = want.bytes_per_frame * want.fps
         self.out.mkdir(parents=True, exist_ok=True)
-        report = check_destinations({self.out: self.names}, bps, None)
+        report = check_destinations({self.out: self.names}, bps, None, self._speeds)
         problems += report.problems
         if (self.out / self.take_name).exists():
             problems.append(f"{self.out / self.take_name}: exists; takes are never overwritten")

@@ -380,3 +380,24 @@ def test_quit_while_a_take_is_stopping_finishes_it_once(fast_out: Path) -> None:
     assert session.recorder is None and not session.recording
     take = TakeReader(fast_out / "S01-01-T01")
     assert take.status in ("ended", "complete") and len(take.complete_sets()) >= 15
+
+
+def test_the_disk_is_measured_before_the_cameras_stream_not_at_every_take(
+    fast_out: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Measured while nine capture threads stream, the test writes wait for the interpreter between blocks
+    and the disk reads slow enough to refuse the take: the session measures once, before the first arming."""
+    import rigctl.preflight
+
+    session = Session(RIG, fast_out, SIM)
+    try:
+        session.arm()
+        assert session._speeds[fast_out] > 0
+
+        def no_measuring(folder: Path, nbytes: int = 0) -> float:
+            raise AssertionError(f"{folder} measured again while the cameras stream")
+
+        monkeypatch.setattr(rigctl.preflight, "measure_write_speed", no_measuring)
+        assert session.preflight() == []
+    finally:
+        session.close()
