@@ -13,8 +13,9 @@ from collections.abc import Callable
 from rigctl.drivers.protocols import bmd_control as bmd
 from rigctl.drivers.sdi_bridge import SdiBridge
 
-from rigctl.camera_control import CONFIRMED, FAILED, MISMATCH, REFERENCE_SOURCES, UNCONFIRMED, SettingResult
+from rigctl.camera_control import REFERENCE_SOURCES
 from rigctl.errors import DeviceError
+from rigctl.interfaces import SettingResult, SettingState
 
 
 def _to_av(f_number: float) -> float:
@@ -76,11 +77,10 @@ class BmdBridgeControl:
         try:
             self.bridge.send_control([m for _, _, m in planned])
         except DeviceError as exc:
-            return [SettingResult(c, k, values[k], FAILED, detail=str(exc)) for c, k, _ in planned]
+            return [SettingResult(c, k, values[k], SettingState.FAILED, detail=str(exc)) for c, k, _ in planned]
         if not self.can_confirm:
-            return [
-                SettingResult(c, k, values[k], UNCONFIRMED, detail="sent; the bridge is blind") for c, k, _ in planned
-            ]
+            blind = SettingState.UNCONFIRMED
+            return [SettingResult(c, k, values[k], blind, detail="sent; the bridge is blind") for c, k, _ in planned]
         results = []
         for cam, key, msg in planned:
             want = _as_sent(msg)
@@ -94,11 +94,12 @@ class BmdBridgeControl:
                         break
                     time.sleep(0.04)  # the camera reports a changed value a few frames later
             except DeviceError as exc:
-                results.append(SettingResult(cam, key, values[key], UNCONFIRMED, detail=f"readback failed: {exc}"))
+                detail = f"readback failed: {exc}"
+                results.append(SettingResult(cam, key, values[key], SettingState.UNCONFIRMED, detail=detail))
                 continue
             from_p = MAPPING[key][4]
             shown = from_p(reported[0]) if isinstance(reported, tuple) and reported else None
-            state = CONFIRMED if reported == want else MISMATCH
+            state = SettingState.CONFIRMED if reported == want else SettingState.MISMATCH
             results.append(SettingResult(cam, key, values[key], state, shown))
         return results
 

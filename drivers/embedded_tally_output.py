@@ -5,7 +5,7 @@ from __future__ import annotations
 from rigctl.drivers.protocols import bmd_tally
 from rigctl.drivers.sdi_bridge import SdiBridge
 
-from rigctl.tally import TallyState
+from rigctl.interfaces import TallyState
 
 
 class EmbeddedTallyOutput:

@@ -6,7 +6,7 @@ from rigctl.drivers.protocols import tsl31
 from rigctl.drivers.serial_link import open_link
 
 from rigctl.errors import DeviceError
-from rigctl.tally import TallyState
+from rigctl.interfaces import TallyState
 
 
 class Tsl31Output:

@@ -8,7 +8,7 @@ import socket
 from rigctl.drivers.protocols import tsl50
 
 from rigctl.errors import DeviceError, RigFileError
-from rigctl.tally import TallyState
+from rigctl.interfaces import TallyState
 
 
 def parse_udp(url: str) -> tuple[str, int]:

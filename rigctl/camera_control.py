@@ -8,12 +8,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol
 
 from rigctl.errors import ParameterError, RigFileError
+from rigctl.interfaces import SettingResult, SettingState
 from rigctl.rig import Rig
 
-CONFIRMED, UNCONFIRMED, MISMATCH, FAILED = "confirmed", "unconfirmed", "MISMATCH", "FAILED"
 REFERENCE_SOURCES = ("internal", "program", "external")
 
 
@@ -67,28 +66,6 @@ def check_settings(values: dict[str, float | str]) -> dict[str, float | str]:
     return out
 
 
-@dataclass(frozen=True)
-class SettingResult:
-    camera: str
-    setting: str
-    requested: float | str
-    state: str
-    reported: float | str | None = None
-    detail: str = ""
-
-
-class ControlPath(Protocol):
-    """How settings reach the cameras (an SDI bridge, a camera's own network API, ...)."""
-
-    description: str
-    can_confirm: bool
-
-    def apply(self, values: dict[str, float | str], cameras: list[str]) -> list[SettingResult]:
-        """Send ``values`` to ``cameras`` and report each one's state."""
-
-    def close(self) -> None: ...
-
-
 def _show(value: float | str | None) -> str:
     if value is None:
         return "-"
@@ -112,9 +89,9 @@ def format_results(results: list[SettingResult], locks: dict[str, str] | None = 
                 row.append("")
                 continue
             cell = f"{_show(r.requested)} {r.state}"
-            if r.state == MISMATCH:
+            if r.state is SettingState.MISMATCH:
                 cell += f" (camera reports {_show(r.reported)})"
-            elif r.state == FAILED and r.detail:
+            elif r.state is SettingState.FAILED and r.detail:
                 cell += f" ({r.detail})"
             row.append(cell)
         if locks:
@@ -126,7 +103,7 @@ def format_results(results: list[SettingResult], locks: dict[str, str] | None = 
 
 def worst(results: list[SettingResult]) -> int:
     """Exit status: 0 when everything is confirmed or sent to a path that cannot confirm, 1 otherwise."""
-    return 1 if any(r.state in (MISMATCH, FAILED) for r in results) else 0
+    return 1 if any(r.state.is_problem for r in results) else 0
 
 
 def camera_ids(rig: Rig) -> dict[str, int]:

@@ -1,14 +1,19 @@
-"""What callers need from devices, as Protocols: drivers and simulators implement them alike.
+"""What callers need from devices, as Protocols, and the values that cross them: drivers and simulators
+implement them alike.
 
-A camera delivers :class:`Frame` objects; the recorder, the TUI and ``rigctl devices`` see only this
-interface, and the rig file's device address alone decides which implementation stands behind it.
+A camera delivers :class:`Frame` objects; a tally output takes a whole :class:`TallyState`; a camera-control
+path applies settings and reports a :class:`SettingResult` with a :class:`SettingState` per camera and
+setting. The recorder, the TUI and the CLI see only these interfaces, and the rig file's device address
+alone decides which implementation stands behind them (:mod:`rigctl.registry`). Every method that talks to
+a device raises :class:`~rigctl.errors.DeviceError` (naming the device) when the device fails; nothing
+else escapes.
 """
 
 from __future__ import annotations
 
-import collections
 import enum
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Protocol, runtime_checkable
 
 
@@ -76,49 +81,101 @@ class CameraStatus:
 
 @runtime_checkable
 class Camera(Protocol):
-    """A capture device. Lifecycle: open -> configure -> start -> read ... -> stop -> close."""
+    """A capture device. Lifecycle: open -> configure -> start -> read ... -> stop -> close.
+
+    :class:`~rigctl.camera_base.CameraBase` implements the lifecycle checks once; drivers subclass it.
+    """
 
     name: str
 
     def open(self) -> None:
-        """Acquire the device; raises :class:`~rigctl.errors.DeviceError` if missing or busy."""
+        """Acquire the device; raises DeviceError if missing or busy."""
 
     def configure(self, fmt: CaptureFormat) -> CaptureFormat:
-        """Ask for ``fmt``; returns what the device will deliver or raises naming what it offers."""
+        """Ask for ``fmt``; returns what the device will deliver, or raises DeviceError naming what it offers."""
 
     def start(self) -> None:
-        """Start streaming."""
+        """Start streaming; raises DeviceError before configure. Sequence numbers restart at 0."""
 
     def read(self, timeout_s: float, into: memoryview | None = None) -> Frame | None:
-        """The next frame, copied into ``into`` when given (no allocation), or None on timeout."""
+        """The next frame, copied into ``into`` when given (no allocation), or None on timeout. Raises
+        DeviceError when not streaming, when ``into`` is too small, or when the device fails."""
 
     def stop(self) -> None:
-        """Stop streaming; frames not yet read are discarded by the device."""
+        """Stop streaming; frames not yet read are discarded by the device. Never raises when not streaming."""
 
     def close(self) -> None:
-        """Release the device."""
+        """Release the device. Never raises when already closed."""
 
     def status(self) -> CameraStatus:
         """Signal, format, measured rate and drops, without blocking capture."""
 
 
-class RateMeter:
-    """Frames per second over the last ``window`` capture timestamps: frames / time spanned. Unlike an average
-    of instantaneous rates seeded by one interval, a burst of queued buffers at stream start cannot skew it
-    for long."""
+@dataclass(frozen=True)
+class TallyState:
+    """Which cameras are on program (live) and on preview: the whole truth, always sent whole."""
 
-    def __init__(self, window: int = 25) -> None:
-        self._stamps: collections.deque[int] = collections.deque(maxlen=window)
+    program: frozenset[str] = field(default_factory=frozenset)
+    preview: frozenset[str] = field(default_factory=frozenset)
 
-    def add(self, timestamp_ns: int) -> None:
-        if not self._stamps or timestamp_ns > self._stamps[-1]:
-            self._stamps.append(timestamp_ns)
+    @classmethod
+    def recording(cls, cameras: list[str]) -> TallyState:
+        """A recording take puts every camera on program."""
+        return cls(program=frozenset(cameras))
 
-    def reset(self) -> None:
-        self._stamps.clear()
+
+class TallyOutput(Protocol):
+    """Where tally goes: a TSL UMD line, embedded tally through the SDI bridge, ..."""
+
+    def send(self, state: TallyState) -> None:
+        """Send the complete state; raises DeviceError when the line fails (the service reopens it)."""
+
+    def close(self) -> None:
+        """Release the line. Never raises."""
+
+
+class SettingState(enum.StrEnum):
+    """How far a camera setting is known to have been applied. Nothing is shown as applied on faith.
+    A string enum, so reports and JSON carry the plain words."""
+
+    CONFIRMED = "confirmed"  # the camera's own report matches
+    UNCONFIRMED = "unconfirmed"  # sent, but the path cannot read the value back
+    MISMATCH = "MISMATCH"  # the camera reports something else
+    FAILED = "FAILED"  # the command did not get through
 
     @property
-    def fps(self) -> float:
-        if len(self._stamps) < 2:
-            return 0.0
-        return (len(self._stamps) - 1) * 1e9 / (self._stamps[-1] - self._stamps[0])
+    def is_problem(self) -> bool:
+        return self in (SettingState.MISMATCH, SettingState.FAILED)
+
+
+@dataclass(frozen=True)
+class SettingResult:
+    """One camera's outcome for one setting."""
+
+    camera: str
+    setting: str
+    requested: float | str
+    state: SettingState
+    reported: float | str | None = None
+    detail: str = ""
+
+
+class CameraControl(Protocol):
+    """How settings reach the cameras (an SDI bridge, a camera's own network API, ...)."""
+
+    description: str
+    can_confirm: bool
+
+    def apply(self, values: dict[str, float | str], cameras: list[str]) -> list[SettingResult]:
+        """Send ``values`` to ``cameras`` and report each one's state. A failure to reach a camera is a
+        FAILED result, not an exception; raises DeviceError only when the path itself is gone."""
+
+    def close(self) -> None:
+        """Release the path. Never raises."""
+
+
+class TruthProvider(Protocol):
+    """Something that knows what the cameras really saw (only a simulation can)."""
+
+    def write_truth(self, folder: Path, frame_sets: list[tuple[int, dict[str, int]]]) -> None:
+        """Write ``truth/`` for frame sets given as (number, {camera: sequence number})."""

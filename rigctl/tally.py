@@ -12,31 +12,12 @@ import os
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Protocol
 
 from rigctl.errors import RigctlError, RigFileError
+from rigctl.interfaces import TallyOutput, TallyState
 from rigctl.rig import Rig
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class TallyState:
-    program: frozenset[str] = field(default_factory=frozenset)
-    preview: frozenset[str] = field(default_factory=frozenset)
-
-    @classmethod
-    def recording(cls, rig: Rig) -> TallyState:
-        """A recording take puts every camera on program."""
-        return cls(program=frozenset(rig.camera_names))
-
-
-class TallyOutput(Protocol):
-    def send(self, state: TallyState) -> None:
-        """Send the complete state."""
-
-    def close(self) -> None: ...
 
 
 def tsl_addresses(rig: Rig) -> dict[str, int]:

@@ -9,7 +9,6 @@ delivery without advancing the sequence. Every frame carries its ids burnt into 
 from __future__ import annotations
 
 import logging
-import threading
 import time
 from collections.abc import Iterator
 
@@ -18,74 +17,55 @@ import numpy as np
 from rigctl.simulators import burnin
 from rigctl.simulators.array import FrameTiming, SimArray
 
+from rigctl.camera_base import CameraBase, SignalReport
 from rigctl.errors import DeviceError
-from rigctl.interfaces import CameraStatus, CaptureFormat, Frame, FrameFlags, RateMeter
+from rigctl.interfaces import CaptureFormat, Frame, FrameFlags
 
 log = logging.getLogger(__name__)
 
 
-class SimCamera:
+class SimCamera(CameraBase):
     """One ``sim://rXcY`` camera of a :class:`SimArray`."""
 
     def __init__(self, name: str, array: SimArray, buffers: int = 8, latency_us: float = 800.0) -> None:
-        self.name = name
+        super().__init__(name, f"sim://{name}")
         self.array = array
         self.buffers = buffers
         self.latency_ns = int(latency_us * 1e3)
-        self._open = False
-        self._streaming = False
         self._timings: Iterator[FrameTiming] | None = None
         self._pending: FrameTiming | None = None
-        self._lock = threading.Lock()
-        self._source_drops = 0
-        self._frames = 0
-        self._rate = RateMeter()
         self.delivered: dict[int, int] = {}  # sequence -> scene frame, for the ground truth
 
     # lifecycle -------------------------------------------------------------------------------------
-    def open(self) -> None:
-        if self._open:
-            raise DeviceError(f"sim://{self.name}: device is busy (already open)")
+    def _do_open(self) -> None:
         self.array.claim(self.name)
-        self._open = True
 
-    def configure(self, fmt: CaptureFormat) -> CaptureFormat:
+    def _do_configure(self, fmt: CaptureFormat) -> CaptureFormat:
         have = self.array.format
         if (fmt.width, fmt.height, fmt.pixel_format) != (have.width, have.height, have.pixel_format):
-            raise DeviceError(f"sim://{self.name}: format {fmt.describe()} not offered (offered: {have.describe()})")
+            raise DeviceError(f"{self.address}: format {fmt.describe()} not offered (offered: {have.describe()})")
         if abs(fmt.fps - have.fps) > 1e-6:
-            raise DeviceError(f"sim://{self.name}: {fmt.fps:g} fps not offered (offered: {have.fps:g} fps)")
+            raise DeviceError(f"{self.address}: {fmt.fps:g} fps not offered (offered: {have.fps:g} fps)")
         return have
 
-    def start(self) -> None:
-        if not self._open:
-            raise DeviceError(f"sim://{self.name}: start before open")
+    def _do_start(self) -> None:
         self.array.prime()
         t0 = self.array.start_stream()
         now = time.monotonic_ns()
         first_grid = max(0, -(-(now - t0) // self.array.period_ns))
         self._timings = self.array.timing(self.name, first_grid=first_grid)
-        self._rate.reset()
         self._pending = None
-        self._source_drops = 0
-        self._frames = 0
-        self._streaming = True
 
-    def stop(self) -> None:
-        self._streaming = False
+    def _do_stop(self) -> None:
         self._timings = None
         self._pending = None
 
-    def close(self) -> None:
-        self.stop()
-        if self._open:
-            self.array.release(self.name)
-        self._open = False
+    def _do_close(self) -> None:
+        self.array.release(self.name)
 
     # frames ----------------------------------------------------------------------------------------
-    def read(self, timeout_s: float, into: memoryview | None = None) -> Frame | None:
-        if not self._streaming or self._timings is None:
-            raise DeviceError(f"sim://{self.name}: read while not streaming")
+    def _do_read(self, timeout_s: float, into: memoryview) -> Frame | None:
+        assert self._timings is not None
         deadline = time.monotonic_ns() + int(timeout_s * 1e9)
         t0 = self.array.stream_start_ns
         assert t0 is not None
@@ -95,11 +75,11 @@ class SimCamera:
             due = t0 + timing.capture_ns + self.latency_ns
             now = time.monotonic_ns()
             if not timing.delivered:
-                self._source_drops += 1
+                self._count_source_drops()
                 continue
             if now - due > self.buffers * self.array.period_ns:
                 # the reader fell behind: every driver buffer was full, the device dropped this frame
-                self._source_drops += 1
+                self._count_source_drops()
                 continue
             if due > deadline:
                 self._pending = timing
@@ -110,17 +90,11 @@ class SimCamera:
                 time.sleep((due - now) / 1e9)
             return self._deliver(timing, t0, into)
 
-    def _deliver(self, timing: FrameTiming, t0: int, into: memoryview | None) -> Frame:
+    def _deliver(self, timing: FrameTiming, t0: int, into: memoryview) -> Frame:
         arr = self.array
         state = arr.state_of(timing.scene_frame)
         clean = arr.frames(state)[arr.index[self.name]]
-        nbytes = clean.nbytes
-        if into is None:
-            buf = np.empty_like(clean)
-        else:
-            if len(into) < nbytes:
-                raise DeviceError(f"sim://{self.name}: buffer of {len(into)} bytes for a {nbytes}-byte frame")
-            buf = np.frombuffer(into, dtype=np.uint8, count=nbytes).reshape(clean.shape)
+        buf = np.frombuffer(into, dtype=np.uint8, count=clean.nbytes).reshape(clean.shape)
         gain = arr.gain_for(self.name)
         noise = arr.noise_for(self.name, timing.sequence)
         if gain != 1.0:
@@ -136,27 +110,18 @@ class SimCamera:
         if arr.format.pixel_format in ("UYVY", "YUYV"):
             burnin.burn(buf, arr.format.width, arr.index[self.name], timing.sequence, timing.scene_frame)
         capture = t0 + timing.capture_ns
-        with self._lock:
-            self._rate.add(capture)
-            self._frames += 1
-            self.delivered[timing.sequence] = timing.scene_frame
+        self.delivered[timing.sequence] = timing.scene_frame
         flags = FrameFlags.TIMESTAMP_MONOTONIC | FrameFlags.TIMESTAMP_SOE
         data = buf.reshape(-1).data
         return Frame(self.name, timing.sequence, capture, time.monotonic_ns(), flags, data)
 
-    def status(self) -> CameraStatus:
+    def _signal_report(self) -> SignalReport:
         t0 = self.array.stream_start_ns
         now_rel = time.monotonic_ns() - t0 if t0 is not None else 0
-        present = self.array.signal_present(self.name, now_rel)
         locked, reference = self.array.reference_locked(self.name)
-        with self._lock:
-            return CameraStatus(
-                signal_present=present,
-                format=self.array.format if present else None,
-                measured_fps=self._rate.fps if self._streaming else 0.0,
-                source_drops=self._source_drops,
-                frames=self._frames,
-                reference_locked=locked,
-                detail=self.array.describe(),
-                extra={"reference": reference},
-            )
+        return SignalReport(
+            present=self.array.signal_present(self.name, now_rel),
+            detail=self.array.describe(),
+            reference_locked=locked,
+            extra={"reference": reference},
+        )

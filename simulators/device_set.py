@@ -9,6 +9,7 @@ from rigctl.simulators.array import SimArray
 from rigctl.simulators.camera import SimCamera
 from rigctl.simulators.settings import parse_sim_args
 
+from rigctl.address import Address
 from rigctl.errors import DeviceError
 from rigctl.interfaces import Camera
 from rigctl.rig import Rig
@@ -27,17 +28,15 @@ class SimTruth:
 
 
 def simulated_cameras(
-    rig: Rig, sim_args: list[str], names: list[str]
+    rig: Rig, sim_args: list[str], addresses: dict[str, Address]
 ) -> tuple[dict[str, Camera], SimTruth, dict[str, Any], str]:
+    """The ``sim://`` cameras named in ``addresses`` on one simulated array, its truth, settings and summary."""
     settings = parse_sim_args(sim_args)
     array = SimArray(rig, settings)
     cams: dict[str, SimCamera] = {}
-    for cam in rig.cameras:
-        if cam.name not in names or not cam.device.startswith("sim://"):
-            continue
-        target = cam.device.removeprefix("sim://")
-        if target != cam.name:
-            raise DeviceError(f"{rig.source}: camera {cam.name} has device {cam.device}; expected sim://{cam.name}")
-        cams[cam.name] = SimCamera(cam.name, array)
+    for name, address in addresses.items():
+        if address.target != name:
+            raise DeviceError(f"{rig.source}: camera {name} has device {address}; expected sim://{name}")
+        cams[name] = SimCamera(name, array)
     out: dict[str, Camera] = dict(cams)
     return out, SimTruth(array, cams), settings.model_dump(mode="json"), array.describe()

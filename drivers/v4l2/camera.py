@@ -8,36 +8,32 @@ import time
 from rigctl.drivers.v4l2 import structs as S
 from rigctl.drivers.v4l2.device import V4L2Device
 
+from rigctl.camera_base import CameraBase, SignalReport
 from rigctl.errors import DeviceError
-from rigctl.interfaces import CameraStatus, CaptureFormat, Frame, FrameFlags, RateMeter
+from rigctl.interfaces import CaptureFormat, Frame, FrameFlags
 
 log = logging.getLogger(__name__)
 
 SIGNAL_CHECK_S = 1.0  # how often a streaming camera re-reads its input's DV timings
 
 
-class V4L2Camera:
+class V4L2Camera(CameraBase):
     """A rig camera on a V4L2 capture node (SDI or HDMI input, or any V4L2 capture device)."""
 
     def __init__(self, name: str, address: str, buffers: int = 8) -> None:
-        self.name = name
-        self.address = address
+        super().__init__(name, address)
         self.buffers = buffers
         self.device = V4L2Device(address)
-        self.format: CaptureFormat | None = None
-        self._frames = 0
-        self._drops = 0
         self._last_seq: int | None = None
-        self._rate = RateMeter()
         self._next_signal_check = 0.0
         self._format_changed = False
         self._signal: str = ""
         self._repeats = 0
 
-    def open(self) -> None:
+    def _do_open(self) -> None:
         self.device.open()
 
-    def configure(self, fmt: CaptureFormat) -> CaptureFormat:
+    def _do_configure(self, fmt: CaptureFormat) -> CaptureFormat:
         dev = self.device
         if dev.has_dv_timings():
             # SDI/HDMI inputs: the format follows the input's timings, so set those first
@@ -49,26 +45,19 @@ class V4L2Camera:
             offered = ", ".join(f"{r:g}" for r in dev.frame_rates(fourcc, w, h)) or "unknown"
             raise DeviceError(f"{self.address}: {fmt.fps:g} fps not offered (offered: {offered} fps)")
         w, h, fourcc, size = dev.get_format()
-        self.format = CaptureFormat(w, h, fourcc, rate or fmt.fps)
-        if size < self.format.bytes_per_frame:
+        got = CaptureFormat(w, h, fourcc, rate or fmt.fps)
+        if size < got.bytes_per_frame:
             raise DeviceError(f"{self.address}: driver frames of {size} bytes, {fourcc} {w}x{h} needs more")
-        return self.format
+        return got
 
-    def start(self) -> None:
-        if self.format is None:
-            raise DeviceError(f"{self.address}: start before configure")
-        self._frames = self._drops = self._repeats = 0
+    def _do_start(self) -> None:
+        self._repeats = 0
         self._last_seq = None
-        self._rate.reset()
         self.device.start(self.buffers)
 
-    def read(self, timeout_s: float, into: memoryview | None = None) -> Frame | None:
-        if self.format is None or not self.device.streaming:
-            raise DeviceError(f"{self.address}: read while not streaming")
+    def _do_read(self, timeout_s: float, target: memoryview) -> Frame | None:
+        assert self.format is not None
         size = self.format.bytes_per_frame
-        target = into if into is not None else memoryview(bytearray(size))
-        if len(target) < size:
-            raise DeviceError(f"{self.address}: buffer of {len(target)} bytes for a {size}-byte frame")
         got = self.device.dequeue(timeout_s, target)
         if got is None:
             self._check_signal()
@@ -93,10 +82,8 @@ class V4L2Camera:
                 log.warning("%s: driver repeated sequence number %d; renumbering to keep order", self.address, seq)
             seq = self._last_seq + 1
         if self._last_seq is not None and seq > self._last_seq + 1:
-            self._drops += seq - self._last_seq - 1
+            self._count_source_drops(seq - self._last_seq - 1)
         self._last_seq = seq
-        self._rate.add(got.timestamp_ns)
-        self._frames += 1
         self._check_signal()
         if self._format_changed:
             flags |= FrameFlags.FORMAT_CHANGED
@@ -118,13 +105,13 @@ class V4L2Camera:
             self._format_changed = True
         self._signal = now_signal
 
-    def stop(self) -> None:
+    def _do_stop(self) -> None:
         self.device.stop()
 
-    def close(self) -> None:
+    def _do_close(self) -> None:
         self.device.close()
 
-    def status(self) -> CameraStatus:
+    def _signal_report(self) -> SignalReport:
         dev = self.device
         present = True
         detail = ""
@@ -134,13 +121,6 @@ class V4L2Camera:
             detail = "no signal" if t is None else f"input {t.describe()}"
         elif dev.fd >= 0:
             present = not dev.input_status() & (S.IN_ST_NO_SIGNAL | S.IN_ST_NO_POWER)
-        return CameraStatus(
-            signal_present=present,
-            format=self.format if present else None,
-            measured_fps=self._rate.fps if dev.streaming else 0.0,
-            source_drops=self._drops,
-            frames=self._frames,
-            reference_locked=None,  # V4L2 does not say; the camera's reference comes from camera control
-            detail=detail,
-            extra={"sequence_repeats": str(self._repeats)} if self._repeats else {},
-        )
+        # V4L2 does not say whether the camera is locked to reference; camera control does
+        extra = {"sequence_repeats": str(self._repeats)} if self._repeats else {}
+        return SignalReport(present=present, detail=detail, reference_locked=None, extra=extra)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from rigctl.registry import describe_attached
+from rigctl.discovery import describe_attached
 from rigctl.rig import load_rig
 
 

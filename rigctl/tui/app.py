@@ -21,6 +21,7 @@ from textual.screen import ModalScreen, Screen
 from textual.widgets import Footer, Input, Static
 
 from rigctl.errors import RigctlError
+from rigctl.interfaces import SettingState
 from rigctl.preflight import PreflightError
 from rigctl.tui.session import Session, Snapshot, TileStatus
 
@@ -90,9 +91,9 @@ class CameraTile(Static):
             style="bold red" if drops else "green" if recording else "",
         )
         text.append(f"queue {t.queue_fill:4.0%}  {t.mb_s:6.1f} MB/s\n", style="yellow" if t.queue_fill > 0.5 else "")
-        for key, value in t.settings.items():
-            confirmed = value.endswith(" confirmed")
-            text.append(f"{key} {value}\n", style="green" if confirmed else "yellow")
+        for key, result in t.settings.items():
+            confirmed = result.state is SettingState.CONFIRMED
+            text.append(f"{key} {result.requested} {result.state}\n", style="green" if confirmed else "yellow")
         if self.thumbnails:
             now = time.monotonic()
             if self._thumb is None or now - self._thumb_t >= 1.0:

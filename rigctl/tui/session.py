@@ -16,15 +16,16 @@ from typing import Any
 
 import numpy as np
 
-from rigctl.camera_control import SettingResult, check_settings
+from rigctl.camera_control import check_settings
 from rigctl.errors import RigctlError
+from rigctl.interfaces import SettingResult, SettingState, TallyState
 from rigctl.plan_report import plan_rig
 from rigctl.preflight import LOW_TIME_S, PreflightError, check_destinations, measure_write_speed
 from rigctl.recorder import Recorder, TakePlan
 from rigctl.registry import DeviceSet, open_cameras, open_control, open_tally
 from rigctl.rig import Rig
 from rigctl.take.manifest import read_manifest, write_manifest
-from rigctl.tally import TallyService, TallyState
+from rigctl.tally import TallyService
 
 log = logging.getLogger(__name__)
 
@@ -49,7 +50,7 @@ class TileStatus:
     stale: bool = False
     tally: str = ""
     mb_s: float = 0.0
-    settings: dict[str, str] = field(default_factory=dict)
+    settings: dict[str, SettingResult] = field(default_factory=dict)
     thumbnail: Any = None
 
 
@@ -100,7 +101,7 @@ class Session:
         self.busy = ""
         self.message = ""
         self.last_take = ""
-        self.settings: dict[str, dict[str, str]] = {n: {} for n in self.names}
+        self.settings: dict[str, dict[str, SettingResult]] = {n: {} for n in self.names}
         self.tally_state = TallyState()
         self._take_lock = threading.Lock()  # start, stop and close one at a time (stop's worker meets quit)
         self.closed = False
@@ -175,7 +176,7 @@ class Session:
             try:
                 self.recorder.start()
                 self.recording = True
-                self._set_tally(TallyState.recording(self.rig))
+                self._set_tally(TallyState.recording(self.rig.camera_names))
                 self.message = f"recording {self.take_name}"
             finally:
                 self.busy = ""
@@ -240,8 +241,9 @@ class Session:
         finally:
             path.close()
         for r in results:
-            self.settings[r.camera][r.setting] = f"{r.requested} {r.state}"
-        self.message = f"camera settings: {sum(r.state == 'confirmed' for r in results)} of {len(results)} confirmed"
+            self.settings[r.camera][r.setting] = r
+        confirmed = sum(r.state is SettingState.CONFIRMED for r in results)
+        self.message = f"camera settings: {confirmed} of {len(results)} confirmed"
         return results
 
     # ---- what the screen shows --------------------------------------------------------------------------

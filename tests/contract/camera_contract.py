@@ -38,10 +38,35 @@ def _stream(cam: Camera, fmt: CaptureFormat, n: int, timeout_s: float = 2.0) -> 
         cam.close()
 
 
-def check_is_a_camera(make_camera: MakeCamera) -> None:
-    cam, _ = make_camera()
-    assert isinstance(cam, Camera)
+def check_lifecycle_is_enforced(make_camera: MakeCamera) -> None:
+    """Calls out of order are refused with a DeviceError naming the device; stop and close are idempotent."""
+    cam, fmt = make_camera()
     assert isinstance(cam.name, str) and cam.name
+    with pytest.raises(DeviceError, match="not streaming"):
+        cam.read(0.1)
+    with pytest.raises(DeviceError, match="before open"):
+        cam.configure(fmt)
+    cam.open()
+    try:
+        with pytest.raises(DeviceError, match="before configure"):
+            cam.start()
+        with pytest.raises(DeviceError, match="not streaming"):
+            cam.read(0.1)
+        cam.configure(fmt)
+        cam.start()
+        with pytest.raises(DeviceError, match="while streaming"):
+            cam.configure(fmt)
+        assert cam.read(2.0) is not None
+        cam.stop()
+        cam.stop()  # harmless when already stopped
+        with pytest.raises(DeviceError, match="not streaming"):
+            cam.read(0.1)
+        assert cam.status().measured_fps == 0.0, "a stopped camera reports no rate"
+    finally:
+        cam.close()
+    cam.close()  # harmless when already closed
+    cam.open()  # and the device can be opened again
+    cam.close()
 
 
 def check_frames_in_order_with_monotonic_timestamps(make_camera: MakeCamera) -> None:
@@ -141,7 +166,7 @@ def check_restart_begins_a_new_sequence(make_camera: MakeCamera) -> None:
 
 
 CONTRACT = [
-    check_is_a_camera,
+    check_lifecycle_is_enforced,
     check_frames_in_order_with_monotonic_timestamps,
     check_read_into_fills_the_given_buffer,
     check_unsupported_format_names_what_is_offered,

@@ -213,7 +213,7 @@ def test_vanishing_device_ends_its_stream_while_others_record(v4l2_devices, tmp_
 
 
 def test_devices_lists_vivid_and_maps_the_rig(v4l2_devices, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    from rigctl.registry import describe_attached
+    from rigctl.discovery import describe_attached
     from rigctl.rig import load_rig
 
     found = describe_attached(load_rig(_rig(tmp_path, v4l2_devices[:9])))

@@ -16,12 +16,11 @@ from rigctl.drivers.protocols import bmd_control, tsl50
 from rigctl.drivers.sdi_bridge import SdiBridge
 from rigctl.simulators.sdi_bridge import SimSdiBridge
 
-from rigctl.camera_control import CONFIRMED, FAILED, MISMATCH, UNCONFIRMED
 from rigctl.errors import DeviceError
+from rigctl.interfaces import CaptureFormat, SettingState, TallyState
 from rigctl.pixfmt import luma
 from rigctl.registry import open_cameras, open_control
 from rigctl.rig import load_rig
-from rigctl.tally import TallyState
 
 REPO = Path(__file__).resolve().parents[2]
 IDS = {f"r{r}c{c}": 3 * r + c + 1 for r in range(3) for c in range(3)}
@@ -50,8 +49,9 @@ def test_exposure_through_the_bridge_changes_the_images(blind: bool) -> None:
     cams = devices.cameras
     for cam in cams.values():
         cam.open()
+        cam.configure(CaptureFormat(rig.width_px, rig.height_px, rig.model.format.pixel_format, rig.fps))
         cam.start()
-    array = devices.truth.array  # type: ignore[union-attr]
+    array = devices.simulation
     sim = SimSdiBridge(array, IDS, readback=not blind)
     control = BmdBridgeControl(SdiBridge(sim.port), IDS)
     try:
@@ -66,7 +66,7 @@ def test_exposure_through_the_bridge_changes_the_images(blind: bool) -> None:
     for n in cams:
         assert (after[n] - 16) == pytest.approx((before[n] - 16) / 2, rel=0.05), n
     assert {r.camera for r in results} == set(cams)
-    assert {r.state for r in results} == {UNCONFIRMED if blind else CONFIRMED}
+    assert {r.state for r in results} == {SettingState.UNCONFIRMED if blind else SettingState.CONFIRMED}
     assert all(r.reported == (None if blind else 10_000) for r in results)
 
 
@@ -119,7 +119,7 @@ def test_camera_that_ignores_a_setting_is_a_mismatch() -> None:
     finally:
         control.close()
         sim.close()
-    assert [(r.camera, r.state) for r in results] == [("r0c0", CONFIRMED), ("r2c1", MISMATCH)]
+    assert [(r.camera, r.state) for r in results] == [("r0c0", SettingState.CONFIRMED), ("r2c1", SettingState.MISMATCH)]
 
 
 def test_retries_through_garbage_and_slow_replies_apply_once() -> None:
@@ -145,12 +145,12 @@ def test_silent_bridge_and_unplugged_bridge_fail_clearly() -> None:
     try:
         sim.mute = True
         results = control.apply({"exposure_us": 5000}, ["r0c0"])
-        assert results[0].state == FAILED
+        assert results[0].state is SettingState.FAILED
         assert "no reply from the SDI bridge to CONTROL within 0.10 s (3 tries)" in results[0].detail
         sim.mute = False
         sim.unplug()
         results = control.apply({"exposure_us": 5000}, ["r0c0"])
-        assert results[0].state == FAILED and sim.port in results[0].detail
+        assert results[0].state is SettingState.FAILED and sim.port in results[0].detail
     finally:
         control.close()
         sim.close()

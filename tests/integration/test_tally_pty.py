@@ -12,9 +12,9 @@ import yaml
 from rigctl.drivers.protocols import tsl31
 
 from rigctl.errors import DeviceError
+from rigctl.interfaces import TallyState
 from rigctl.registry import open_tally
 from rigctl.rig import load_rig
-from rigctl.tally import TallyState
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from tests_support import rigctl_exe
 
+from rigctl.interfaces import SettingResult, SettingState
 from rigctl.rig import load_rig, rig_from_dict
 from rigctl.take.reader import TakeReader
 from rigctl.tui.app import CameraTile, Confirm, HelpScreen, Notice, PlannerScreen, ShootApp
@@ -229,6 +230,7 @@ def fixed_snapshot() -> Snapshot:
     tiles = []
     for i, n in enumerate(RIG.camera_names):
         c = RIG.camera(n)
+        state = SettingState.CONFIRMED if i % 2 == 0 else SettingState.UNCONFIRMED
         tiles.append(
             TileStatus(
                 n,
@@ -246,7 +248,7 @@ def fixed_snapshot() -> Snapshot:
                 stale=n == "r2c0",
                 tally="PGM",
                 mb_s=25.9,
-                settings={"exposure_us": "10000 confirmed"} if i % 2 == 0 else {"exposure_us": "10000 unconfirmed"},
+                settings={"exposure_us": SettingResult(n, "exposure_us", 10000, state)},
                 thumbnail=np.roll(ramp, 4 * i, axis=1),
             )
         )

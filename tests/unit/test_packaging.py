@@ -23,10 +23,16 @@ def test_every_package_is_listed() -> None:
 
 
 def test_installed_under_the_rigctl_namespace() -> None:
-    import rigctl.drivers
-    import rigctl.rigs
-    import rigctl.simulators
+    """drivers/, simulators/ and rigs/ are importable only under rigctl, with the repository's own contents."""
+    import importlib.resources
+    import importlib.util
 
-    assert Path(rigctl.drivers.__file__).parent.name in ("drivers",)
-    assert rigctl.simulators.__name__ == "rigctl.simulators"
-    assert rigctl.rigs.__name__ == "rigctl.rigs"
+    import rigctl.drivers.v4l2.camera
+    import rigctl.simulators.camera
+
+    for generic in ("drivers", "simulators", "rigs"):
+        assert importlib.util.find_spec(generic) is None, f"a top-level package {generic!r} is importable"
+    assert Path(rigctl.drivers.v4l2.camera.__file__).read_bytes() == (REPO / "drivers/v4l2/camera.py").read_bytes()
+    assert Path(rigctl.simulators.camera.__file__).read_bytes() == (REPO / "simulators/camera.py").read_bytes()
+    shipped = {p.name for p in importlib.resources.files("rigctl.rigs").iterdir() if p.name.endswith(".yaml")}
+    assert shipped == {p.name for p in (REPO / "rigs").glob("*.yaml")}, "rig files missing from the package data"

@@ -1,0 +1,121 @@
+"""What is attached to this machine (V4L2 nodes, serial ports, USB identities), and how it maps onto a rig:
+the ``rigctl devices`` report. Nothing here opens a device for capture or control."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from rigctl.address import camera_address, line_address
+from rigctl.errors import DeviceError
+from rigctl.rig import Rig
+
+
+def usb_backend() -> Any:
+    """The pyusb backend to enumerate with: libusb, or the simulated backend when ``RIGCTL_SIM_USB`` names a
+    YAML list of simulated devices (vendor_id, product_id, serial, manufacturer, product, bus, ports)."""
+    path = os.environ.get("RIGCTL_SIM_USB")
+    if not path:
+        return None
+    from rigctl.simulators.usb_backend import load_sim_usb
+
+    return load_sim_usb(Path(path))
+
+
+def _serial_ports() -> list[dict[str, Any]]:
+    from serial.tools import list_ports
+
+    out = []
+    for port in list_ports.comports():
+        out.append(
+            {
+                "device": port.device,
+                "description": port.description,
+                "usb": f"{port.vid:04x}:{port.pid:04x}" if port.vid is not None and port.pid is not None else None,
+                "serial": port.serial_number,
+                "location": port.location,
+            }
+        )
+    return out
+
+
+def rig_usb_identities(rig: Rig) -> dict[str, Any]:
+    """Every USB identity the rig file names, keyed by what it identifies (camera r0c0, tally, bridge)."""
+    out: dict[str, Any] = {f"camera {c.name}": c.usb for c in rig.model.cameras if c.usb is not None}
+    if rig.model.tally is not None and rig.model.tally.usb is not None:
+        out["tally"] = rig.model.tally.usb
+    if rig.model.camera_control is not None and rig.model.camera_control.usb is not None:
+        out["bridge"] = rig.model.camera_control.usb
+    return out
+
+
+def _line_state(text: str, role: str) -> str:
+    address = line_address(text, role)
+    if address.scheme == "sim":
+        return "simulated"
+    if not address.is_local_path:
+        return "network"
+    return "found" if address.exists() else "MISSING"
+
+
+def describe_attached(rig: Rig) -> dict[str, Any]:
+    """Attached devices of every kind the rig uses, and each of the rig's devices: found, missing or simulated."""
+    addresses = {c.name: camera_address(c.device, c.name) for c in rig.cameras}
+    v4l2: list[dict[str, Any]] = []
+    if any(a.scheme == "v4l2" for a in addresses.values()) or any(p.startswith("video") for p in os.listdir("/dev")):
+        from rigctl.drivers.v4l2.discovery import list_v4l2
+
+        v4l2 = [d.as_json() for d in list_v4l2()]
+    known = {d["path"] for d in v4l2}
+    cams, missing = [], []
+    for cam in rig.cameras:
+        entry: dict[str, Any] = {"name": cam.name, "device": cam.device}
+        if addresses[cam.name].scheme == "sim":
+            entry["state"] = "simulated"
+        else:
+            resolved = os.path.realpath(addresses[cam.name].target)
+            entry["resolved"] = resolved
+            entry["state"] = "found" if resolved in known else "MISSING"
+            if resolved not in known:
+                missing.append(f"{cam.name} ({cam.device})")
+        cams.append(entry)
+    lines = []
+    for role, address in (
+        ("tally", rig.model.tally.port if rig.model.tally else None),
+        ("bridge", rig.model.camera_control.bridge if rig.model.camera_control else None),
+    ):
+        if address is None:
+            continue
+        state = _line_state(address, f"{role} line")
+        lines.append({"role": role, "address": address, "state": state})
+        if state == "MISSING":
+            missing.append(f"{role} line ({address})")
+    usb: list[dict[str, Any]] = []
+    identities: list[dict[str, Any]] = []
+    wanted = rig_usb_identities(rig)
+    try:
+        from rigctl.drivers.usb_identity import list_usb, resolve
+
+        attached = list_usb(usb_backend())
+        usb = [{"describe": d.describe(), **d.__dict__} for d in attached]
+        for role, ident in wanted.items():
+            try:
+                dev = resolve({role: ident}, attached)[role]
+                identities.append({"role": role, "state": "found", "device": dev.describe()})
+            except DeviceError as exc:
+                identities.append({"role": role, "state": "PROBLEM", "error": str(exc)})
+                missing.append(str(exc))
+    except DeviceError as exc:
+        if wanted:
+            missing.append(str(exc))
+        usb = [{"error": str(exc)}]
+    return {
+        "v4l2": v4l2,
+        "serial": _serial_ports(),
+        "usb": usb,
+        "cameras": cams,
+        "lines": lines,
+        "usb_identities": identities,
+        "missing": missing,
+    }
