@@ -1,7 +1,14 @@
 """YAML files that remember where each value stood, so errors can name ``file:line: field``.
 
-Rig files, take manifests and calibration files are all read through :func:`load_yaml_with_lines`; a
-validation error is mapped back to the line of the offending field by :func:`describe_validation_error`.
+Rig files, take manifests, calibration files, board descriptions and ``grid.yaml`` are all read through
+:func:`load_yaml_with_lines`; a validation error is mapped back to the line of the offending field by
+:func:`describe_validation_error`.
+
+The loader has limits, so a file received from someone else cannot exhaust the machine (an "alias bomb"
+of nested anchors expands to billions of nodes from a few hundred bytes): at most :data:`MAX_FILE_BYTES`
+bytes, :data:`MAX_ALIASES` aliases, :data:`MAX_NODES` nodes after aliases are expanded and
+:data:`MAX_DEPTH` levels of nesting. A file over a limit is refused with one line naming the file and
+the limit.
 """
 
 from __future__ import annotations
@@ -17,16 +24,58 @@ from rigctl.errors import RigFileError, SpecVersionError
 
 Loc = tuple[str | int, ...]
 
+MAX_FILE_BYTES = 16 * 1024 * 1024  # a 64x64 array's calibration is about 3 MB
+MAX_ALIASES = 1000
+MAX_NODES = 1_000_000  # after expanding aliases; a 64x64 calibration has about 200,000
+MAX_DEPTH = 64
+
+
+class _Limit(Exception):
+    """A limit of the loader was hit (turned into a RigFileError naming the file)."""
+
 
 class _Loader(yaml.SafeLoader):
-    """SafeLoader without YAML 1.1 surprises we do not want in rig files (yes/no as booleans stay)."""
+    """SafeLoader without YAML 1.1 surprises we do not want in rig files (yes/no as booleans stay), counting
+    aliases and nesting as it composes."""
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self.aliases = 0
+        self.depth = 0
+        self.nodes = 0
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node | None:
+        if self.check_event(yaml.AliasEvent):
+            self.aliases += 1
+            if self.aliases > MAX_ALIASES:
+                raise _Limit(f"more than {MAX_ALIASES} aliases (*name)")
+        self.depth += 1
+        try:
+            if self.depth > MAX_DEPTH:
+                raise _Limit(f"nested deeper than {MAX_DEPTH} levels")
+            return super().compose_node(parent, index)
+        finally:
+            self.depth -= 1
+
+
+def _count(loader: _Loader, depth: int) -> None:
+    loader.nodes += 1
+    if loader.nodes > MAX_NODES:
+        raise _Limit(f"more than {MAX_NODES:,} values once aliases are expanded")
+    if depth > MAX_DEPTH:
+        raise _Limit(f"nested deeper than {MAX_DEPTH} levels once aliases are expanded")
 
 
 def _construct(node: yaml.Node, loader: _Loader, path: Loc, lines: dict[Loc, int]) -> Any:
+    _count(loader, len(path))
     lines[path] = node.start_mark.line + 1
     if isinstance(node, yaml.MappingNode):
         out: dict[Any, Any] = {}
         for key_node, value_node in node.value:
+            if not isinstance(key_node, yaml.ScalarNode):
+                raise RigFileError(
+                    f"{{file}}:{key_node.start_mark.line + 1}: a key must be a plain value, not a list or mapping"
+                )
             key = loader.construct_object(key_node, deep=True)
             if key in out:
                 raise RigFileError(f"{{file}}:{key_node.start_mark.line + 1}: duplicate key {key!r}")
@@ -44,11 +93,16 @@ def load_yaml_with_lines(path: Path, text: str | None = None) -> tuple[Any, dict
     """Parse ``path`` (or ``text`` read from it) and return the data and a map from field path to line."""
     try:
         if text is None:
+            size = path.stat().st_size
+            if size > MAX_FILE_BYTES:
+                raise RigFileError(f"{path}: file of {size:,} bytes is over the limit of {MAX_FILE_BYTES:,} bytes")
             text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise RigFileError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise RigFileError(f"{path}: cannot read: {exc}") from None
+    if len(text) > MAX_FILE_BYTES:
+        raise RigFileError(f"{path}: text of {len(text):,} characters is over the limit of {MAX_FILE_BYTES:,} bytes")
     loader = _Loader(text)
     lines: dict[Loc, int] = {}
     try:
@@ -58,11 +112,22 @@ def load_yaml_with_lines(path: Path, text: str | None = None) -> tuple[Any, dict
         mark = exc.problem_mark
         where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
         raise RigFileError(f"{where}: not valid YAML: {exc.problem}") from None
+    except yaml.YAMLError as exc:  # e.g. a byte that is not allowed in YAML (no mark)
+        raise RigFileError(f"{path}: not valid YAML: {str(exc).splitlines()[0]}") from None
+    except _Limit as exc:
+        raise RigFileError(f"{path}: refused: {exc} (limit of the YAML reader)") from None
+    except RecursionError:
+        raise RigFileError(f"{path}: refused: nested too deeply (limit of the YAML reader)") from None
     except RigFileError as exc:
         raise RigFileError(str(exc).replace("{file}", str(path))) from None
     finally:
         loader.dispose()
     return data, lines
+
+
+def load_yaml(path: Path) -> Any:
+    """The data of a YAML file, read with the same limits (for files whose errors need no line numbers)."""
+    return load_yaml_with_lines(path)[0]
 
 
 def line_of(lines: Mapping[Loc, int], loc: Sequence[str | int]) -> int:

@@ -10,11 +10,11 @@ from typing import Any
 
 import cv2
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 
 from rigctl.errors import ParameterError, RigFileError, TakeError
 from rigctl.rig import CAMERA_NAME
+from rigctl.yamlfile import load_yaml
 
 F32 = NDArray[np.float32]
 
@@ -93,10 +93,7 @@ def grid_from_arrays(
 
 def load_grid_folder(folder: Path) -> Grid:
     path = folder / "grid.yaml"
-    try:
-        spec = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise RigFileError(f"{path}: cannot read grid description: {exc}") from None
+    spec = load_yaml(path)
     if not isinstance(spec, dict):
         raise RigFileError(f"{path}: expected spacing_x, spacing_y, focal_px")
     for key in ("spacing_x", "focal_px"):
