@@ -13,12 +13,15 @@ the limit.
 
 from __future__ import annotations
 
+import difflib
+import types
+import typing
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from rigctl.errors import RigFileError, SpecVersionError
 
@@ -162,6 +165,12 @@ def _phrase(err: Mapping[str, Any]) -> str:
         if isinstance(bound, float) and bound.is_integer():
             bound = int(bound)
         return f"must be {op} {bound}, got {got!r}"
+    if kind in ("int_type", "float_type", "int_from_float") and isinstance(got, bool):
+        return f"must be a number, got {str(got).lower()} (a boolean)"
+    if kind in ("int_type", "int_from_float"):
+        return f"must be a whole number, got {got!r}"
+    if kind == "float_type":
+        return f"must be a number, got {got!r}"
     if kind == "finite_number":
         return f"must be a finite number, got {got!r}"
     message = str(err["msg"])
@@ -170,13 +179,59 @@ def _phrase(err: Mapping[str, Any]) -> str:
     return f"{message}, got {got!r}" if "got" not in message and not isinstance(got, dict | list) else message
 
 
-def describe_validation_error(path: Path, exc: ValidationError, lines: Mapping[Loc, int]) -> str:
-    """One line for the first error of ``exc``: ``path:line: field message`` (and a count of the rest)."""
+def _models_in(annotation: Any) -> list[type[BaseModel]]:
+    """The pydantic models an annotation can hold (through Optional, list, dict and Annotated)."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [annotation]
+    out: list[type[BaseModel]] = []
+    if typing.get_origin(annotation) is not None or isinstance(annotation, types.UnionType):
+        for arg in typing.get_args(annotation):
+            out += _models_in(arg)
+    return out
+
+
+def _known_fields(model: type[BaseModel] | None, parent: Loc) -> list[str]:
+    """The field names of the model found at ``parent`` inside ``model`` (empty when it cannot be told)."""
+    models = [model] if model is not None else []
+    for part in parent:
+        if isinstance(part, int):
+            continue  # an item of a list: the same models
+        models = [
+            m
+            for model_ in models
+            if part in model_.model_fields
+            for m in _models_in(model_.model_fields[part].annotation)
+        ]
+    return sorted({name for m in models for name in m.model_fields})
+
+
+def _unknown_key(first: Mapping[str, Any], errors: list[Any], model: type[BaseModel] | None) -> str:
+    loc = tuple(first["loc"])
+    key, parent = str(loc[-1]), loc[:-1]
+    missing = [str(e["loc"][-1]) for e in errors if e["type"] == "missing" and tuple(e["loc"][:-1]) == parent]
+    close = difflib.get_close_matches(key, missing, n=1) or difflib.get_close_matches(
+        key, _known_fields(model, parent), n=1
+    )
+    hint = f"; did you mean {close[0]!r}?" if close else " (check its spelling and the reference in the README)"
+    return f"is not a known field{hint}"
+
+
+def describe_validation_error(
+    path: Path, exc: ValidationError, lines: Mapping[Loc, int], model: type[BaseModel] | None = None
+) -> str:
+    """One line for the first error of ``exc``: ``path:line: field message`` (and a count of the rest).
+
+    An unknown key comes first, on its own line, with a "did you mean" hint: a mistyped key otherwise shows
+    as the correct key missing, on the section's line. ``model`` (the validated class) widens the hint to
+    every field of the section.
+    """
     errors = exc.errors()
-    first = errors[0]
+    unknown = [e for e in errors if e["type"] == "extra_forbidden"]
+    first = unknown[0] if unknown else errors[0]
     loc = tuple(p for p in first["loc"] if not (isinstance(p, str) and p.startswith("function-")))
     field = dotted(loc)
-    text = f"{path}:{line_of(lines, loc)}: {field + ' ' if field else ''}{_phrase(first)}"
+    phrase = _unknown_key(first, errors, model) if unknown else _phrase(first)
+    text = f"{path}:{line_of(lines, loc)}: {field + ' ' if field else ''}{phrase}"
     if len(errors) > 1:
         text += f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})"
     return text
