@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from rigctl.calibration_model import ArrayCalibration, load_calibration
 from rigctl.errors import CalibrationError, TakeError
 from rigctl.interfaces import Frame, FrameFlags
-from rigctl.pixfmt import from_rgb
+from rigctl.pixfmt import from_rgb, to_rgb
 from rigctl.rectgeom import RectifiedGrid, common_plane
 from rigctl.take.manifest import TAKE_SPEC, write_manifest
 from rigctl.take.reader import TakeReader
@@ -107,10 +107,14 @@ class Rectifier:
         }
 
 
-def _bgr(reader: TakeReader, name: str, i: int) -> NDArray[np.uint8]:
+def _bgr(reader: TakeReader, name: str, i: int) -> NDArray[np.uint8] | None:
+    """Frame ``i`` as BGR; None when it is damaged and the reader skips damaged frames."""
+    data = reader.frame_or_none(name, i)
+    if data is None:
+        return None
     if reader.pixel_format == "BGR3":
-        return reader.frame_bytes(name, i).reshape(reader.height, reader.width, 3)
-    rgb = reader.frame_rgb(name, i)
+        return data.reshape(reader.height, reader.width, 3)
+    rgb = to_rgb(data, reader.pixel_format, reader.width, reader.height)
     return np.ascontiguousarray(from_rgb(rgb, "BGR3").reshape(reader.height, reader.width, 3))
 
 
@@ -119,9 +123,13 @@ def rectify_take(
     calibration: Path,
     out: Path,
     progress: Callable[[int, int], None] | None = None,
+    skip_damaged: bool = False,
 ) -> dict[str, Any]:
-    """Rectify every frame of every camera of ``source`` into the new take ``out``."""
-    reader = TakeReader(source)
+    """Rectify every frame of every camera of ``source`` into the new take ``out``.
+
+    A damaged source frame stops it (naming file and byte; the CLI removes the partial new take), unless
+    ``skip_damaged``: then the frame is left out and listed in the new take's ``damaged_skipped``."""
+    reader = TakeReader(source, skip_damaged=skip_damaged)
     calib = load_calibration(calibration)
     missing = [n for n in reader.names if n not in calib.cameras]
     if missing:
@@ -152,6 +160,8 @@ def rectify_take(
             for i in range(len(idx)):
                 rec = idx[i]
                 img = _bgr(reader, name, i)
+                if img is None:
+                    continue  # damaged and skipped: listed in reader.damaged, never given a fresh checksum
                 t0 = time.perf_counter()
                 res = rect.frame(name, img)
                 t_remap += time.perf_counter() - t0
@@ -191,6 +201,8 @@ def rectify_take(
             **rect.record(),
         },
     )
+    if reader.damaged:
+        manifest["damaged_skipped"] = reader.damaged
     truth = source / "truth"
     if truth.is_dir():
         shutil.copytree(truth, out / "truth")
@@ -201,11 +213,12 @@ def rectify_take(
     elapsed = time.perf_counter() - t_start
     return {
         "take": str(out),
-        "frames": total,
+        "frames": done,
         "image_size": [w, h],
         "focal_px": rect.grid.focal_px,
         "tables_s": t_tables,
         "tables_cached": rect.cache_hit,
         "remap_s": t_remap,
         "total_s": elapsed,
+        "damaged_skipped": reader.damaged,
     }
