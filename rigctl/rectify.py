@@ -107,6 +107,49 @@ class Rectifier:
         }
 
 
+MAX_ZOOM = 2.0  # common focal length over the cameras' mean: beyond, they share under a quarter of their views
+MIN_VALID_SHARE = 0.5  # of the rectified image that a camera's pixels cover
+
+
+def _zoom(calib: ArrayCalibration) -> float:
+    mean_f = float(np.mean([(calib[n].K[0, 0] + calib[n].K[1, 1]) / 2 for n in calib.names]))
+    return common_plane(calib).focal_px / mean_f
+
+
+def check_rectification(rect: Rectifier, path: Path) -> None:
+    """Refuse a rectification whose common focal length or valid area is degenerate, naming the camera that
+    causes it (the one whose absence makes the rest sane)."""
+    calib = rect.calibration
+    mean_f = float(np.mean([(calib[n].K[0, 0] + calib[n].K[1, 1]) / 2 for n in calib.names]))
+    zoom = rect.grid.focal_px / mean_f
+    if not (1 / MAX_ZOOM <= zoom <= MAX_ZOOM) and len(calib.names) > 1:
+
+        def without(name: str) -> float:
+            rest = {n: calib[n] for n in calib.names if n != name}
+            ref = calib.reference if calib.reference in rest else next(iter(rest))
+            try:
+                return abs(np.log(_zoom(ArrayCalibration(calib.rig, rest, ref, calib.meta))))
+            except CalibrationError:
+                return np.inf
+
+        culprit = min(calib.names, key=without)
+        raise CalibrationError(
+            f"{path}: camera {culprit} makes the rectification degenerate: the common focal length would be "
+            f"{rect.grid.focal_px:.6g} px, {zoom:.3g} times the cameras' {mean_f:.6g} px (the cameras share too "
+            f"little of their views); check its calibration (R, K, dist) or leave it out"
+        )
+    w, h = calib[calib.names[0]].image_size
+    for name in calib.names:
+        xy = rect.maps[name][0]
+        inside = (xy[..., 0] >= 0) & (xy[..., 0] < w) & (xy[..., 1] >= 0) & (xy[..., 1] < h)
+        share = float(np.mean(inside))
+        if share < MIN_VALID_SHARE:
+            raise CalibrationError(
+                f"{path}: camera {name} covers only {share:.0%} of the rectified image (at least "
+                f"{MIN_VALID_SHARE:.0%} needed); check its calibration (R, K, dist)"
+            )
+
+
 def _bgr(reader: TakeReader, name: str, i: int) -> NDArray[np.uint8] | None:
     """Frame ``i`` as BGR; None when it is damaged and the reader skips damaged frames."""
     data = reader.frame_or_none(name, i)
@@ -144,6 +187,7 @@ def rectify_take(
     t_tables = time.perf_counter()
     rect = Rectifier(sub)
     t_tables = time.perf_counter() - t_tables
+    check_rectification(rect, calibration)
     if out.exists():
         raise TakeError(f"{out}: already exists; takes are never overwritten")
     out.mkdir(parents=True)
