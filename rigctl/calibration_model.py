@@ -124,6 +124,10 @@ def load_calibration(path: Path) -> ArrayCalibration:
         raise RigFileError(f"{path}:{line_of(lines, ('cameras',))}: cameras must map camera names to models")
     models: dict[str, CameraModel] = {}
     for name, c in cams.items():
+        if not isinstance(name, str) or not CAMERA_NAME.match(name):
+            raise RigFileError(
+                f"{path}:{line_of(lines, ('cameras', name))}: camera name {name!r} is not r{{row}}c{{col}}"
+            )
         if not isinstance(c, dict):
             raise RigFileError(f"{path}:{line_of(lines, ('cameras', name))}: cameras.{name} must be a mapping")
         for key in ("K", "dist", "R", "t", "image_size"):
@@ -153,9 +157,12 @@ def load_calibration(path: Path) -> ArrayCalibration:
             field_name, text = problem
             raise CalibrationError(f"{path}:{line_of(lines, (*loc, field_name))}: cameras.{name}.{field_name} {text}")
     ref = data.get("reference_camera", next(iter(models)))
-    if ref not in models:
+    if not isinstance(ref, str) or ref not in models:
         raise RigFileError(f"{path}:{line_of(lines, ('reference_camera',))}: reference_camera {ref!r} is not a camera")
-    return ArrayCalibration(rig=str(data.get("rig", "")), cameras=models, reference=ref, meta=data.get("meta") or {})
+    meta = data.get("meta") or {}
+    if not isinstance(meta, dict):
+        raise RigFileError(f"{path}:{line_of(lines, ('meta',))}: meta must be a mapping")
+    return ArrayCalibration(rig=str(data.get("rig", "")), cameras=models, reference=ref, meta=meta)
 
 
 # A rectilinear lens seen by the model: from a 170 degree to a 0.6 degree field of view.

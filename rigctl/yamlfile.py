@@ -29,7 +29,7 @@ Loc = tuple[str | int, ...]
 
 MAX_FILE_BYTES = 16 * 1024 * 1024  # a 64x64 array's calibration is about 3 MB
 MAX_ALIASES = 1000
-MAX_NODES = 1_000_000  # after expanding aliases; a 64x64 calibration has about 200,000
+MAX_NODES = 250_000  # after expanding aliases; a 64x64 array's calibration has 164,000
 MAX_DEPTH = 64
 
 
@@ -106,16 +106,21 @@ def load_yaml_with_lines(path: Path, text: str | None = None) -> tuple[Any, dict
         raise RigFileError(f"{path}: cannot read: {exc}") from None
     if len(text) > MAX_FILE_BYTES:
         raise RigFileError(f"{path}: text of {len(text):,} characters is over the limit of {MAX_FILE_BYTES:,} bytes")
-    loader = _Loader(text)
     lines: dict[Loc, int] = {}
+    loader: _Loader | None = None
     try:
+        loader = _Loader(text)  # checks every character: a control character is refused here
         node = loader.get_single_node()
         data = None if node is None else _construct(node, loader, (), lines)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark
         where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
         raise RigFileError(f"{where}: not valid YAML: {exc.problem}") from None
-    except yaml.YAMLError as exc:  # e.g. a byte that is not allowed in YAML (no mark)
+    except yaml.reader.ReaderError as exc:  # a character YAML does not allow
+        raise RigFileError(
+            f"{path}: not valid YAML: character {exc.character!r} at character {exc.position} is not allowed"
+        ) from None
+    except yaml.YAMLError as exc:
         raise RigFileError(f"{path}: not valid YAML: {str(exc).splitlines()[0]}") from None
     except _Limit as exc:
         raise RigFileError(f"{path}: refused: {exc} (limit of the YAML reader)") from None
@@ -124,7 +129,8 @@ def load_yaml_with_lines(path: Path, text: str | None = None) -> tuple[Any, dict
     except RigFileError as exc:
         raise RigFileError(str(exc).replace("{file}", str(path))) from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
     return data, lines
 
 

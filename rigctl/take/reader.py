@@ -11,6 +11,7 @@ inside the take folder.
 
 from __future__ import annotations
 
+import logging
 import os
 import zlib
 from functools import cached_property
@@ -27,6 +28,10 @@ from rigctl.take.index import RECORD_SIZE, IndexProblem, read_index
 from rigctl.take.manifest import Manifest, read_manifest
 from rigctl.take.reserve import remove_stale_reserves
 
+log = logging.getLogger(__name__)
+
+BYTES_PER_PIXEL = {"UYVY": 2, "YUYV": 2, "BGR3": 3, "GREY": 1}
+
 
 class TakeReader:
     """A take folder opened for reading. Frames are addressed by camera and position in its index."""
@@ -40,7 +45,17 @@ class TakeReader:
         fmt = self.manifest.format
         self.width, self.height, self.pixel_format, self.fps = fmt.width, fmt.height, fmt.pixel_format, fmt.fps
         self.bytes_per_frame = fmt.bytes_per_frame
-        self.period_ns = int(self.manifest.timing.get("frame_period_ns") or round(1e9 / fmt.fps))
+        per_pixel = BYTES_PER_PIXEL.get(fmt.pixel_format)
+        if per_pixel is None or fmt.bytes_per_frame != fmt.width * fmt.height * per_pixel:
+            raise TakeError(
+                f"{self.folder / 'take.yaml'}: format {fmt.width}x{fmt.height} {fmt.pixel_format!r} with "
+                f"bytes_per_frame {fmt.bytes_per_frame} is not a format rigctl reads "
+                f"({', '.join(BYTES_PER_PIXEL)}; width x height x bytes per pixel)"
+            )
+        period = self.manifest.timing.get("frame_period_ns")
+        if not (isinstance(period, int) and not isinstance(period, bool) and period > 0):
+            period = round(1e9 / fmt.fps)
+        self.period_ns = int(period)
         self.index: dict[str, NDArray[np.void]] = {}
         self.problems: dict[str, list[IndexProblem]] = {}
         for name in self.names:
@@ -119,6 +134,11 @@ class TakeReader:
             data = os.pread(fd, size, offset)
         finally:
             os.close(fd)
+        if size != self.bytes_per_frame:
+            raise DamagedDataError(
+                f"{self.index_path(name)}: byte {i * RECORD_SIZE}: frame of {size} bytes, the format needs "
+                f"{self.bytes_per_frame}"
+            )
         if len(data) != size:
             raise DamagedDataError(f"{path}: byte {offset}: frame of {size} bytes is cut short ({len(data)} read)")
         if verify and rec["crc"] and zlib.crc32(data) != int(rec["crc"]):
@@ -155,8 +175,28 @@ class TakeReader:
         flags = [self.index[n]["flags"] for n in self.names if len(self.index[n])]
         use_tc = bool(flags) and all(np.all(f & FrameFlags.TIMECODE) for f in flags)
         timecodes = {n: self.index[n]["timecode"].astype(np.int64) for n in self.names} if use_tc else None
+        if timecodes is not None and not all(np.all(np.diff(tc) > 0) for tc in timecodes.values()):
+            # timecodes that repeat or go back (a damaged index, or midnight): capture times still order frames
+            log.warning(
+                "%s: timecodes do not increase in every index; frame sets assembled by capture time", self.folder
+            )
+            timecodes = None
+        if timecodes is not None:
+            self._check_timecode_span(timecodes)
         t0 = self.manifest.timing.get("t0_ns")
         return framesets.assemble(stamps, self.period_ns, t0, timecodes)
+
+    def _check_timecode_span(self, timecodes: dict[str, NDArray[np.int64]]) -> None:
+        """Frame sets by timecode make one slot per timecode from the first to the last: a damaged or hostile
+        index whose timecodes span far more than its frames would ask for billions of them."""
+        used = [tc for tc in timecodes.values() if len(tc)]
+        span = max(int(tc.max()) for tc in used) - min(int(tc.min()) for tc in used) + 1
+        frames = sum(len(tc) for tc in used)
+        if span > 4 * frames + 1000:
+            raise DamagedDataError(
+                f"{self.folder}: the indexes' timecodes span {span} frames for {frames} frames recorded: "
+                "an index is damaged"
+            )
 
     def complete_sets(self) -> list[framesets.FrameSet]:
         return [s for s in self.frame_sets if s.complete(self.names)]
