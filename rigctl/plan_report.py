@@ -303,8 +303,14 @@ def plan_rig(
         depth_here = far - near
 
     c0x, c0y = rig.c0_px, rig.c0_y_px
-    px_x = planner.parallax_px(c0x, dx, near, far)
-    px_y = planner.parallax_px(c0y, dy, near, far)
+    with np.errstate(over="ignore"):
+        px_x = planner.parallax_px(c0x, dx, near, far)
+        px_y = planner.parallax_px(c0y, dy, near, far)
+        d_lo, d_hi = planner.disparity_range_px(c0x, rig.spacing_m[0], near, far)
+    if not (np.all(np.isfinite(px_x)) and np.all(np.isfinite(px_y)) and np.isfinite(d_hi)):
+        raise ParameterError(
+            f"near_m {near!r} is so close that the parallax is beyond double range: no camera can see it"
+        )
     fx, fy = px_x / rig.width_px, px_y / rig.height_px
     within = (fx <= budget * (1 + _TOL)) & (fy <= budget * (1 + _TOL))
     pair_near = planner.near_for_scale(1.0 / kmax, np.asarray(depth_here))
@@ -330,7 +336,6 @@ def plan_rig(
     if not grouped:
         pairs = _every_pair(rig, groups, pairs)
     sx = rig.spacing_m[0]
-    d_lo, d_hi = planner.disparity_range_px(c0x, sx, near, far)
     max_sx = planner.max_spacing_m(c0x, near, far, budget * rig.width_px)
     err_near = planner.depth_error_m(c0x, sx, near, DEPTH_ERROR_AT_PX) * 1e3
     err_far = None if math.isinf(far) else float(planner.depth_error_m(c0x, sx, far, DEPTH_ERROR_AT_PX) * 1e3)

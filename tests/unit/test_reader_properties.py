@@ -1,5 +1,6 @@
 """Every file reader, fed anything: a result or the project's error (RigctlError), never another exception,
-within bounded time (hypothesis' deadline) and memory (tracemalloc's peak).
+within bounded memory (tracemalloc's peak). Time is bounded by the same limits (file size, aliases, values
+after expansion, timecode span), not asserted with a clock: CI shares two cores with other work.
 
 Inputs are both arbitrary bytes and mutations of a valid file (a valid file with one value, line or byte
 changed reaches far deeper into a reader than random bytes do).
@@ -32,7 +33,7 @@ REPO = Path(__file__).resolve().parents[2]
 RIG_TEXT = (REPO / "rigs" / "sim-3x3.yaml").read_text()
 MEMORY_BOUND = 64 << 20  # bytes allocated by one read at most (the inputs are a few kB)
 PROPERTY = settings(
-    max_examples=40, deadline=3000, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
 )
 
 # YAML values a careless or hostile writer puts where a number or a mapping belongs
