@@ -118,7 +118,7 @@ def load_yaml_with_lines(path: Path, text: str | None = None) -> tuple[Any, dict
         raise RigFileError(f"{where}: not valid YAML: {exc.problem}") from None
     except yaml.reader.ReaderError as exc:  # a character YAML does not allow
         raise RigFileError(
-            f"{path}: not valid YAML: character {exc.character!r} at character {exc.position} is not allowed"
+            f"{path}: not valid YAML: character {_char(exc.character)} at character {exc.position} is not allowed"
         ) from None
     except yaml.YAMLError as exc:
         raise RigFileError(f"{path}: not valid YAML: {str(exc).splitlines()[0]}") from None
@@ -132,6 +132,10 @@ def load_yaml_with_lines(path: Path, text: str | None = None) -> tuple[Any, dict
         if loader is not None:
             loader.dispose()
     return data, lines
+
+
+def _char(c: Any) -> str:
+    return repr(chr(c)) if isinstance(c, int) else repr(c)
 
 
 def load_yaml(path: Path) -> Any:

@@ -599,3 +599,48 @@ def test_killed_take_reserve_is_removed_when_next_read(run_cli, tmp_path: Path) 
         assert remove_stale_reserves([tmp_path]) == [tmp_path / ".reserve"]
     finally:
         os.close(fd)
+
+
+def test_writers_close_only_after_the_flush_thread_ends(tmp_path: Path) -> None:
+    """'flushing r2c2: Bad file descriptor' at the end of a take: the flush thread was still syncing files the
+    ending take had closed. A flush that began before the end must end before any writer closes."""
+    import threading
+
+    from rigctl.recorder import Recorder, TakePlan
+    from rigctl.registry import open_cameras
+    from rigctl.rig import load_rig
+    from rigctl.take.writer import CameraWriter
+
+    trace: list[str] = []
+    syncing = threading.Event()
+    holder: dict[str, Recorder] = {}
+
+    class Traced(CameraWriter):
+        def sync(self) -> None:
+            if threading.current_thread().name != "syncer":  # close() syncs its own files last: not traced
+                super().sync()
+                return
+            trace.append("sync-start")
+            syncing.set()
+            holder["rec"]._finished.wait(30)  # a slow flush: still running when the take ends
+            trace.append("sync-end")
+            super().sync()
+
+        def close(self) -> None:
+            trace.append("close")
+            super().close()
+
+    rig = load_rig("sim-3x3")
+    devices = open_cameras(rig, ["motion=false", "noise=0"], ["r0c0", "r0c1"])
+    plan = TakePlan.spread("t", [tmp_path], sorted(devices.cameras))
+    rec = holder["rec"] = Recorder(rig, devices, plan, writer_factory=Traced)
+    rec.sync_interval_s = 0.01
+    rec.arm()
+    rec.start(200)
+    assert syncing.wait(30)
+    rec.stop()
+    man = rec.finish()
+    assert man["status"] in ("complete", "ended") and "close" in trace
+    first_close = trace.index("close")
+    assert trace[:first_close].count("sync-start") == trace[:first_close].count("sync-end")
+    assert "sync-start" not in trace[first_close:]
