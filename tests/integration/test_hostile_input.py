@@ -644,3 +644,45 @@ def test_writers_close_only_after_the_flush_thread_ends(tmp_path: Path) -> None:
     first_close = trace.index("close")
     assert trace[:first_close].count("sync-start") == trace[:first_close].count("sync-end")
     assert "sync-start" not in trace[first_close:]
+
+
+def test_tally_service_never_dies_silently(tmp_path: Path) -> None:
+    """The service on a port with an unknown scheme: the error shows in its state and it keeps retrying; on
+    an error that is not the line's (a bug) it stops, and says so."""
+    import threading
+
+    from rigctl.errors import DeviceError
+    from rigctl.registry import open_tally
+    from rigctl.rig import load_rig
+    from rigctl.tally import TallyService, TallyState
+
+    rig = load_rig(_rig_with(tmp_path, tally={"protocol": "tsl-umd-3.1", "port": "foo://bar"}))
+    attempts: list[str] = []
+    retried = threading.Event()
+
+    def opener() -> Any:
+        attempts.append("open")
+        if len(attempts) >= 3:
+            retried.set()
+        return open_tally(rig)
+
+    svc = TallyService(opener, port_path="foo://bar")
+    svc.BACKOFF_S = (0.0,)  # retry at once: the test waits for attempts, not for time
+    svc.start()
+    try:
+        assert retried.wait(30)
+        assert not svc.connected and svc.running and svc.stopped_by == ""
+        assert svc.last_error.startswith("foo://bar: cannot open serial port")
+    finally:
+        svc.stop()
+    with pytest.raises(DeviceError, match="foo://bar"):
+        open_tally(rig)
+
+    def broken() -> Any:
+        raise ValueError("a bug in an output driver")
+
+    svc = TallyService(broken).start()
+    svc._thread.join(30)
+    assert not svc.running and not svc.connected
+    assert svc.last_error == svc.stopped_by == "tally service stopped: ValueError: a bug in an output driver"
+    svc.set(TallyState(program=frozenset({"r0c0"})))  # setting state on a stopped service does not hang
