@@ -40,7 +40,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_info(ns: argparse.Namespace) -> int:
-    summary = TakeReader(ns.take).summary()
+    reader = TakeReader(ns.take, skip_damaged=True)  # a summary: damage is counted, `take check` locates it
+    summary = reader.summary()
+    if reader.damaged:
+        print(
+            f"warning: {len(reader.damaged)} damaged item(s); rigctl take check {ns.take} locates them", file=sys.stderr
+        )
     print(json.dumps(summary, indent=2) if ns.json else format_summary(summary))
     return 0
 
