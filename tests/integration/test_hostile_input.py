@@ -237,6 +237,8 @@ def test_missing_frames_are_damage_not_members_skipped(run_cli, tiny: Path, tmp_
     one_line(res, EXIT_DAMAGED, *expect)
     check = run_cli("take", "check", str(take))
     assert check.returncode == 1 and expect[0] in check.stderr
+    info = run_cli("take", "info", str(take))  # a summary still shows, and says where to look
+    assert info.returncode == 0 and "damaged item(s); rigctl take check" in info.stderr
 
 
 @pytest.mark.parametrize("target", ["/etc/passwd", "../../../../../../etc/passwd", "symlink"])
