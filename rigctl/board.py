@@ -12,6 +12,7 @@ import yaml
 from numpy.typing import NDArray
 
 from rigctl.errors import RigFileError
+from rigctl.yamlfile import load_yaml
 
 DICTIONARIES = {
     "DICT_4X4_250": cv2.aruco.DICT_4X4_250,
@@ -58,10 +59,7 @@ class BoardSpec:
 
     @classmethod
     def load(cls, path: Path) -> BoardSpec:
-        try:
-            data = yaml.safe_load(path.read_text())
-        except (OSError, yaml.YAMLError) as exc:
-            raise RigFileError(f"{path}: cannot read board description: {exc}") from None
+        data = load_yaml(path)
         if not isinstance(data, dict) or data.get("type") != "charuco":
             raise RigFileError(f"{path}: not a board description (type: charuco)")
         fields = {k: data[k] for k in ("squares_x", "squares_y", "square_m", "marker_m", "dictionary") if k in data}

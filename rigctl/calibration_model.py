@@ -18,7 +18,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from rigctl.errors import RigFileError
+from rigctl.errors import CalibrationError, RigFileError
 from rigctl.rig import CAMERA_NAME
 from rigctl.yamlfile import check_spec, line_of, load_yaml_with_lines
 
@@ -124,6 +124,10 @@ def load_calibration(path: Path) -> ArrayCalibration:
         raise RigFileError(f"{path}:{line_of(lines, ('cameras',))}: cameras must map camera names to models")
     models: dict[str, CameraModel] = {}
     for name, c in cams.items():
+        if not isinstance(name, str) or not CAMERA_NAME.match(name):
+            raise RigFileError(
+                f"{path}:{line_of(lines, ('cameras', name))}: camera name {name!r} is not r{{row}}c{{col}}"
+            )
         if not isinstance(c, dict):
             raise RigFileError(f"{path}:{line_of(lines, ('cameras', name))}: cameras.{name} must be a mapping")
         for key in ("K", "dist", "R", "t", "image_size"):
@@ -148,10 +152,77 @@ def load_calibration(path: Path) -> ArrayCalibration:
         )
         if not CAMERA_NAME.match(name):
             raise RigFileError(f"{path}:{line_of(lines, loc)}: camera name {name!r} is not r{{row}}c{{col}}")
+        problem = camera_problem(models[name])
+        if problem:
+            field_name, text = problem
+            raise CalibrationError(f"{path}:{line_of(lines, (*loc, field_name))}: cameras.{name}.{field_name} {text}")
     ref = data.get("reference_camera", next(iter(models)))
-    if ref not in models:
+    if not isinstance(ref, str) or ref not in models:
         raise RigFileError(f"{path}:{line_of(lines, ('reference_camera',))}: reference_camera {ref!r} is not a camera")
-    return ArrayCalibration(rig=str(data.get("rig", "")), cameras=models, reference=ref, meta=data.get("meta") or {})
+    meta = data.get("meta") or {}
+    if not isinstance(meta, dict):
+        raise RigFileError(f"{path}:{line_of(lines, ('meta',))}: meta must be a mapping")
+    return ArrayCalibration(rig=str(data.get("rig", "")), cameras=models, reference=ref, meta=meta)
+
+
+# A rectilinear lens seen by the model: from a 170 degree to a 0.6 degree field of view.
+FOCAL_RANGE_WIDTHS = (0.05, 100.0)
+RADIAL_SCALE_RANGE = (0.25, 4.0)  # distorted over undistorted radius anywhere in the image
+DIST_LENGTHS = (4, 5, 8, 12, 14)
+
+
+def radial_scale(dist: F64, r: F64) -> F64:
+    """OpenCV's radial factor (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6) at radii ``r``."""
+    k = np.zeros(8)
+    k[: min(len(dist), 8)] = dist[:8]
+    r2 = r * r
+    num = 1 + r2 * (k[0] + r2 * (k[1] + r2 * k[4]))
+    den = 1 + r2 * (k[5] + r2 * (k[6] + r2 * k[7]))
+    with np.errstate(all="ignore"):
+        return np.asarray(num / den, dtype=np.float64)
+
+
+def camera_problem(cam: CameraModel) -> tuple[str, str] | None:
+    """What makes no sense in a camera model, as (field, phrase), or None. Checked: focal lengths positive
+    and plausible for the image size, principal point inside the image, the distortion's radius growing
+    monotonically and within bounds over the image diagonal."""
+    w, h = cam.image_size
+    K = cam.K
+    fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
+    if not np.allclose(K[2], [0, 0, 1]) or K[1, 0] != 0:
+        return "K", f"must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]], got last rows {K[1:].tolist()}"
+    lo, hi = FOCAL_RANGE_WIDTHS
+    for label, f in (("fx", fx), ("fy", fy)):
+        if not lo * w <= f <= hi * w:
+            return "K", (
+                f"focal length {label} = {f:g} px is not plausible for an image {w} px wide "
+                f"(expected {lo * w:g} to {hi * w:g} px)"
+            )
+    if not (0.5 <= fx / fy <= 2.0):
+        return "K", f"fx / fy = {fx / fy:.3g}: pixels this far from square are a mistake"
+    if not (0 <= cx <= w and 0 <= cy <= h):
+        return "K", f"principal point ({cx:g}, {cy:g}) lies outside the {w}x{h} image"
+    if len(cam.dist) not in DIST_LENGTHS:
+        return "dist", f"must hold 4, 5, 8, 12 or 14 coefficients (OpenCV order), got {len(cam.dist)}"
+    corners = np.array([[0, 0], [w, 0], [0, h], [w, h]], dtype=np.float64)
+    r_max = float(np.max(np.hypot((corners[:, 0] - cx) / fx, (corners[:, 1] - cy) / fy)))
+    r = np.linspace(0.0, r_max, 256)
+    scale = radial_scale(cam.dist, r)
+    radius = r * scale
+    if not np.all(np.isfinite(scale)) or np.any(np.diff(radius) <= 0):
+        bad = int(np.argmax(~np.isfinite(scale[1:]) | (np.diff(radius) <= 0)))
+        return "dist", (
+            f"{np.round(cam.dist, 6).tolist()} folds the image back on itself at {r[bad + 1] / r_max:.0%} of the "
+            "image diagonal (the distorted radius must grow monotonically over the image)"
+        )
+    lo, hi = RADIAL_SCALE_RANGE
+    if not np.all((scale >= lo) & (scale <= hi)):
+        worst = float(scale[np.argmax(np.abs(np.log(scale)))])
+        return "dist", (
+            f"{np.round(cam.dist, 6).tolist()} scales the image radius by {worst:.3g} within the image "
+            f"(a lens this model describes stays within {lo:g} to {hi:g})"
+        )
+    return None
 
 
 def rotation_angle_deg(R: NDArray[np.floating]) -> float:

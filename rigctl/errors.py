@@ -3,15 +3,37 @@
 Every error a user can cause derives from :class:`RigctlError`. The CLI prints ``str(error)`` as one line
 on stderr and exits with :attr:`RigctlError.exit_code`; nothing else reaches the user unless ``--debug``.
 Each message names the file, field, device or byte offset concerned and, where it can, what to do.
+
+Exit codes, one per class of error, so a script can tell a missing device from a bad file:
+
+====  ==========================================================================================
+0     success
+1     a check failed (``take check`` found problems, ``control`` a setting not confirmed, ...)
+2     usage: a bad option or parameter value (:class:`ParameterError`, argparse)
+3     bad input file: rig file, take, calibration, grid (:class:`RigFileError`, :class:`TakeError`,
+      :class:`CalibrationError`)
+4     device: missing, busy, failing, or speaking garbage (:class:`DeviceError`, :class:`ProtocolError`)
+5     data damaged: a frame fails its checksum or is missing (:class:`DamagedDataError`); also the exit
+      status of a run that completed with ``--skip-damaged`` and left damaged frames out
+130   interrupted (Ctrl-C)
+====  ==========================================================================================
 """
 
 from __future__ import annotations
 
+EXIT_OK = 0
+EXIT_CHECK_FAILED = 1
+EXIT_USAGE = 2
+EXIT_BAD_INPUT = 3
+EXIT_DEVICE = 4
+EXIT_DAMAGED = 5
+EXIT_INTERRUPTED = 130
+
 
 class RigctlError(Exception):
-    """Base of every error a user can cause or act on. Exit code 2 at the CLI."""
+    """Base of every error a user can cause or act on. Exit code 2 (usage) at the CLI unless a subclass says."""
 
-    exit_code = 2
+    exit_code = EXIT_USAGE
 
 
 class RigFileError(RigctlError):
@@ -20,6 +42,8 @@ class RigFileError(RigctlError):
     The message starts with ``path:line:`` and names the field, e.g.
     ``rigs/x.yaml:12: grid.spacing_x_m must be > 0, got -0.12``.
     """
+
+    exit_code = EXIT_BAD_INPUT
 
 
 class SpecVersionError(RigFileError):
@@ -37,14 +61,32 @@ class ParameterError(RigctlError, ValueError):
 class DeviceError(RigctlError):
     """A device named in a rig file is missing, busy, or does not do what the rig asks of it."""
 
+    exit_code = EXIT_DEVICE
+
 
 class TakeError(RigctlError):
     """A take on disk is missing, unreadable, or inconsistent; the message names file and byte offset."""
+
+    exit_code = EXIT_BAD_INPUT
+
+
+class DamagedDataError(TakeError):
+    """A frame a take claims fails its checksum, is cut short or missing: never passed on silently.
+
+    The message names the file and byte offset; ``--skip-damaged`` leaves such frames out instead.
+    """
+
+    exit_code = EXIT_DAMAGED
 
 
 class ProtocolError(RigctlError):
     """Bytes on a wire do not form a valid message of the protocol being decoded."""
 
+    exit_code = EXIT_DEVICE
+
 
 class CalibrationError(RigctlError):
-    """Calibration input cannot constrain a calibration; the message says which camera and what to shoot."""
+    """Calibration input cannot constrain a calibration, or a calibration makes no sense; the message says
+    which camera and what to do."""
+
+    exit_code = EXIT_BAD_INPUT

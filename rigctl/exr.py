@@ -8,6 +8,8 @@ import numpy as np
 import OpenEXR
 from numpy.typing import NDArray
 
+from rigctl.errors import TakeError
+
 
 def write_exr(path: Path, channels: dict[str, NDArray[np.floating]], attributes: dict[str, str] | None = None) -> None:
     """Write a scanline EXR (ZIP) with float32 channels; ``RGB`` may be one H x W x 3 array."""
@@ -20,5 +22,9 @@ def write_exr(path: Path, channels: dict[str, NDArray[np.floating]], attributes:
 
 
 def read_exr(path: Path) -> tuple[dict[str, NDArray[np.float32]], dict[str, object]]:
-    f = OpenEXR.File(str(path))
-    return {k: np.asarray(v.pixels, dtype=np.float32) for k, v in f.channels().items()}, dict(f.header())
+    """Channels and header of an EXR; a file OpenEXR cannot read is a :class:`TakeError` naming it."""
+    try:
+        f = OpenEXR.File(str(path))
+        return {k: np.asarray(v.pixels, dtype=np.float32) for k, v in f.channels().items()}, dict(f.header())
+    except (OSError, RuntimeError, ValueError, TypeError) as exc:  # OpenEXR's errors on a damaged file
+        raise TakeError(f"{path}: not a readable EXR file: {exc}") from None

@@ -3,12 +3,18 @@
 The arithmetic lives in :mod:`rigctl.planner`; this module decides which distances to use (solve the
 near distance from a subject depth, or check given near/far), evaluates every pair of the rig in one
 vectorised call, and formats the result.
+
+Pairs with the same row and column offset see the same parallax, so the arithmetic is done once per offset
+(a 64x64 grid has 8.4 million pairs but 8,127 offsets). Every pair is listed while there are at most
+:data:`LIST_PAIRS_UP_TO`; beyond that the plan lists one pair per offset with ``same_offset_pairs``.
+JSON holds no infinity or NaN at any finite input: a value beyond double range is ``null`` and its key
+is listed under ``not_representable``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from itertools import combinations
 from typing import Any
 
@@ -22,6 +28,7 @@ DEFAULT_SUBJECT_DEPTH_M = 1.0
 DEFAULT_BUDGET = 0.04
 DEPTH_ERROR_AT_PX = 0.25  # disparity error used for the depth-error readout (a good sub-pixel matcher)
 _TOL = 1e-9  # relative slack so a solved near distance is counted within budget
+LIST_PAIRS_UP_TO = 10_000  # a 14x14 grid has 9,591 pairs, 15x15 has 12,600
 
 
 @dataclass(frozen=True)
@@ -39,9 +46,10 @@ class PairPlan:
     fraction_of_height: float
     within_budget: bool
     min_near_m: float
+    same_offset_pairs: int = 1  # pairs of the rig this entry stands for (1 unless the plan is grouped)
 
-    def as_json(self) -> dict[str, Any]:
-        return {
+    def as_json(self, grouped: bool = False) -> dict[str, Any]:
+        out = {
             "name": self.name,
             "baseline_m": self.baseline_m,
             "dx_m": self.dx_m,
@@ -54,6 +62,9 @@ class PairPlan:
             "within_budget": self.within_budget,
             "min_near_m": self.min_near_m,
         }
+        if grouped:
+            out["same_offset_pairs"] = self.same_offset_pairs
+        return out
 
 
 @dataclass(frozen=True)
@@ -81,10 +92,16 @@ class Plan:
     fov_deg: tuple[float, float]
     view_at_near_m: tuple[float, float]
     subject_fits: dict[str, bool] = field(default_factory=dict)
+    pair_count: int = 0
+    pairs_grouped: bool = False
 
     @property
     def over_budget(self) -> list[PairPlan]:
         return [p for p in self.pairs if not p.within_budget]
+
+    @property
+    def over_budget_count(self) -> int:
+        return sum(p.same_offset_pairs for p in self.over_budget)
 
     def as_json(self) -> dict[str, Any]:
         far_inf = math.isinf(self.far_m)
@@ -102,7 +119,9 @@ class Plan:
             "reference_pair": self.reference_pair,
             "near_m_all_pairs": self.near_m_all_pairs,
             "all_within_budget": not self.over_budget,
-            "pairs": [p.as_json() for p in self.pairs],
+            "pair_count": self.pair_count,
+            "pairs_grouped": self.pairs_grouped,
+            "pairs": [p.as_json(self.pairs_grouped) for p in self.pairs],
             "disparity_range_px": {"min": self.disparity_min_px, "max": self.disparity_max_px},
             "max_spacing_x_m": None if math.isinf(self.max_spacing_x_m) else self.max_spacing_x_m,
             "depth_error_mm": {
@@ -115,28 +134,86 @@ class Plan:
         }
         if self.subject_fits:
             out["subject_fits"] = self.subject_fits
-        return out
+        lost: list[str] = []
+        clean: dict[str, Any] = _finite_or_none(out, "", lost)
+        if lost:
+            clean["not_representable"] = lost
+        return clean
 
 
-def _pairs(rig: Rig) -> tuple[list[str], np.ndarray, np.ndarray]:
+def _finite_or_none(value: Any, where: str, lost: list[str]) -> Any:
+    """``value`` with every infinite or NaN float replaced by None (their keys collected in ``lost``)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        lost.append(where)
+        return None
+    if isinstance(value, dict):
+        return {k: _finite_or_none(v, f"{where}.{k}" if where else str(k), lost) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite_or_none(v, f"{where}[{i}]", lost) for i, v in enumerate(value)]
+    return value
+
+
+@dataclass(frozen=True)
+class _Offsets:
+    """Camera pairs grouped by offset: ``rows`` (>= 0) and ``cols`` (>= 0) apart, how many, and the first pair
+    of each group in row-major order."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    count: np.ndarray
+    example: list[str]
+
+
+def _offset_groups(rig: Rig) -> _Offsets:
     cams = rig.cameras
-    names, dxs, dys = [], [], []
-    for a, b in combinations(cams, 2):
-        names.append(f"{a.name}-{b.name}")
-        dxs.append(abs(b.x_m - a.x_m))
-        dys.append(abs(b.y_m - a.y_m))
-    return names, np.array(dxs, dtype=np.float64), np.array(dys, dtype=np.float64)
+    n_rows = max(c.row for c in cams) + 1
+    n_cols = max(c.col for c in cams) + 1
+    order = np.full((n_rows, n_cols), -1, dtype=np.int64)
+    names = {}
+    for i, cam in enumerate(cams):
+        order[cam.row, cam.col] = i
+        names[i] = cam.name
+    occupied = order >= 0
+    groups: dict[tuple[int, int], list[Any]] = {}  # (rows, |cols|) -> [count, (first a, first b)]
+    for dr in range(n_rows):
+        for dc in range(-(n_cols - 1), n_cols):
+            if dr == 0 and dc <= 0:
+                continue  # pairs (a, b) with a before b in row-major order
+            c0, c1 = max(0, -dc), n_cols - max(0, dc)
+            both = occupied[: n_rows - dr, c0:c1] & occupied[dr:, c0 + dc : c1 + dc]
+            n = int(np.count_nonzero(both))
+            if not n:
+                continue
+            r, c = divmod(int(np.flatnonzero(both)[0]), c1 - c0)
+            first = (int(order[r, c + c0]), int(order[r + dr, c + c0 + dc]))
+            entry = groups.setdefault((dr, abs(dc)), [0, first])
+            entry[0] += n
+            entry[1] = min(entry[1], first)
+    keys = sorted(groups, key=lambda k: groups[k][1])
+    return _Offsets(
+        rows=np.array([k[0] for k in keys], dtype=np.int64),
+        cols=np.array([k[1] for k in keys], dtype=np.int64),
+        count=np.array([groups[k][0] for k in keys], dtype=np.int64),
+        example=[f"{names[groups[k][1][0]]}-{names[groups[k][1][1]]}" for k in keys],
+    )
 
 
-def _reference_index(rig: Rig, names: list[str]) -> int:
+def _reference_index(rig: Rig, groups: _Offsets) -> int:
     """The pair the paper's rule is stated for: adjacent horizontal cameras (else adjacent vertical)."""
-    cams = {c.name: c for c in rig.cameras}
     for want in ((0, 1), (1, 0)):
-        for i, name in enumerate(names):
-            a, b = (cams[n] for n in name.split("-"))
-            if (abs(b.row - a.row), abs(b.col - a.col)) == want:
-                return i
+        hit = np.flatnonzero((groups.rows == want[0]) & (groups.cols == want[1]))
+        if hit.size:
+            return int(hit[0])
     raise ParameterError(f"rig {rig.name} has no camera pair: there is no parallax to plan")
+
+
+def _every_pair(rig: Rig, groups: _Offsets, per_group: list[PairPlan]) -> list[PairPlan]:
+    """Every pair of the rig in ``combinations`` order, each with its group's numbers."""
+    at = {(int(r), int(c)): i for i, (r, c) in enumerate(zip(groups.rows, groups.cols, strict=True))}
+    return [
+        replace(per_group[at[(b.row - a.row, abs(b.col - a.col))]], name=f"{a.name}-{b.name}")
+        for a, b in combinations(rig.cameras, 2)
+    ]
 
 
 def _pair_scale(rig: Rig, dx: np.ndarray, dy: np.ndarray, budget: float) -> np.ndarray:
@@ -179,10 +256,13 @@ def plan_rig(
     if subject_depth_m is not None:
         planner.checked("subject_depth_m", subject_depth_m, allow_inf=True, allow_zero=True)
 
-    names, dx, dy = _pairs(rig)
+    groups = _offset_groups(rig)
+    names = groups.example
     if not names:
         raise ParameterError(f"rig {rig.name} has a single camera: there is no parallax to plan")
-    ref = _reference_index(rig, names)
+    dx = groups.cols * rig.spacing_m[0]
+    dy = groups.rows * rig.spacing_m[1]
+    ref = _reference_index(rig, groups)
     kmax = _pair_scale(rig, dx, dy, budget)
     depth_for_solve = subject_depth_m if subject_depth_m is not None else DEFAULT_SUBJECT_DEPTH_M
 
@@ -223,8 +303,14 @@ def plan_rig(
         depth_here = far - near
 
     c0x, c0y = rig.c0_px, rig.c0_y_px
-    px_x = planner.parallax_px(c0x, dx, near, far)
-    px_y = planner.parallax_px(c0y, dy, near, far)
+    with np.errstate(over="ignore"):
+        px_x = planner.parallax_px(c0x, dx, near, far)
+        px_y = planner.parallax_px(c0y, dy, near, far)
+        d_lo, d_hi = planner.disparity_range_px(c0x, rig.spacing_m[0], near, far)
+    if not (np.all(np.isfinite(px_x)) and np.all(np.isfinite(px_y)) and np.isfinite(d_hi)):
+        raise ParameterError(
+            f"near_m {near!r} is so close that the parallax is beyond double range: no camera can see it"
+        )
     fx, fy = px_x / rig.width_px, px_y / rig.height_px
     within = (fx <= budget * (1 + _TOL)) & (fy <= budget * (1 + _TOL))
     pair_near = planner.near_for_scale(1.0 / kmax, np.asarray(depth_here))
@@ -241,11 +327,15 @@ def plan_rig(
             fraction_of_height=float(math.hypot(px_x[i], px_y[i]) / rig.height_px),
             within_budget=bool(within[i]),
             min_near_m=float(pair_near[i]),
+            same_offset_pairs=int(groups.count[i]),
         )
         for i in range(len(names))
     ]
+    pair_count = int(groups.count.sum())
+    grouped = pair_count > LIST_PAIRS_UP_TO
+    if not grouped:
+        pairs = _every_pair(rig, groups, pairs)
     sx = rig.spacing_m[0]
-    d_lo, d_hi = planner.disparity_range_px(c0x, sx, near, far)
     max_sx = planner.max_spacing_m(c0x, near, far, budget * rig.width_px)
     err_near = planner.depth_error_m(c0x, sx, near, DEPTH_ERROR_AT_PX) * 1e3
     err_far = None if math.isinf(far) else float(planner.depth_error_m(c0x, sx, far, DEPTH_ERROR_AT_PX) * 1e3)
@@ -285,6 +375,8 @@ def plan_rig(
         fov_deg=fov,
         view_at_near_m=(view_w, view_h),
         subject_fits=fits,
+        pair_count=pair_count,
+        pairs_grouped=grouped,
     )
 
 
@@ -298,6 +390,10 @@ def _pair_class(p: PairPlan, rig: Rig) -> str:
     else:
         kind = "diagonal"
     return f"{kind} {i}c {j}r"
+
+
+def _mm(value: float) -> str:
+    return f"{value:.2f} mm" if math.isfinite(value) else "beyond double range"
 
 
 def format_plan(plan: Plan, rig: Rig) -> str:
@@ -321,15 +417,15 @@ def format_plan(plan: Plan, rig: Rig) -> str:
         p = group[0]
         ok = all(q.within_budget for q in group)
         lines.append(
-            f"{label:<16}{len(group):>6}{p.baseline_m * 1e3:>13.1f}{p.parallax_px:>13.1f}"
+            f"{label:<16}{sum(q.same_offset_pairs for q in group):>6}{p.baseline_m * 1e3:>13.1f}{p.parallax_px:>13.1f}"
             f"{p.fraction_of_width * 100:>9.2f}{p.fraction_of_height * 100:>10.2f}{p.min_near_m:>12.3f}  "
             + ("ok" if ok else "OVER")
         )
     lines += [
         "",
         f"disparity search range (horizontal spacing): {plan.disparity_min_px} to {plan.disparity_max_px} px",
-        f"depth error at {DEPTH_ERROR_AT_PX} px disparity error: {plan.depth_error_near_mm:.2f} mm at near"
-        + ("" if plan.depth_error_far_mm is None else f", {plan.depth_error_far_mm:.2f} mm at far"),
+        f"depth error at {DEPTH_ERROR_AT_PX} px disparity error: {_mm(plan.depth_error_near_mm)} at near"
+        + ("" if plan.depth_error_far_mm is None else f", {_mm(plan.depth_error_far_mm)} at far"),
         "max horizontal spacing for this range: "
         + ("unbounded" if math.isinf(plan.max_spacing_x_m) else f"{plan.max_spacing_x_m * 1e3:.1f} mm"),
         f"field of view {plan.fov_deg[0]:.1f} x {plan.fov_deg[1]:.1f} deg; one camera sees "
@@ -340,10 +436,10 @@ def format_plan(plan: Plan, rig: Rig) -> str:
     over = plan.over_budget
     if over:
         lines.append(
-            f"{len(over)} of {len(plan.pairs)} pairs exceed the budget: "
+            f"{plan.over_budget_count} of {plan.pair_count} pairs exceed the budget: "
             + ", ".join(p.name for p in over[:6])
             + (" ..." if len(over) > 6 else "")
         )
     else:
-        lines.append(f"all {len(plan.pairs)} pairs within budget")
+        lines.append(f"all {plan.pair_count} pairs within budget")
     return "\n".join(lines)

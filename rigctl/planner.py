@@ -175,7 +175,8 @@ def depth_error_m(
     b = checked("baseline_m", baseline_m)
     z = checked("distance_m", distance_m)
     dd = checked("disparity_error_px", disparity_error_px, allow_zero=True)
-    return z * z * dd / (b * f)
+    with np.errstate(over="ignore"):  # beyond double range (Z ~ 1e154 m) is inf: reports show it as such
+        return z * (z * dd / (b * f))
 
 
 def field_of_view_deg(sensor_extent_m: ArrayLike, focal_length_m: ArrayLike) -> Array:

@@ -10,7 +10,6 @@ ends at T1; frame sets are assembled by capture time afterwards (see :mod:`rigct
 
 from __future__ import annotations
 
-import contextlib
 import datetime as dt
 import logging
 import os
@@ -33,6 +32,7 @@ from rigctl.rig import Rig
 from rigctl.take import framesets, sidecars
 from rigctl.take.accounting import CameraStats
 from rigctl.take.manifest import TAKE_SPEC, write_manifest
+from rigctl.take.reserve import create_reserve, release_reserve
 from rigctl.take.writer import CameraWriter, DiskFullError
 
 log = logging.getLogger(__name__)
@@ -118,6 +118,8 @@ class Recorder:
         self._writers: dict[str, CameraWriter] = {}
         self._writer_busy: dict[str, Frame | None] = {}
         self._writer_threads: dict[str, threading.Thread] = {}
+        self._syncer: threading.Thread | None = None
+        self._reserves: dict[Path, int] = {}  # destination -> locked .reserve descriptor
         self._lock = threading.Lock()
         self._finished = threading.Event()
         self._finish_lock = threading.Lock()
@@ -219,8 +221,7 @@ class Recorder:
             for name in self.names:
                 self.plan.camera_folders[name].mkdir(parents=True, exist_ok=True)
             for dest in {p.parent for p in self.plan.camera_folders.values()} | {folder}:
-                with open(dest / ".reserve", "wb") as f:
-                    f.write(b"\0" * RESERVE_BYTES)
+                self._reserves[dest] = create_reserve(dest, RESERVE_BYTES)  # locked: see take/reserve.py
         except OSError as exc:
             raise TakeError(f"{folder}: cannot create the take: {exc.strerror}") from None
         for name in self.names:
@@ -426,13 +427,14 @@ class Recorder:
                 f"(sequences {st.not_written[:10]}{' ...' if len(st.not_written) > 10 else ''})"
             )
         self._finished.set()
+        if self._syncer is not None:  # a flush in progress must end before its files are closed
+            self._syncer.join(timeout=max(1.0, deadline - time.monotonic()))
         for name, writer in self._writers.items():
             if name not in stalled:
                 writer.close()
         self.devices_close()
-        for dest in {p.parent for p in self.plan.camera_folders.values()} | {self.plan.folder}:
-            with contextlib.suppress(OSError):
-                (dest / ".reserve").unlink()
+        for dest, fd in self._reserves.items():
+            release_reserve(dest, fd)
         if not self.end_reason:
             self.end_reason = "stopped" if self._stop.is_set() else "frames reached"
         if stalled and self.error is None:

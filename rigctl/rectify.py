@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from rigctl.calibration_model import ArrayCalibration, load_calibration
 from rigctl.errors import CalibrationError, TakeError
 from rigctl.interfaces import Frame, FrameFlags
-from rigctl.pixfmt import from_rgb
+from rigctl.pixfmt import from_rgb, to_rgb
 from rigctl.rectgeom import RectifiedGrid, common_plane
 from rigctl.take.manifest import TAKE_SPEC, write_manifest
 from rigctl.take.reader import TakeReader
@@ -107,10 +107,57 @@ class Rectifier:
         }
 
 
-def _bgr(reader: TakeReader, name: str, i: int) -> NDArray[np.uint8]:
+MAX_ZOOM = 2.0  # common focal length over the cameras' mean: beyond, they share under a quarter of their views
+MIN_VALID_SHARE = 0.5  # of the rectified image that a camera's pixels cover
+
+
+def _zoom(calib: ArrayCalibration) -> float:
+    mean_f = float(np.mean([(calib[n].K[0, 0] + calib[n].K[1, 1]) / 2 for n in calib.names]))
+    return common_plane(calib).focal_px / mean_f
+
+
+def check_rectification(rect: Rectifier, path: Path) -> None:
+    """Refuse a rectification whose common focal length or valid area is degenerate, naming the camera that
+    causes it (the one whose absence makes the rest sane)."""
+    calib = rect.calibration
+    mean_f = float(np.mean([(calib[n].K[0, 0] + calib[n].K[1, 1]) / 2 for n in calib.names]))
+    zoom = rect.grid.focal_px / mean_f
+    if not (1 / MAX_ZOOM <= zoom <= MAX_ZOOM) and len(calib.names) > 1:
+
+        def without(name: str) -> float:
+            rest = {n: calib[n] for n in calib.names if n != name}
+            ref = calib.reference if calib.reference in rest else next(iter(rest))
+            try:
+                return abs(np.log(_zoom(ArrayCalibration(calib.rig, rest, ref, calib.meta))))
+            except CalibrationError:
+                return np.inf
+
+        culprit = min(calib.names, key=without)
+        raise CalibrationError(
+            f"{path}: camera {culprit} makes the rectification degenerate: the common focal length would be "
+            f"{rect.grid.focal_px:.6g} px, {zoom:.3g} times the cameras' {mean_f:.6g} px (the cameras share too "
+            f"little of their views); check its calibration (R, K, dist) or leave it out"
+        )
+    w, h = calib[calib.names[0]].image_size
+    for name in calib.names:
+        xy = rect.maps[name][0]
+        inside = (xy[..., 0] >= 0) & (xy[..., 0] < w) & (xy[..., 1] >= 0) & (xy[..., 1] < h)
+        share = float(np.mean(inside))
+        if share < MIN_VALID_SHARE:
+            raise CalibrationError(
+                f"{path}: camera {name} covers only {share:.0%} of the rectified image (at least "
+                f"{MIN_VALID_SHARE:.0%} needed); check its calibration (R, K, dist)"
+            )
+
+
+def _bgr(reader: TakeReader, name: str, i: int) -> NDArray[np.uint8] | None:
+    """Frame ``i`` as BGR; None when it is damaged and the reader skips damaged frames."""
+    data = reader.frame_or_none(name, i)
+    if data is None:
+        return None
     if reader.pixel_format == "BGR3":
-        return reader.frame_bytes(name, i).reshape(reader.height, reader.width, 3)
-    rgb = reader.frame_rgb(name, i)
+        return data.reshape(reader.height, reader.width, 3)
+    rgb = to_rgb(data, reader.pixel_format, reader.width, reader.height)
     return np.ascontiguousarray(from_rgb(rgb, "BGR3").reshape(reader.height, reader.width, 3))
 
 
@@ -119,9 +166,13 @@ def rectify_take(
     calibration: Path,
     out: Path,
     progress: Callable[[int, int], None] | None = None,
+    skip_damaged: bool = False,
 ) -> dict[str, Any]:
-    """Rectify every frame of every camera of ``source`` into the new take ``out``."""
-    reader = TakeReader(source)
+    """Rectify every frame of every camera of ``source`` into the new take ``out``.
+
+    A damaged source frame stops it (naming file and byte; the CLI removes the partial new take), unless
+    ``skip_damaged``: then the frame is left out and listed in the new take's ``damaged_skipped``."""
+    reader = TakeReader(source, skip_damaged=skip_damaged)
     calib = load_calibration(calibration)
     missing = [n for n in reader.names if n not in calib.cameras]
     if missing:
@@ -136,6 +187,7 @@ def rectify_take(
     t_tables = time.perf_counter()
     rect = Rectifier(sub)
     t_tables = time.perf_counter() - t_tables
+    check_rectification(rect, calibration)
     if out.exists():
         raise TakeError(f"{out}: already exists; takes are never overwritten")
     out.mkdir(parents=True)
@@ -152,6 +204,8 @@ def rectify_take(
             for i in range(len(idx)):
                 rec = idx[i]
                 img = _bgr(reader, name, i)
+                if img is None:
+                    continue  # damaged and skipped: listed in reader.damaged, never given a fresh checksum
                 t0 = time.perf_counter()
                 res = rect.frame(name, img)
                 t_remap += time.perf_counter() - t0
@@ -191,6 +245,8 @@ def rectify_take(
             **rect.record(),
         },
     )
+    if reader.damaged:
+        manifest["damaged_skipped"] = reader.damaged
     truth = source / "truth"
     if truth.is_dir():
         shutil.copytree(truth, out / "truth")
@@ -201,11 +257,12 @@ def rectify_take(
     elapsed = time.perf_counter() - t_start
     return {
         "take": str(out),
-        "frames": total,
+        "frames": done,
         "image_size": [w, h],
         "focal_px": rect.grid.focal_px,
         "tables_s": t_tables,
         "tables_cached": rect.cache_hit,
         "remap_s": t_remap,
         "total_s": elapsed,
+        "damaged_skipped": reader.damaged,
     }

@@ -14,10 +14,10 @@ from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from rigctl.errors import RigFileError
-from rigctl.yamlfile import check_spec, describe_validation_error, load_yaml_with_lines
+from rigctl.yamlfile import check_spec, describe_validation_error, line_of, load_yaml_with_lines
 
 RIG_SPEC = 1
 CAMERA_NAME = re.compile(r"^r(\d+)c(\d+)$")
@@ -28,7 +28,8 @@ PositiveInt = Annotated[int, Field(gt=0)]
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=False)
+    # strict: ``rows: true`` is not 1, ``width_px: "960"`` is not a number (YAML already gives numbers as numbers)
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
 
 class Sensor(_Section):
@@ -130,36 +131,6 @@ class RigModel(_Section):
     camera_control: CameraControl | None = None
     reference: Reference | None = None
     storage: list[Storage] | None = None
-
-    @model_validator(mode="after")
-    def _cameras_fit_grid(self) -> RigModel:
-        seen: set[str] = set()
-        devices: set[str] = set()
-        for i, cam in enumerate(self.cameras):
-            m = CAMERA_NAME.match(cam.name)
-            assert m is not None  # checked by the field validator
-            row, col = int(m.group(1)), int(m.group(2))
-            if row >= self.grid.rows or col >= self.grid.columns:
-                raise ValueError(
-                    f"cameras[{i}].name {cam.name} lies outside the {self.grid.rows}x{self.grid.columns} grid"
-                )
-            if cam.name in seen:
-                raise ValueError(f"cameras[{i}].name {cam.name} appears twice")
-            if cam.device in devices:
-                raise ValueError(f"cameras[{i}].device {cam.device} is used by two cameras")
-            seen.add(cam.name)
-            devices.add(cam.device)
-        for section, names in (
-            ("tally.addresses", (self.tally.addresses or {}) if self.tally else {}),
-            (
-                "camera_control.camera_ids",
-                (self.camera_control.camera_ids or {}) if self.camera_control else {},
-            ),
-        ):
-            for name in names:
-                if name not in seen:
-                    raise ValueError(f"{section} names {name}, which is not a camera of this rig")
-        return self
 
 
 @dataclass(frozen=True)
@@ -314,5 +285,55 @@ def rig_from_dict(data: Any, source: str = "<rig>", lines: dict[Any, int] | None
     try:
         model = RigModel.model_validate(data)
     except ValidationError as exc:
-        raise RigFileError(describe_validation_error(Path(source), exc, lines)) from None
+        raise RigFileError(describe_validation_error(Path(source), exc, lines, RigModel)) from None
+    _check_whole_rig(model, source, lines)
     return Rig(model=model, source=source)
+
+
+def _check_whole_rig(model: RigModel, source: str, lines: dict[Any, int]) -> None:
+    """What no single field can say: cameras inside the grid, once each, the grid no larger than its cameras,
+    and the optional sections naming cameras of this rig. Each error names the offending entry's line."""
+
+    def fail(loc: tuple[Any, ...], text: str) -> None:
+        raise RigFileError(f"{source}:{line_of(lines, loc)}: {text}")
+
+    g = model.grid
+    seen: dict[str, int] = {}
+    devices: dict[str, int] = {}
+    rows, cols = set(), set()
+    for i, cam in enumerate(model.cameras):
+        m = CAMERA_NAME.match(cam.name)
+        assert m is not None  # checked by the field validator
+        row, col = int(m.group(1)), int(m.group(2))
+        if row >= g.rows or col >= g.columns:
+            fail(("cameras", i, "name"), f"cameras[{i}].name {cam.name} lies outside the {g.rows}x{g.columns} grid")
+        if cam.name in seen:
+            fail(
+                ("cameras", i, "name"),
+                f"cameras[{i}].name {cam.name} appears twice (first as cameras[{seen[cam.name]}])",
+            )
+        if cam.device in devices:
+            fail(
+                ("cameras", i, "device"),
+                f"cameras[{i}].device {cam.device} is used by two cameras (cameras[{devices[cam.device]}] too)",
+            )
+        seen[cam.name], devices[cam.device] = i, i
+        rows.add(row)
+        cols.add(col)
+    for key, n, used in (("rows", g.rows, rows), ("columns", g.columns, cols)):
+        if max(used) + 1 != n:
+            fail(
+                ("grid", key),
+                f"grid.{key} is {n} but the cameras use {key} 0-{max(used)}: "
+                f"make it {max(used) + 1} or add the cameras",
+            )
+    for section, field_name, names in (
+        ("tally", "addresses", (model.tally.addresses or {}) if model.tally else {}),
+        ("camera_control", "camera_ids", (model.camera_control.camera_ids or {}) if model.camera_control else {}),
+    ):
+        for name in names:
+            if name not in seen:
+                fail(
+                    (section, field_name, name),
+                    f"{section}.{field_name} names {name}, which is not a camera of this rig",
+                )

@@ -32,7 +32,11 @@ def tsl_addresses(rig: Rig) -> dict[str, int]:
 class TallyService:
     """Keeps a tally output right: sends the whole state on connect, on every change and every second,
     and reopens a lost line with backoff (1, 2, 4 s, capped at 10 s), restoring the state without anyone
-    doing anything. A port whose device node comes back is retried at once."""
+    doing anything. A port whose device node comes back is retried at once.
+
+    It never dies silently: every failure, of the line or of a bug, is in :attr:`last_error` (and logged);
+    a failure to open is retried with backoff, and anything else stops the service with :attr:`stopped_by`
+    saying why."""
 
     BACKOFF_S = (1.0, 2.0, 4.0, 10.0)
 
@@ -48,6 +52,7 @@ class TallyService:
         self._thread = threading.Thread(target=self._run, name="tally", daemon=True)
         self.connected = False
         self.last_error = ""
+        self.stopped_by = ""  # set when the service stopped on an unexpected error
         self.sends = 0
 
     def start(self) -> TallyService:
@@ -80,7 +85,19 @@ class TallyService:
                 return  # the device came back (replugged): try now
             time.sleep(0.05)
 
+    @property
+    def running(self) -> bool:
+        return self._thread.is_alive()
+
     def _run(self) -> None:
+        try:
+            self._serve()
+        except Exception as exc:  # a bug must not kill the tally silently: stop, visibly
+            self.connected = False
+            self.last_error = self.stopped_by = f"tally service stopped: {type(exc).__name__}: {exc}"
+            log.error("%s", self.last_error, exc_info=True)
+
+    def _serve(self) -> None:
         attempt = 0
         output: TallyOutput | None = None
         gone: tuple[int, int] | None = None
@@ -95,6 +112,8 @@ class TallyService:
                     if output is not None:
                         output.close()
                         output = None
+                    if str(exc) != self.last_error:
+                        log.warning("tally: %s; retrying", exc)
                     self.connected, self.last_error = False, str(exc)
                     wait = self.BACKOFF_S[min(attempt, len(self.BACKOFF_S) - 1)]
                     attempt += 1

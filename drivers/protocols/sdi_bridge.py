@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import binascii
 import struct
+from collections import deque
 from dataclasses import dataclass
 
 from rigctl.errors import ProtocolError
@@ -112,12 +113,20 @@ def decode(data: bytes) -> Frame:
 
 class FrameDecoder:
     """Frames out of a byte stream: resynchronises on the sync bytes after garbage, a cut frame or a bad
-    checksum, and counts what it skipped."""
+    checksum, and counts what it skipped. Only the last :attr:`KEEP_ERRORS` error strings are kept (a
+    stream of garbage would otherwise grow the list forever); :attr:`error_count` counts them all."""
+
+    KEEP_ERRORS = 64
 
     def __init__(self) -> None:
         self._buf = bytearray()
         self.skipped = 0
-        self.errors: list[str] = []
+        self.errors: deque[str] = deque(maxlen=self.KEEP_ERRORS)
+        self.error_count = 0
+
+    def _error(self, text: str) -> None:
+        self.errors.append(text)
+        self.error_count += 1
 
     def feed(self, data: bytes) -> list[Frame]:
         self._buf += data
@@ -140,14 +149,14 @@ class FrameDecoder:
                 if later < 0:
                     return out
                 # a damaged length byte would hold back the frames behind it: skip to the complete one
-                self.errors.append(f"byte 5: payload length {self._buf[5]} overruns a later valid frame")
+                self._error(f"byte 5: payload length {self._buf[5]} overruns a later valid frame")
                 self.skipped += later
                 del self._buf[:later]
                 continue
             try:
                 out.append(decode(bytes(self._buf[:total])))
             except ProtocolError as exc:
-                self.errors.append(str(exc))
+                self._error(str(exc))
                 self.skipped += 1
                 del self._buf[:1]  # a false sync or a damaged frame: look for the next sync
                 continue

@@ -10,12 +10,12 @@ from typing import Any
 
 import cv2
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 
 from rigctl.board import BoardSpec
 from rigctl.calib.inputs import Views
 from rigctl.errors import CalibrationError
+from rigctl.yamlfile import load_yaml
 
 _SUBPIX = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
 
@@ -57,10 +57,7 @@ def describe_target(target: Target) -> str:
 def load_target(path: Path) -> Target:
     """A board description: ``type: charuco`` (as ``rigctl board`` writes) or ``type: chessboard``
     with ``columns``, ``rows`` (inner corners) and ``square``."""
-    try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise CalibrationError(f"{path}: cannot read board description: {exc}") from None
+    data = load_yaml(path)
     if isinstance(data, dict) and data.get("type") == "chessboard":
         try:
             return Chessboard(int(data["columns"]), int(data["rows"]), float(data.get("square", 1.0)))

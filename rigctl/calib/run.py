@@ -51,7 +51,9 @@ def _nominal(views: Views) -> tuple[dict[str, Any] | None, str]:
     try:
         from rigctl.take.reader import TakeReader
 
-        rig = rig_from_dict(TakeReader(views.source).manifest.rig, source=str(views.source / "take.yaml"))
+        rig = rig_from_dict(
+            TakeReader(views.source, skip_damaged=True).manifest.rig, source=str(views.source / "take.yaml")
+        )
     except (RigctlError, OSError):
         return None, views.rig
     return {c.name: np.array([c.x_m, c.y_m, 0.0]) for c in rig.cameras}, rig.name

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from rigctl.cli.args import distance, far_distance
 from rigctl.cli.progress import Progress
+from rigctl.cli.take import damaged_exit
 from rigctl.depth.multibaseline import PRESETS
 from rigctl.depth.run import DepthOptions, run_depth
 from rigctl.take.export import parse_range
@@ -31,6 +32,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cameras", nargs="+", metavar="CAM", help="cameras to compute (default: all)")
     p.add_argument("--frames", metavar="A-B", help="frame sets (default: all complete ones)")
     p.add_argument("--no-key", action="store_true", help="search every pixel (no green-screen key)")
+    p.add_argument(
+        "--skip-damaged",
+        action="store_true",
+        help="leave out frame sets with a damaged or missing frame, list them in report.json and exit 5",
+    )
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run)
 
@@ -49,12 +55,13 @@ def run(ns: argparse.Namespace) -> int:
     )
     bar = Progress(f"depth {ns.input.name}")
     try:
-        report = run_depth(ns.input, ns.out, opt, frames, progress=bar)
+        report = run_depth(ns.input, ns.out, opt, frames, progress=bar, skip_damaged=ns.skip_damaged)
     finally:
         bar.close()
+    status = damaged_exit(report.get("damaged_skipped", []), ns.out / "report.json")
     if ns.json:
         print(json.dumps(report, default=float))
-        return 0
+        return status
     for n, fr in report["frames"].items():
         lo, hi = fr["disparity_range_px"]
         print(
@@ -67,4 +74,4 @@ def run(ns: argparse.Namespace) -> int:
             if truth:
                 print(f"  {cam}: bad 1.0 {truth['bad_1.0']:.2f} %, bad 2.0 {truth['bad_2.0']:.2f} % against the truth")
     print(f"wrote {ns.out} in {report['seconds']:.1f} s")
-    return 0
+    return status

@@ -1,7 +1,9 @@
 """Entry point of the ``rigctl`` console script.
 
 Every error a user can cause is a :class:`~rigctl.errors.RigctlError`: it becomes one line on stderr and
-a non-zero exit code. ``--debug`` shows the traceback instead.
+a non-zero exit code (one per class of error, :mod:`rigctl.errors`). ``--debug``, anywhere on the command
+line, shows the traceback instead. Output into a pipe that closes early (``rigctl plan --json | head -1``)
+ends quietly.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from rigctl.cli import (
     tally,
     tui,
 )
-from rigctl.errors import RigctlError
+from rigctl.errors import EXIT_INTERRUPTED, EXIT_USAGE, RigctlError
 
 log = logging.getLogger(__name__)
 
@@ -53,18 +55,41 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _take_debug(argv: list[str]) -> tuple[list[str], bool]:
+    """``argv`` without ``--debug`` (accepted before or after the verb, up to a ``--``), and whether it was there."""
+    end = argv.index("--") if "--" in argv else len(argv)
+    head = [a for a in argv[:end] if a != "--debug"]
+    return head + argv[end:], len(head) != end
+
+
+def _quiet_closed_pipe() -> None:
+    """The reader of our stdout went away: send what is left to /dev/null so nothing more is reported."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    finally:
+        os.close(devnull)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
+    argv, debug = _take_debug(list(sys.argv[1:] if argv is None else argv))
     ns = parser.parse_args(argv)
+    ns.debug = debug
     logging.basicConfig(
         level=logging.DEBUG if ns.debug else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
     )
     if not getattr(ns, "func", None):
         parser.print_help()
-        return 2
+        return EXIT_USAGE
     try:
-        return int(ns.func(ns))
+        code = int(ns.func(ns))
+        sys.stdout.flush()  # a closed pipe shows here, inside the handler, not at interpreter exit
+        return code
+    except BrokenPipeError:
+        _quiet_closed_pipe()
+        return 0
     except RigctlError as exc:
         if ns.debug:
             raise
@@ -72,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
         return exc.exit_code
     except KeyboardInterrupt:
         sys.stderr.write(f"rigctl {ns.verb}: interrupted\n")
-        return 130
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

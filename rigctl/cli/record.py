@@ -97,7 +97,7 @@ def run(ns: argparse.Namespace) -> int:
         signal.signal(signal.SIGINT, previous)
         manifest = recorder.finish()
         bar.close()
-    reader = TakeReader(plan.folder)
+    reader = TakeReader(plan.folder, skip_damaged=True)  # the summary of what was written
     summary = reader.summary()
     summary["path"] = str(plan.folder)
     if ns.json:

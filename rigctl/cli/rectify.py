@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 from pathlib import Path
 
 from rigctl.cli.progress import Progress
+from rigctl.cli.take import damaged_exit
+from rigctl.errors import DamagedDataError
 from rigctl.rectify import rectify_take
 
 
@@ -22,14 +25,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("take", type=Path, metavar="TAKE")
     p.add_argument("--calibration", type=Path, required=True, metavar="FILE", help="calibration.yaml")
     p.add_argument("--out", type=Path, required=True, metavar="RECTIFIED_TAKE", help="the new take's folder")
+    p.add_argument(
+        "--skip-damaged",
+        action="store_true",
+        help="leave out source frames that fail their checksum or are missing, list them in the new take.yaml "
+        "(damaged_skipped) and exit 5",
+    )
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run)
 
 
 def run(ns: argparse.Namespace) -> int:
     bar = Progress(f"rectifying {ns.take.name}")
+    existed = ns.out.exists()
     try:
-        summary = rectify_take(ns.take, ns.calibration, ns.out, bar.steps)
+        summary = rectify_take(ns.take, ns.calibration, ns.out, bar.steps, skip_damaged=ns.skip_damaged)
+    except DamagedDataError:
+        if not existed:
+            shutil.rmtree(ns.out, ignore_errors=True)  # no half-rectified take is left behind
+        raise
     finally:
         bar.close()
     if ns.json:
@@ -41,4 +55,4 @@ def run(ns: argparse.Namespace) -> int:
             f"tables {'from cache' if summary['tables_cached'] else 'built'} in {summary['tables_s']:.2f} s, "
             f"remap {summary['remap_s']:.2f} s of {summary['total_s']:.2f} s"
         )
-    return 0
+    return damaged_exit(summary["damaged_skipped"], ns.out / "take.yaml")

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from rigctl.cli.progress import Progress
 from rigctl.cli.record import format_summary
+from rigctl.errors import EXIT_DAMAGED
 from rigctl.take.check import check_take
 from rigctl.take.export import export_take
 from rigctl.take.reader import TakeReader
@@ -30,11 +31,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     export.add_argument("--out", type=Path, required=True, metavar="DIR")
     export.add_argument("--frames", metavar="A-B", help="N or A-B, frame-set numbers from 0 (default: all)")
     export.add_argument("--format", default="png", choices=("png", "exr"))
+    export.add_argument(
+        "--skip-damaged",
+        action="store_true",
+        help="leave out frames that fail their checksum or are missing, list them in DIR/export.json and exit 5",
+    )
     export.set_defaults(func=run_export)
 
 
 def run_info(ns: argparse.Namespace) -> int:
-    summary = TakeReader(ns.take).summary()
+    reader = TakeReader(ns.take, skip_damaged=True)  # a summary: damage is counted, `take check` locates it
+    summary = reader.summary()
+    if reader.damaged:
+        print(
+            f"warning: {len(reader.damaged)} damaged item(s); rigctl take check {ns.take} locates them", file=sys.stderr
+        )
     print(json.dumps(summary, indent=2) if ns.json else format_summary(summary))
     return 0
 
@@ -53,7 +64,7 @@ def run_check(ns: argparse.Namespace) -> int:
 
 
 def run_export(ns: argparse.Namespace) -> int:
-    reader = TakeReader(ns.take)
+    reader = TakeReader(ns.take, skip_damaged=ns.skip_damaged)
     bar = Progress(f"exporting {reader.manifest.take}")
     try:
         result = export_take(reader, ns.out, ns.frames, ns.format, progress=bar.steps)
@@ -61,6 +72,19 @@ def run_export(ns: argparse.Namespace) -> int:
         bar.close()
     print(
         f"{result['images']} images from {result['sets']} frame sets written to {ns.out}"
-        + (f" ({result['missing']} missing members skipped)" if result["missing"] else "")
+        + (f" ({result['missing']} members not captured)" if result["missing"] else "")
     )
-    return 0
+    return damaged_exit(reader.damaged, ns.out / "export.json")
+
+
+def damaged_exit(damaged: list[dict[str, object]], listed_in: Path) -> int:
+    """0, or the data-damaged exit status after saying on stderr what was left out and where it is listed."""
+    if not damaged:
+        return 0
+    first = damaged[0]
+    print(
+        f"warning: damaged data left out ({len(damaged)} item(s)), listed in {listed_in} "
+        f"(first: {first['file']}: byte {first['byte']}: {first['problem']})",
+        file=sys.stderr,
+    )
+    return EXIT_DAMAGED

@@ -10,11 +10,11 @@ from typing import Any
 
 import cv2
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 
 from rigctl.errors import ParameterError, RigFileError, TakeError
 from rigctl.rig import CAMERA_NAME
+from rigctl.yamlfile import load_yaml
 
 F32 = NDArray[np.float32]
 
@@ -93,10 +93,7 @@ def grid_from_arrays(
 
 def load_grid_folder(folder: Path) -> Grid:
     path = folder / "grid.yaml"
-    try:
-        spec = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise RigFileError(f"{path}: cannot read grid description: {exc}") from None
+    spec = load_yaml(path)
     if not isinstance(spec, dict):
         raise RigFileError(f"{path}: expected spacing_x, spacing_y, focal_px")
     for key in ("spacing_x", "focal_px"):
@@ -126,15 +123,19 @@ def load_grid_folder(folder: Path) -> Grid:
         raise RigFileError(f"{path}: spacing_x, spacing_y, focal_px, doffs must be numbers") from None
 
 
+class SkippedFrameSet(Exception):
+    """A frame set left out because one of its frames is damaged (``skip_damaged``)."""
+
+
 class TakeGrid:
     """Frame sets of a rectified take (or an ideal simulated take) as grids."""
 
-    def __init__(self, folder: Path) -> None:
+    def __init__(self, folder: Path, skip_damaged: bool = False) -> None:
         from rigctl.calibration_model import load_calibration
         from rigctl.rectgeom import common_plane
         from rigctl.take.reader import TakeReader
 
-        self.reader = TakeReader(folder)
+        self.reader = TakeReader(folder, skip_damaged=skip_damaged)
         raw = self.reader.raw
         rect = raw.get("rectification")
         settings = (raw.get("devices") or {}).get("settings") or {}
@@ -173,7 +174,12 @@ class TakeGrid:
         if number not in sets:
             raise ParameterError(f"{self.folder}: frame set {number} is not complete or does not exist")
         s = sets[number]
-        images = {n: self.reader.frame_rgb(n, s.members[n]) for n in self.names}
+        images = {}
+        for n in self.names:
+            rgb = self.reader.frame_rgb_or_none(n, s.members[n])
+            if rgb is None:
+                raise SkippedFrameSet(number)  # a damaged frame, skipped: listed in reader.damaged
+            images[n] = rgb
         truth = None
         tdir = self.folder / "truth" / "disparity" / f"{number:06d}"
         if tdir.is_dir():

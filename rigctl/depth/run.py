@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.depth.grid import Grid, TakeGrid, load_grid_folder
+from rigctl.depth.grid import Grid, SkippedFrameSet, TakeGrid, load_grid_folder
 from rigctl.depth.key import Keyer
 from rigctl.depth.multibaseline import PRESETS, DepthResult, cross_check, estimate
 from rigctl.errors import ParameterError
@@ -148,11 +148,16 @@ def run_depth(
     frames: list[int] | None = None,
     formats: tuple[str, ...] = ("exr", "pfm", "png"),
     progress: Callable[[float, str], None] | None = None,
+    skip_damaged: bool = False,
 ) -> dict[str, Any]:
-    """Depth for a rectified take or a grid folder; writes outputs and ``report.json``; returns the report."""
+    """Depth for a rectified take or a grid folder; writes outputs and ``report.json``; returns the report.
+
+    A damaged frame of a take stops it (naming file and byte) unless ``skip_damaged``: then its frame set is
+    left out and the damaged frames are listed in the report's ``damaged_skipped``."""
     t_start = time.perf_counter()
+    take: TakeGrid | None = None
     if (source / "take.yaml").exists():
-        take = TakeGrid(source)
+        take = TakeGrid(source, skip_damaged=skip_damaged)
         numbers = take.frame_numbers()
         if frames is not None:
             missing = [f for f in frames if f not in numbers]
@@ -182,7 +187,10 @@ def run_depth(
     total = len(numbers)
     for i, n in enumerate(numbers):
         t0 = time.perf_counter()
-        grid = load(n)
+        try:
+            grid = load(n)
+        except SkippedFrameSet:
+            continue
         t_load = time.perf_counter() - t0
         d_range, why = planned_range(grid, opt)
         full = unplanned_range(grid)
@@ -218,6 +226,8 @@ def run_depth(
                 "write": t_write,
             },
         }
+    if take is not None and take.reader.damaged:
+        report["damaged_skipped"] = take.reader.damaged
     report["seconds"] = time.perf_counter() - t_start
     out.mkdir(parents=True, exist_ok=True)
     (out / "report.json").write_text(json.dumps(report, indent=1, default=float))

@@ -28,7 +28,7 @@ class CheckReport:
 def check_take(folder: Path, verify_data: bool = True) -> CheckReport:
     report = CheckReport()
     try:
-        reader = TakeReader(folder)
+        reader = TakeReader(folder, skip_damaged=True)  # every problem is listed below, not only the first
     except RigctlError as exc:
         report.errors.append(str(exc))
         return report
@@ -37,6 +37,12 @@ def check_take(folder: Path, verify_data: bool = True) -> CheckReport:
         report.warnings.append(
             f"{folder / 'take.yaml'}: status 'recording': the recording did not end cleanly (crash or power loss); "
             "what the indexes hold is checked"
+        )
+    left_out = reader.raw.get("damaged_skipped")
+    if left_out:
+        report.warnings.append(
+            f"{folder / 'take.yaml'}: damaged_skipped: {len(left_out)} damaged source frame(s) were left out when "
+            "this take was made"
         )
     for name in reader.names:
         idx = reader.index[name]
@@ -47,6 +53,10 @@ def check_take(folder: Path, verify_data: bool = True) -> CheckReport:
                 report.warnings.append(f"{p} (torn by the interruption: last frame excluded)")
             else:
                 report.errors.append(str(p))
+        if epath.stat().st_size == 0 and man.cameras[name].frames:
+            report.errors.append(
+                f"{epath}: byte 0: essence file of camera {name} is empty, {man.cameras[name].frames} frames claimed"
+            )
         if len(idx) == 0:
             continue
         seq = idx["sequence"].astype(np.int64)

@@ -1,7 +1,12 @@
-"""``rigctl take export``: frame sets as images, ``DIR/<frame>/<camera>.png`` (8-bit) or ``.exr`` (float)."""
+"""``rigctl take export``: frame sets as images, ``DIR/<frame>/<camera>.png`` (8-bit) or ``.exr`` (float).
+
+A damaged frame stops the export (naming file and byte) unless the reader skips damaged frames; then it is
+left out and listed in ``DIR/export.json`` under ``skipped_damaged``.
+"""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from pathlib import Path
 
@@ -54,7 +59,9 @@ def export_take(
             if name not in fs.members:
                 missing += 1
                 continue
-            rgb = reader.frame_rgb(name, fs.members[name])
+            rgb = reader.frame_rgb_or_none(name, fs.members[name])
+            if rgb is None:
+                continue  # damaged, skipped: listed in reader.damaged
             if fmt == "png":
                 bgr = np.clip(np.rint(rgb[..., ::-1] * 255.0), 0, 255).astype(np.uint8)
                 if not cv2.imwrite(str(folder / f"{name}.png"), bgr):
@@ -64,4 +71,8 @@ def export_take(
             written += 1
         if progress:
             progress(k + 1, len(chosen))
-    return {"images": written, "missing": missing, "sets": len(chosen)}
+    result = {"images": written, "missing": missing, "sets": len(chosen), "skipped_damaged": len(reader.damaged)}
+    if reader.damaged:
+        manifest = {"take": str(reader.folder), **result, "skipped_damaged": reader.damaged}
+        (out / "export.json").write_text(json.dumps(manifest, indent=1))
+    return result

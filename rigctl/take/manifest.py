@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from rigctl.errors import TakeError
 from rigctl.yamlfile import check_spec, describe_validation_error, load_yaml_with_lines
@@ -38,11 +38,11 @@ class CameraEntry(BaseModel):
 class FormatEntry(BaseModel):
     model_config = ConfigDict(extra="allow")
 
-    width: int
-    height: int
+    width: Annotated[int, Field(gt=0, le=65536)]
+    height: Annotated[int, Field(gt=0, le=65536)]
     pixel_format: str
-    fps: float
-    bytes_per_frame: int
+    fps: Annotated[float, Field(gt=0, le=1000, allow_inf_nan=False)]
+    bytes_per_frame: Annotated[int, Field(gt=0)]
 
 
 class Manifest(BaseModel):

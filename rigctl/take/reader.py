@@ -1,7 +1,17 @@
-"""Reading a take: manifest, per-camera indexes, frames (never a partial one) and frame sets."""
+"""Reading a take: manifest, per-camera indexes, frames (never a partial one) and frame sets.
+
+Damaged data is never passed on silently. Every frame's CRC is checked as it is read (zlib's CRC-32 runs
+at GB/s: ``benchmarks/frame_crc_cost.py``), and a frame the take claims but cannot deliver -- a checksum
+that fails, an index record that is corrupt, a frame past the end of its essence file, an empty essence
+file, fewer frames than the manifest counts -- raises :class:`~rigctl.errors.DamagedDataError` naming file
+and byte offset. With ``skip_damaged`` such frames are left out instead and listed in :attr:`damaged`,
+for the caller to put in its output's manifest and exit status. Paths in ``take.yaml`` must resolve
+inside the take folder.
+"""
 
 from __future__ import annotations
 
+import logging
 import os
 import zlib
 from functools import cached_property
@@ -10,54 +20,112 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.errors import TakeError
+from rigctl.errors import DamagedDataError, TakeError
 from rigctl.interfaces import FrameFlags
 from rigctl.pixfmt import to_rgb
 from rigctl.take import framesets
-from rigctl.take.index import IndexProblem, read_index
+from rigctl.take.index import RECORD_SIZE, IndexProblem, read_index
 from rigctl.take.manifest import Manifest, read_manifest
+from rigctl.take.reserve import remove_stale_reserves
+
+log = logging.getLogger(__name__)
+
+BYTES_PER_PIXEL = {"UYVY": 2, "YUYV": 2, "BGR3": 3, "GREY": 1}
 
 
 class TakeReader:
     """A take folder opened for reading. Frames are addressed by camera and position in its index."""
 
-    def __init__(self, folder: Path) -> None:
+    def __init__(self, folder: Path, skip_damaged: bool = False) -> None:
         self.folder = Path(folder)
+        self.skip_damaged = skip_damaged
+        self.damaged: list[dict[str, object]] = []  # what was left out, with file and byte (skip_damaged)
         self.manifest, self.raw = read_manifest(self.folder)
         self.names = list(self.manifest.cameras)
         fmt = self.manifest.format
         self.width, self.height, self.pixel_format, self.fps = fmt.width, fmt.height, fmt.pixel_format, fmt.fps
         self.bytes_per_frame = fmt.bytes_per_frame
-        self.period_ns = int(self.manifest.timing.get("frame_period_ns") or round(1e9 / fmt.fps))
+        per_pixel = BYTES_PER_PIXEL.get(fmt.pixel_format)
+        if per_pixel is None or fmt.bytes_per_frame != fmt.width * fmt.height * per_pixel:
+            raise TakeError(
+                f"{self.folder / 'take.yaml'}: format {fmt.width}x{fmt.height} {fmt.pixel_format!r} with "
+                f"bytes_per_frame {fmt.bytes_per_frame} is not a format rigctl reads "
+                f"({', '.join(BYTES_PER_PIXEL)}; width x height x bytes per pixel)"
+            )
+        period = self.manifest.timing.get("frame_period_ns")
+        if not (isinstance(period, int) and not isinstance(period, bool) and period > 0):
+            period = round(1e9 / fmt.fps)
+        self.period_ns = int(period)
         self.index: dict[str, NDArray[np.void]] = {}
         self.problems: dict[str, list[IndexProblem]] = {}
         for name in self.names:
             essence = self.essence_path(name)
             if not essence.exists():
                 raise TakeError(f"{essence}: essence file of camera {name} is missing")
-            idx, problems = read_index(self.index_path(name), essence.stat().st_size)
+            size = essence.stat().st_size
+            idx, problems = read_index(self.index_path(name), size)
             self.index[name] = idx
             self.problems[name] = problems
+            self._check_claims(name, essence, size)
+        if self.status == "recording":  # a take cut off by a crash: free the space its recorder kept
+            remove_stale_reserves({self.folder} | {self.essence_path(n).parent.parent for n in self.names})
+
+    def _check_claims(self, name: str, essence: Path, size: int) -> None:
+        """Refuse (or, skipping, record) frames this camera's index or manifest claims but cannot deliver."""
+        claimed = self.manifest.cameras[name].frames
+        if size == 0 and (claimed or self.problems[name]):
+            self._damaged(name, essence, 0, f"essence file of camera {name} is empty, {claimed} frames claimed")
+            return
+        for p in self.problems[name]:
+            if not p.torn_tail:
+                self._damaged(name, p.path, p.offset, p.message)
+        readable = len(self.index[name])
+        if self.status != "recording" and claimed > readable:
+            ipath = self.index_path(name)
+            self._damaged(
+                name,
+                ipath,
+                readable * RECORD_SIZE,
+                f"take.yaml claims {claimed} frames of camera {name}, {readable} readable",
+            )
+
+    def _damaged(self, name: str, path: Path, offset: int, message: str, sequence: int | None = None) -> None:
+        if not self.skip_damaged:
+            raise DamagedDataError(f"{path}: byte {offset}: {message} (--skip-damaged leaves damaged frames out)")
+        entry: dict[str, object] = {"camera": name, "file": str(path), "byte": offset, "problem": message}
+        if sequence is not None:
+            entry["sequence"] = sequence
+        self.damaged.append(entry)
 
     @property
     def status(self) -> str:
         return self.manifest.status
 
-    def _resolve(self, text: str) -> Path:
-        p = Path(text)
-        return p if p.is_absolute() else self.folder / p
+    def _resolve(self, text: str, field: str) -> Path:
+        """A path of the manifest, refused unless it resolves inside the take folder."""
+        p = self.folder / text
+        try:
+            p.resolve().relative_to(self.folder.resolve())
+        except ValueError:
+            raise TakeError(
+                f"{self.folder / 'take.yaml'}: {field} {text!r} points outside the take folder: refused"
+            ) from None
+        return p
 
     def essence_path(self, name: str) -> Path:
-        return self._resolve(self.manifest.cameras[name].essence)
+        return self._resolve(self.manifest.cameras[name].essence, f"cameras.{name}.essence")
 
     def index_path(self, name: str) -> Path:
-        path = self._resolve(self.manifest.cameras[name].index)
+        path = self._resolve(self.manifest.cameras[name].index, f"cameras.{name}.index")
         if not path.exists():
             raise TakeError(f"{path}: index file of camera {name} is missing")
         return path
 
-    def frame_bytes(self, name: str, i: int, verify: bool = False) -> NDArray[np.uint8]:
-        """The bytes of frame ``i`` of camera ``name``, exactly as captured."""
+    def frame_bytes(self, name: str, i: int, verify: bool = True) -> NDArray[np.uint8]:
+        """The bytes of frame ``i`` of camera ``name``, exactly as captured, their CRC checked.
+
+        A frame that fails its checksum or is cut short raises :class:`DamagedDataError`, also when
+        skipping (the caller leaves it out through :meth:`frame_or_none`)."""
         rec = self.index[name][i]
         size, offset = int(rec["size"]), int(rec["offset"])
         path = self.essence_path(name)
@@ -66,15 +134,39 @@ class TakeReader:
             data = os.pread(fd, size, offset)
         finally:
             os.close(fd)
+        if size != self.bytes_per_frame:
+            raise DamagedDataError(
+                f"{self.index_path(name)}: byte {i * RECORD_SIZE}: frame of {size} bytes, the format needs "
+                f"{self.bytes_per_frame}"
+            )
         if len(data) != size:
-            raise TakeError(f"{path}: byte {offset}: frame of {size} bytes is cut short ({len(data)} read)")
+            raise DamagedDataError(f"{path}: byte {offset}: frame of {size} bytes is cut short ({len(data)} read)")
         if verify and rec["crc"] and zlib.crc32(data) != int(rec["crc"]):
-            raise TakeError(f"{path}: byte {offset}: frame {int(rec['sequence'])} fails its checksum")
+            raise DamagedDataError(f"{path}: byte {offset}: frame {int(rec['sequence'])} fails its checksum")
         return np.frombuffer(data, dtype=np.uint8)
+
+    def frame_or_none(self, name: str, i: int) -> NDArray[np.uint8] | None:
+        """Frame bytes as :meth:`frame_bytes`; a damaged frame is None when skipping (and listed in
+        :attr:`damaged`), an error otherwise."""
+        try:
+            return self.frame_bytes(name, i)
+        except DamagedDataError as exc:
+            if not self.skip_damaged:
+                raise DamagedDataError(f"{exc} (--skip-damaged leaves damaged frames out)") from None
+            rec = self.index[name][i]
+            self._damaged(
+                name, self.essence_path(name), int(rec["offset"]), str(exc).split(": ", 2)[-1], int(rec["sequence"])
+            )
+            return None
 
     def frame_rgb(self, name: str, i: int) -> NDArray[np.float32]:
         """Frame ``i`` of ``name`` as RGB float32 in [0, 1] (converted from the captured pixel format)."""
         return to_rgb(self.frame_bytes(name, i), self.pixel_format, self.width, self.height)
+
+    def frame_rgb_or_none(self, name: str, i: int) -> NDArray[np.float32] | None:
+        """As :meth:`frame_rgb`, None for a damaged frame when skipping (see :meth:`frame_or_none`)."""
+        data = self.frame_or_none(name, i)
+        return None if data is None else to_rgb(data, self.pixel_format, self.width, self.height)
 
     @cached_property
     def frame_sets(self) -> list[framesets.FrameSet]:
@@ -83,8 +175,28 @@ class TakeReader:
         flags = [self.index[n]["flags"] for n in self.names if len(self.index[n])]
         use_tc = bool(flags) and all(np.all(f & FrameFlags.TIMECODE) for f in flags)
         timecodes = {n: self.index[n]["timecode"].astype(np.int64) for n in self.names} if use_tc else None
+        if timecodes is not None and not all(np.all(np.diff(tc) > 0) for tc in timecodes.values()):
+            # timecodes that repeat or go back (a damaged index, or midnight): capture times still order frames
+            log.warning(
+                "%s: timecodes do not increase in every index; frame sets assembled by capture time", self.folder
+            )
+            timecodes = None
+        if timecodes is not None:
+            self._check_timecode_span(timecodes)
         t0 = self.manifest.timing.get("t0_ns")
         return framesets.assemble(stamps, self.period_ns, t0, timecodes)
+
+    def _check_timecode_span(self, timecodes: dict[str, NDArray[np.int64]]) -> None:
+        """Frame sets by timecode make one slot per timecode from the first to the last: a damaged or hostile
+        index whose timecodes span far more than its frames would ask for billions of them."""
+        used = [tc for tc in timecodes.values() if len(tc)]
+        span = max(int(tc.max()) for tc in used) - min(int(tc.min()) for tc in used) + 1
+        frames = sum(len(tc) for tc in used)
+        if span > 4 * frames + 1000:
+            raise DamagedDataError(
+                f"{self.folder}: the indexes' timecodes span {span} frames for {frames} frames recorded: "
+                "an index is damaged"
+            )
 
     def complete_sets(self) -> list[framesets.FrameSet]:
         return [s for s in self.frame_sets if s.complete(self.names)]

@@ -15,13 +15,16 @@ import time
 import zlib
 from pathlib import Path
 
-from rigctl.errors import TakeError
+from rigctl.errors import EXIT_DEVICE, TakeError
 from rigctl.interfaces import Frame
 from rigctl.take import index
 
 
 class DiskFullError(TakeError):
-    """A destination ran out of space; the take ends cleanly and stays readable."""
+    """A destination ran out of space; the take ends cleanly and stays readable. Exit status 4: the
+    destination (a device) cannot do what the take needs, the input was fine."""
+
+    exit_code = EXIT_DEVICE
 
 
 def _write_all(fd: int, data: memoryview, path: Path) -> None:

@@ -177,7 +177,7 @@ def test_exports_round_trip(charuco_take: Path, tmp_path: Path) -> None:
 def test_fronto_parallel_boards_are_diagnosed(tmp_path: Path) -> None:
     take = record(tmp_path, "flat", 8, "board_tilt_deg=0")
     code, _, err = calibrate(str(take), "--out", str(tmp_path / "c.yaml"))
-    assert code == 2
+    assert code == 3
     assert "nearly fronto-parallel" in err and "tilt the board 20-40 degrees" in err
     assert "calibration not written" in err and not (tmp_path / "c.yaml").exists()
 
@@ -185,14 +185,14 @@ def test_fronto_parallel_boards_are_diagnosed(tmp_path: Path) -> None:
 def test_boards_that_never_reach_the_edges_are_diagnosed(tmp_path: Path) -> None:
     take = record(tmp_path, "far", 8, "board_distance_m=[4.5,5.0]", "board_tilt_deg=30")
     code, _, err = calibrate(str(take), "--out", str(tmp_path / "c.yaml"))
-    assert code == 2
+    assert code == 3
     assert "move the board towards the edges and corners of r2c0" in err
 
 
 def test_too_few_views_are_diagnosed(tmp_path: Path) -> None:
     take = record(tmp_path, "few", 3)
     code, _, err = calibrate(str(take), "--out", str(tmp_path / "c.yaml"))
-    assert code == 2 and "only 3 usable board views" in err and "record more board poses" in err
+    assert code == 3 and "only 3 usable board views" in err and "record more board poses" in err
 
 
 def test_a_camera_that_rarely_sees_the_board_is_named(tmp_path: Path) -> None:
@@ -203,18 +203,18 @@ def test_a_camera_that_rarely_sees_the_board_is_named(tmp_path: Path) -> None:
     for frame in sets[2:]:
         (frame / "r2c2.png").unlink()  # r2c2 keeps 2 views
     code, _, err = calibrate(str(tmp_path / "sets"), "--out", str(tmp_path / "c.yaml"))
-    assert code == 2 and "camera r2c2 sees the board in 2 views" in err and "hold the board in its view" in err
+    assert code == 3 and "camera r2c2 sees the board in 2 views" in err and "hold the board in its view" in err
 
 
 def test_bad_inputs_are_one_line(tmp_path: Path) -> None:
     code, _, err = calibrate(str(tmp_path / "nothing"), "--out", str(tmp_path / "c.yaml"))
-    assert code == 2 and "no such take or folder" in err
+    assert code == 3 and "no such take or folder" in err
     empty = tmp_path / "empty"
     empty.mkdir()
     code, _, err = calibrate(str(empty), "--out", str(tmp_path / "c.yaml"))
-    assert code == 2 and "no images found" in err
+    assert code == 3 and "no images found" in err
     odd = tmp_path / "odd"
     odd.mkdir()
     shutil.copy(STEREO / "left01.jpg", odd / "cam01.jpg")
     code, _, err = calibrate(str(odd), "--out", str(tmp_path / "c.yaml"))
-    assert code == 2 and "not grid positions" in err
+    assert code == 3 and "not grid positions" in err

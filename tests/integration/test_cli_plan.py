@@ -95,14 +95,13 @@ BAD = [
     (["--near", "2"], "near_m given without far_m"),
     (["--far", "2", "--subject-depth", "3"], "subject_depth_m 3.0 is not less than far_m 2.0"),
     (["--near", "1", "--far", "2", "--subject-depth", "1"], "not all three"),
-    (["no-such-rig.yaml"], "no-such-rig.yaml: no such rig file"),
 ]
 
 
 @pytest.mark.parametrize(("argv", "message"), BAD, ids=[" ".join(a) for a, _ in BAD])
 def test_bad_input_is_one_line_and_exit_2(run_cli, argv: list[str], message: str) -> None:  # type: ignore[no-untyped-def]
     out = run_cli("plan", *argv)
-    assert out.returncode == 2
+    assert out.returncode == 2  # usage: a bad option or parameter value
     assert out.stdout == ""
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1, out.stderr
@@ -115,8 +114,14 @@ def test_bad_rig_file_names_file_line_field(run_cli, tmp_path: Path) -> None:  #
     rig = tmp_path / "x.yaml"
     rig.write_text(text)
     out = run_cli("plan", str(rig))
-    assert out.returncode == 2
+    assert out.returncode == 3  # bad input file
     assert out.stderr.strip() == f"rigctl plan: error: {rig}:20: grid.spacing_x_m must be > 0, got -0.12"
+
+
+def test_missing_rig_file_is_a_bad_input_file(run_cli) -> None:  # type: ignore[no-untyped-def]
+    out = run_cli("plan", "no-such-rig.yaml")
+    assert out.returncode == 3 and out.stdout == ""
+    assert out.stderr.strip().startswith("rigctl plan: error: no-such-rig.yaml: no such rig file")
 
 
 def test_debug_shows_the_traceback(run_cli) -> None:  # type: ignore[no-untyped-def]

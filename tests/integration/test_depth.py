@@ -185,7 +185,7 @@ def test_cli_depth_refuses_unrectified_takes_and_bad_options(tmp_path: Path) -> 
     res = run_rigctl("record", "--take", "raw", "--frames", "1", "--out", str(tmp_path), "--sim", "motion=false")
     assert res.returncode == 0, res.stderr
     res = run_rigctl("depth", str(tmp_path / "raw"), "--out", str(tmp_path / "d"))
-    assert res.returncode == 2 and "not a rectified take (run rigctl rectify first" in res.stderr
+    assert res.returncode == 3 and "not a rectified take (run rigctl rectify first" in res.stderr
     res = run_rigctl("depth", str(tmp_path / "nothing"), "--out", str(tmp_path / "d"))
     assert res.returncode == 2 and "not a take (take.yaml) or a grid folder" in res.stderr
 

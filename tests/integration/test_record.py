@@ -184,7 +184,7 @@ def test_names_that_could_escape_are_refused(tmp_path: Path, run_cli, name: str)
 def test_existing_take_is_never_overwritten(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
     (tmp_path / "again").mkdir()
     res = run_cli("record", "--take", "again", "--frames", "2", "--out", str(tmp_path), *FAST)
-    assert res.returncode == 2 and "never overwritten" in res.stderr
+    assert res.returncode == 3 and "never overwritten" in res.stderr
 
 
 def test_preflight_refuses_a_disk_too_slow_for_the_rig(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]

@@ -91,7 +91,7 @@ def test_swapped_cameras_are_an_error(take: Path, tmp_path: Path, run_cli) -> No
     bad = tmp_path / "swapped.yaml"
     bad.write_text(yaml.safe_dump(data))
     res = run_cli("rectify", str(take), "--calibration", str(bad), "--out", str(tmp_path / "r"))
-    assert res.returncode == 2
+    assert res.returncode == 3  # bad input file
     assert "camera order does not match the geometry" in res.stderr
     assert not (tmp_path / "r").exists()
 
@@ -113,7 +113,7 @@ def test_bad_input_is_one_line(take: Path, tmp_path: Path, run_cli, problem: str
     path = tmp_path / "c.yaml"
     path.write_text(yaml.safe_dump(data))
     res = run_cli("rectify", str(take), "--calibration", str(path), "--out", str(out))
-    assert res.returncode == 2 and message in res.stderr and len(res.stderr.strip().splitlines()) == 1
+    assert res.returncode == 3 and message in res.stderr and len(res.stderr.strip().splitlines()) == 1
 
 
 def test_board_writes_a_detectable_target(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]

@@ -205,7 +205,7 @@ def test_tsl50_over_udp(tmp_path: Path, run_cli) -> None:  # type: ignore[no-unt
 def test_tsl50_bad_port_is_named(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
     rig = write_rig(tmp_path, tally={"protocol": "tsl-umd-5.0", "port": "/dev/ttyUSB0"})
     res = run_cli("tally", str(rig), "--program", "r0c1")
-    assert res.returncode == 2 and "TSL UMD 5.0 goes over UDP, write udp://HOST:PORT" in res.stderr
+    assert res.returncode == 3 and "TSL UMD 5.0 goes over UDP, write udp://HOST:PORT" in res.stderr
 
 
 FTDI = {"vendor_id": 0x0403, "product_id": 0x6001, "manufacturer": "FTDI", "product": "FT232R USB UART"}

@@ -130,7 +130,7 @@ def test_rig_without_tally_says_so(tmp_path: Path, run_cli) -> None:  # type: ig
     path = tmp_path / "rig.yaml"
     path.write_text(yaml.safe_dump(rig))
     res = run_cli("tally", str(path), "--program", "r1c1")
-    assert res.returncode == 2 and "has no tally section" in res.stderr
+    assert res.returncode == 3 and "has no tally section" in res.stderr
 
 
 def test_unplug_for_three_seconds_state_back_within_a_second_of_replug(tmp_path: Path) -> None:
