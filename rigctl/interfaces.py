@@ -11,6 +11,8 @@ import enum
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
+from rigctl.timecode import Timecode
+
 
 class FrameFlags(enum.IntFlag):
     """Per-frame flags, stored in the take's index next to each frame."""
@@ -21,6 +23,7 @@ class FrameFlags(enum.IntFlag):
     TIMESTAMP_MONOTONIC = 4  # capture timestamp is CLOCK_MONOTONIC
     TIMESTAMP_SOE = 8  # capture timestamp taken at start of exposure (else end of frame)
     FORMAT_CHANGED = 16  # first frame after the signal format changed
+    DROP_FRAME = 32  # the frame's timecode counts drop-frame (29.97 / 59.94 DF)
 
 
 @dataclass(frozen=True)
@@ -57,7 +60,7 @@ class Frame:
     host_ns: int
     flags: FrameFlags
     data: memoryview
-    timecode: str | None = None
+    timecode: Timecode | None = None
 
 
 @dataclass

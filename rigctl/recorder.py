@@ -34,6 +34,7 @@ from rigctl.take import framesets, sidecars
 from rigctl.take.accounting import CameraStats
 from rigctl.take.manifest import TAKE_SPEC, write_manifest
 from rigctl.take.writer import CameraWriter, DiskFullError
+from rigctl.timecode import start_timecode
 
 log = logging.getLogger(__name__)
 
@@ -363,6 +364,8 @@ class Recorder:
             self._writer_busy[name] = frame
             try:
                 writer.write(frame)
+                if not st.written:
+                    st.first_timecode = frame.timecode
                 st.written.append((frame.sequence, frame.capture_ns))
                 st.bytes_written += len(frame.data)
             except RigctlError as exc:
@@ -455,7 +458,8 @@ class Recorder:
         write_manifest(folder, self._manifest(status, sets))
         extras_failed = False
         try:
-            sidecars.write_sets_csv(folder / "sets.csv", sets, self.names, self.stats)
+            start = start_timecode(self.started_utc, self.format.fps)
+            sidecars.write_sets_csv(folder / "sets.csv", sets, self.names, self.stats, start)
             devices = {n: self.rig.camera(n).device for n in self.names}
             sidecars.write_log_csv(folder / "log.csv", self.names, devices, self.stats)
             sidecars.write_ale(
@@ -531,7 +535,7 @@ class Recorder:
                 "t0_ns": self.t0_ns,
                 "t1_ns": self.t1_ns,
                 "frame_period_ns": self.period_ns,
-                "start_timecode": sidecars.timecode_of(self.started_utc, fmt.fps),
+                "start_timecode": str(start_timecode(self.started_utc, fmt.fps)),
             },
             "checksum": "crc32" if self.checksum else "none",
             "devices": {"description": self.devices.description, "settings": self.devices.settings},

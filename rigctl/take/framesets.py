@@ -23,6 +23,7 @@ class FrameSet:
     time_ns: int
     members: dict[str, int]
     spread_ns: int
+    timecode: int | None = None  # frames since midnight (unwrapped past it) when assembled by timecode
 
     def complete(self, cameras: list[str]) -> bool:
         return all(c in self.members for c in cameras)
@@ -93,9 +94,8 @@ def _by_timecode(timestamps: dict[str, NDArray[np.int64]], timecodes: dict[str, 
     out = []
     for n, members in enumerate(slots):
         times = [int(timestamps[c][i]) for c, i in members.items()]
-        out.append(
-            FrameSet(n, int(np.median(times)) if times else 0, members, (max(times) - min(times)) if times else 0)
-        )
+        t = int(np.median(times)) if times else 0
+        out.append(FrameSet(n, t, members, (max(times) - min(times)) if times else 0, start + n))
     return out
 
 

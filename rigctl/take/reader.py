@@ -16,6 +16,7 @@ from rigctl.pixfmt import to_rgb
 from rigctl.take import framesets
 from rigctl.take.index import IndexProblem, read_index
 from rigctl.take.manifest import Manifest, read_manifest
+from rigctl.timecode import Timecode, TimecodeError, rate_of, start_timecode, unwrap
 
 
 class TakeReader:
@@ -82,9 +83,48 @@ class TakeReader:
         stamps = {n: self.index[n]["capture_ns"].astype(np.int64) for n in self.names}
         flags = [self.index[n]["flags"] for n in self.names if len(self.index[n])]
         use_tc = bool(flags) and all(np.all(f & FrameFlags.TIMECODE) for f in flags)
-        timecodes = {n: self.index[n]["timecode"].astype(np.int64) for n in self.names} if use_tc else None
+        timecodes = None
+        if use_tc:
+            # one rate and drop flag for the whole take, else counts of different scales would be compared
+            drops = {bool(v) for f in flags for v in np.unique(f & FrameFlags.DROP_FRAME)}
+            if len(drops) > 1:
+                raise TakeError(f"{self.folder}: some frames count drop-frame timecode and some do not")
+            rate, drop = self.timecode_rate(drops.pop())
+            first = min(int(self.index[n]["timecode"][0]) for n in self.names if len(self.index[n]))
+            timecodes = {n: unwrap(self.index[n]["timecode"], first, rate, drop) for n in self.names}
         t0 = self.manifest.timing.get("t0_ns")
         return framesets.assemble(stamps, self.period_ns, t0, timecodes)
+
+    def timecode_rate(self, drop: bool) -> tuple[int, bool]:
+        """The nominal rate of the take's timecode counts (from its fps), and the drop flag as recorded."""
+        try:
+            rate, _ = rate_of(self.fps)
+            Timecode(0, rate, drop)
+        except TimecodeError as exc:
+            raise TakeError(f"{self.folder}: format.fps {self.fps:g}: {exc}") from None
+        return rate, drop
+
+    def timecode(self, name: str, i: int) -> Timecode | None:
+        """The timecode frame ``i`` of ``name`` carried from its source, or None."""
+        rec = self.index[name][i]
+        flags = FrameFlags(int(rec["flags"]))
+        if not flags & FrameFlags.TIMECODE:
+            return None
+        rate, drop = self.timecode_rate(bool(flags & FrameFlags.DROP_FRAME))
+        try:
+            return Timecode(int(rec["timecode"]), rate, drop)
+        except TimecodeError as exc:
+            path = self.index_path(name)
+            raise TakeError(f"{path}: record {i}: {exc}") from None
+
+    def set_timecode(self, fs: framesets.FrameSet) -> Timecode:
+        """The timecode of a frame set: its members' own, else the take's time-of-day start plus the set number
+        (the same rule as the ALE and the shoot UI)."""
+        for name, i in fs.members.items():
+            tc = self.timecode(name, i)
+            if tc is not None:
+                return tc
+        return start_timecode(str(self.raw.get("started_utc", "")), self.fps) + fs.number
 
     def complete_sets(self) -> list[framesets.FrameSet]:
         return [s for s in self.frame_sets if s.complete(self.names)]
