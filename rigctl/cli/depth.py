@@ -7,7 +7,7 @@ import json
 import math
 from pathlib import Path
 
-from rigctl.cli.args import distance, far_distance
+from rigctl.cli.args import add_layout, distance, far_distance
 from rigctl.cli.progress import Progress
 from rigctl.depth.multibaseline import PRESETS
 from rigctl.depth.run import DepthOptions, run_depth
@@ -19,9 +19,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "depth",
         help="per-camera disparity and depth of a rectified take or grid folder (EXR, PFM, PNG)",
         description="Multi-baseline depth: every other camera of the grid with its own baseline, only the keyed "
-        "subject, only the planned disparity range (from --near/--far). Writes <frame>/<camera>.exr (RGB, "
-        "disparityL/R, disparityV, depth.Z = 1/Z), .pfm (disparity, +inf where none) and .png (red near, blue far), "
-        "and report.json. Presets: " + "; ".join(f"{p.name}: {p.description}" for p in PRESETS.values()),
+        "subject, only the planned disparity range (from --near/--far). Writes <frame>/<camera>.exr (scene-linear "
+        "RGB and A, disparityL/R, disparityV, depth.Z = 1/Z), .pfm (disparity, +inf where none) and .png (red near, "
+        "blue far), and report.json (--layout sequence: <camera>/<camera>.<frame>.exr). Presets: "
+        + "; ".join(f"{p.name}: {p.description}" for p in PRESETS.values()),
     )
     p.add_argument("input", type=Path, metavar="INPUT", help="rectified take, ideal simulated take, or grid folder")
     p.add_argument("--out", type=Path, required=True, metavar="DIR")
@@ -31,6 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cameras", nargs="+", metavar="CAM", help="cameras to compute (default: all)")
     p.add_argument("--frames", metavar="A-B", help="frame sets (default: all complete ones)")
     p.add_argument("--no-key", action="store_true", help="search every pixel (no green-screen key)")
+    add_layout(p)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run)
 
@@ -49,7 +51,7 @@ def run(ns: argparse.Namespace) -> int:
     )
     bar = Progress(f"depth {ns.input.name}")
     try:
-        report = run_depth(ns.input, ns.out, opt, frames, progress=bar)
+        report = run_depth(ns.input, ns.out, opt, frames, progress=bar, layout=ns.layout)
     finally:
         bar.close()
     if ns.json:

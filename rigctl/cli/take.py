@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from rigctl.cli.args import add_layout
 from rigctl.cli.progress import Progress
 from rigctl.cli.record import format_summary
 from rigctl.take.check import check_take
@@ -30,6 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     export.add_argument("--out", type=Path, required=True, metavar="DIR")
     export.add_argument("--frames", metavar="A-B", help="N or A-B, frame-set numbers from 0 (default: all)")
     export.add_argument("--format", default="png", choices=("png", "exr"))
+    add_layout(export)
     export.set_defaults(func=run_export)
 
 
@@ -56,7 +58,7 @@ def run_export(ns: argparse.Namespace) -> int:
     reader = TakeReader(ns.take)
     bar = Progress(f"exporting {reader.manifest.take}")
     try:
-        result = export_take(reader, ns.out, ns.frames, ns.format, progress=bar.steps)
+        result = export_take(reader, ns.out, ns.frames, ns.format, progress=bar.steps, layout=ns.layout)
     finally:
         bar.close()
     print(

@@ -1,4 +1,4 @@
-"""``rigctl take export``: frame sets as images, ``DIR/<frame>/<camera>.png`` (8-bit) or ``.exr`` (float)."""
+"""``rigctl take export``: frame sets as images, 8-bit PNG or scene-linear EXR, in a layout of rigctl.layout."""
 
 from __future__ import annotations
 
@@ -8,8 +8,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from rigctl.depth.key import Keyer
 from rigctl.errors import ParameterError, TakeError
-from rigctl.exr import write_exr
+from rigctl.exr import picture, picture_attributes, write_exr
+from rigctl.layout import output_path
 from rigctl.take.reader import TakeReader
 
 
@@ -37,30 +39,40 @@ def export_take(
     frames: str | None = None,
     fmt: str = "png",
     progress: Callable[[int, int], None] | None = None,
+    layout: str = "frames",
 ) -> dict[str, int]:
-    """Write every member of the chosen frame sets; returns counts of images written and members missing."""
+    """Write every member of the chosen frame sets; returns counts of images written and members missing.
+
+    PNG holds the camera's BT.709 picture as captured (8-bit); EXR holds it scene-linear with the key matte
+    as ``A`` (premultiplied), ``chromaticities``, ``framesPerSecond`` and the frame's ``timeCode``.
+    """
     if fmt not in ("png", "exr"):
         raise ParameterError(f"--format {fmt!r}: choose png or exr")
+    output_path(out, layout, 0, "", "")  # an unknown layout is refused before any work
     sets = reader.frame_sets
     if not sets:
         raise TakeError(f"{reader.folder}: the take holds no frames")
     chosen = parse_range(frames, len(sets))
+    keyer = Keyer()
     written = missing = 0
     for k, n in enumerate(chosen):
         fs = sets[n]
-        folder = out / f"{n:06d}"
-        folder.mkdir(parents=True, exist_ok=True)
+        tc = reader.set_timecode(fs)
         for name in reader.names:
             if name not in fs.members:
                 missing += 1
                 continue
             rgb = reader.frame_rgb(name, fs.members[name])
+            path = output_path(out, layout, n, name, f".{fmt}")
+            path.parent.mkdir(parents=True, exist_ok=True)
             if fmt == "png":
                 bgr = np.clip(np.rint(rgb[..., ::-1] * 255.0), 0, 255).astype(np.uint8)
-                if not cv2.imwrite(str(folder / f"{name}.png"), bgr):
-                    raise TakeError(f"{folder / (name + '.png')}: cannot write")
+                if not cv2.imwrite(str(path), bgr):
+                    raise TakeError(f"{path}: cannot write")
             else:
-                write_exr(folder / f"{name}.exr", {"RGB": rgb}, {"rigctl:camera": name, "rigctl:frame_set": str(n)})
+                attrs = picture_attributes(reader.fps, tc)
+                attrs.update({"rigctl:camera": name, "rigctl:frame_set": str(n)})
+                write_exr(path, picture(rgb, keyer.matte(rgb)), attrs)
             written += 1
         if progress:
             progress(k + 1, len(chosen))

@@ -1,0 +1,210 @@
+"""Timecode through takes, and EXR that compositing and engines take as they are.
+
+Takes here are written with the real take writer (essence, index, manifest on disk) from frames that carry
+timecodes, as the V4L2 driver hands them over, and are read back with the real reader and CLI.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+import pytest
+from timecode import Timecode as Reference  # an independent implementation
+
+from rigctl.exr import REC709_CHROMATICITIES, read_exr
+from rigctl.interfaces import CaptureFormat, Frame, FrameFlags
+from rigctl.take.accounting import CameraStats
+from rigctl.take.framesets import FrameSet
+from rigctl.take.manifest import TAKE_SPEC, write_manifest
+from rigctl.take.reader import TakeReader
+from rigctl.take.sidecars import write_ale, write_sets_csv
+from rigctl.take.writer import CameraWriter
+from rigctl.timecode import Timecode, rate_of, start_timecode
+
+W, H = 64, 48
+GREY = 104  # BT.709 code value of 18 % grey: 1.099 * 0.18 ** 0.45 - 0.099 = 0.409 = 104.3 / 255
+RATES = [(24000 / 1001, "23.976"), (25.0, "25"), (30000 / 1001, "29.97"), (50.0, "50"), (60000 / 1001, "59.94")]
+
+
+def picture() -> np.ndarray:
+    """BGR: a green screen with a grey patch in the middle."""
+    img = np.zeros((H, W, 3), np.uint8)
+    img[...] = (20, 190, 20)
+    img[14:34, 22:42] = GREY
+    return img
+
+
+def write_take(folder: Path, fps: float, frames: dict[str, list[Timecode | None]], period_ns: int = 0) -> Path:
+    """A take of BGR3 frames; camera -> the timecode of each frame (None: the frame carries none)."""
+    period_ns = period_ns or round(1e9 / fps)
+    data = picture()
+    cams = {}
+    for ci, (name, tcs) in enumerate(frames.items()):
+        writer = CameraWriter(name, folder, fps, sync_interval_s=0)
+        for i, tc in enumerate(tcs):
+            flags = FrameFlags.TIMESTAMP_MONOTONIC
+            t = 10**12 + (tc.frames if tc else i) * period_ns + ci * 1000
+            writer.write(Frame(name, i, t, t + 10**6, flags, memoryview(data.reshape(-1)), tc))
+        writer.close()
+        cams[name] = {"essence": f"{name}.essence", "index": f"{name}.index", "frames": len(tcs)}
+    write_manifest(
+        folder,
+        {
+            "spec": TAKE_SPEC,
+            "take": folder.name,
+            "status": "complete",
+            "started_utc": "2026-05-01T10:20:30.500+00:00",
+            "format": {"width": W, "height": H, "pixel_format": "BGR3", "fps": fps, "bytes_per_frame": W * H * 3},
+            "timing": {"frame_period_ns": period_ns},
+            "cameras": cams,
+        },
+    )
+    return folder
+
+
+def labels(start: str, count: int, fps: float) -> list[Timecode]:
+    first = Timecode.parse(start, rate_of(fps)[0])
+    return [first + k for k in range(count)]
+
+
+@pytest.mark.parametrize(("fps", "name"), RATES)
+def test_frame_sets_by_timecode_are_exact_at_every_rate(tmp_path: Path, fps: float, name: str) -> None:
+    """Across a minute whose first labels are dropped (29.97/59.94 DF), a camera that lost one frame leaves
+    a gap at exactly that label and no two frames share a set."""
+    rate, drop = rate_of(fps)
+    sep = ";" if drop else ":"
+    tcs = labels(f"00:00:59{sep}{rate - 6:02d}", 12, fps)
+    lost = 7  # the second frame after the minute turns
+    folder = write_take(tmp_path / "t", fps, {"r0c0": tcs, "r0c1": tcs[:lost] + tcs[lost + 1 :]})
+    reader = TakeReader(folder)
+    sets = reader.frame_sets
+    assert len(sets) == 12
+    assert [s.number for s in sets if not s.complete(reader.names)] == [lost]
+    got = [str(reader.set_timecode(s)) for s in sets]
+    # the labels are the reference library's, one frame apart
+    first = Reference(name, got[0])
+    assert got == [str(Reference(name, frames=first.frames + k)) for k in range(12)]
+    if drop:
+        assert got[6] == "00:01:00;" + ("02" if rate == 30 else "04")  # the dropped labels are skipped ...
+    for s in sets:  # ... and every member of a set carries the set's own label
+        assert {str(reader.timecode(c, i)) for c, i in s.members.items()} == {str(reader.set_timecode(s))}
+
+
+def test_the_labels_that_once_collided_are_two_sets(tmp_path: Path) -> None:
+    fps = 30000 / 1001
+    tcs = [Timecode.parse(t, 30) for t in ("00:00:16;28", "00:00:16;29", "00:00:17;00", "00:00:17;01")]
+    reader = TakeReader(write_take(tmp_path / "t", fps, {"r0c0": tcs, "r0c1": tcs}))
+    assert [str(reader.set_timecode(s)) for s in reader.frame_sets] == [str(t) for t in tcs]
+    assert all(s.complete(reader.names) for s in reader.frame_sets)
+
+
+def test_a_take_past_midnight_keeps_its_order(tmp_path: Path) -> None:
+    tcs = labels("23:59:59:22", 6, 25.0)
+    reader = TakeReader(write_take(tmp_path / "t", 25.0, {"r0c0": tcs, "r0c1": tcs}))
+    assert [str(reader.set_timecode(s)) for s in reader.frame_sets] == [
+        "23:59:59:22", "23:59:59:23", "23:59:59:24", "00:00:00:00", "00:00:00:01", "00:00:00:02",
+    ]  # fmt: skip
+
+
+def test_sidecars_use_the_frames_timecode_else_the_time_of_day(tmp_path: Path) -> None:
+    fmt = CaptureFormat(W, H, "BGR3", 30000 / 1001)
+    started = "2026-05-01T10:20:30.500+00:00"
+    stats = {n: CameraStats(n, written=[(k, k) for k in range(100)]) for n in ("r0c0", "r0c1")}
+    stats["r0c1"].first_timecode = Timecode.parse("01:00:59;29", 30)
+    write_ale(tmp_path / "t.ale", "t", started, fmt, ["r0c0", "r0c1"], stats)
+    rows = (tmp_path / "t.ale").read_text().splitlines()
+    data = {r.split("\t")[0]: r.split("\t") for r in rows[rows.index("Data") + 1 :]}
+    tod = start_timecode(started, fmt.fps)
+    assert data["t_r0c0"][2:4] == [str(tod), str(tod + 100)]
+    assert data["t_r0c1"][2:4] == ["01:00:59;29", "01:01:03;11"]  # 100 frames on, across a dropped pair
+    assert data["t_r0c1"][3] == str(Reference("29.97", "01:00:59;29") + 100)
+    sets = [FrameSet(k, k, {"r0c0": k}, 0) for k in range(3)]
+    write_sets_csv(tmp_path / "sets.csv", sets, ["r0c0"], stats, tod)
+    with open(tmp_path / "sets.csv") as f:
+        assert [r["timecode"] for r in csv.DictReader(f)] == [str(tod + k) for k in range(3)]
+
+
+def test_the_shoot_ui_counts_from_the_ales_start() -> None:
+    from rigctl.tui.session import timecode
+
+    started = "2026-05-01T10:20:30.500+00:00"
+    for fps in (25.0, 30000 / 1001):
+        start = start_timecode(started, fps)
+        assert timecode(started, fps, 0.0) == str(start)
+        assert timecode(started, fps, 60.0) == str(start + math.floor(60 * fps))
+    assert timecode("", 25.0, 0.0) == "00:00:00:00"
+
+
+def test_kernel_timecode_fields_become_the_value() -> None:
+    from rigctl.drivers.v4l2.device import KernelTimecode
+
+    from rigctl.timecode import TimecodeError
+
+    # V4L2_TC_TYPE_30FPS with V4L2_TC_FLAG_DROPFRAME: 00:00:17;00 is frame 510, 00:00:16;29 frame 509
+    assert KernelTimecode(3, 1, 0, 0, 17, 0).to_timecode(29.97) == Timecode(510, 30, True)
+    assert KernelTimecode(3, 1, 0, 0, 16, 29).to_timecode(29.97) == Timecode(509, 30, True)
+    assert KernelTimecode(2, 0, 1, 0, 0, 0).to_timecode(25.0) == Timecode(90000, 25, False)
+    assert KernelTimecode(0, 0, 0, 0, 1, 0).to_timecode(50.0) == Timecode(50, 50, False)  # no type: the format's
+    with pytest.raises(TimecodeError, match="dropped label"):
+        KernelTimecode(3, 1, 0, 1, 0, 0).to_timecode(29.97)
+
+
+# ---- EXR -----------------------------------------------------------------------------------------------------
+def exr_header(path: Path) -> dict[str, object]:
+    return dict(OpenEXR.File(str(path)).header())
+
+
+def test_exr_export_is_scene_linear_premultiplied_with_attributes(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    fps = 30000 / 1001
+    tcs = labels("00:00:59;28", 4, fps)
+    folder = write_take(tmp_path / "t", fps, {"r0c0": tcs, "r0c1": tcs})
+    out = tmp_path / "seq"
+    res = run_cli("take", "export", str(folder), "--out", str(out), "--format", "exr", "--layout", "sequence")
+    assert res.returncode == 0, res.stderr
+    # one folder per camera, one numbered file per frame set: what NUKE reads as r0c0.######.exr
+    assert sorted(p.name for p in (out / "r0c0").iterdir()) == [f"r0c0.{k:06d}.exr" for k in range(4)]
+    assert sorted(p.name for p in out.iterdir()) == ["r0c0", "r0c1"]
+    for k, tc in enumerate(tcs):
+        path = out / "r0c1" / f"r0c1.{k:06d}.exr"
+        channels, _ = read_exr(path)
+        rgb, a = channels["RGB"], channels["A"]
+        # the grey patch: 18 % grey, scene-linear (code value 104 decoded by BT.709's inverse OETF) ...
+        patch = rgb[20:28, 28:36]
+        expected = ((GREY / 255 + 0.099) / 1.099) ** (1 / 0.45)
+        assert np.allclose(patch, expected, atol=1e-5) and abs(expected - 0.18) < 0.0015
+        # ... opaque, and the green screen transparent with premultiplied (zero) colour
+        assert np.all(a[20:28, 28:36] == 1.0) and np.all(a[:6] == 0.0) and np.all(rgb[:6] == 0.0)
+        header = exr_header(path)
+        assert np.allclose(header["chromaticities"], REC709_CHROMATICITIES, atol=1e-6)
+        assert header["framesPerSecond"] == Fraction(30000, 1001)
+        t = header["timeCode"]
+        assert (t.hours, t.minutes, t.seconds, t.frame, t.dropFrame) == (*tc.fields(), True)  # type: ignore[attr-defined]
+    assert [str(t) for t in tcs] == ["00:00:59;28", "00:00:59;29", "00:01:00;02", "00:01:00;03"]
+    # the default layout is as before: DIR/<frame>/<camera>.exr
+    res = run_cli("take", "export", str(folder), "--out", str(tmp_path / "flat"), "--format", "exr", "--frames", "1")
+    assert res.returncode == 0, res.stderr
+    assert [p.relative_to(tmp_path / "flat").as_posix() for p in sorted((tmp_path / "flat").rglob("*.exr"))] == [
+        "000001/r0c0.exr",
+        "000001/r0c1.exr",
+    ]
+
+
+def test_exr_time_code_at_50_counts_frame_pairs(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    tcs = labels("10:00:00:48", 3, 50.0)
+    folder = write_take(tmp_path / "t", 50.0, {"r0c0": tcs})
+    res = run_cli(
+        "take", "export", str(folder), "--out", str(tmp_path / "o"), "--format", "exr", "--layout", "sequence"
+    )
+    assert res.returncode == 0, res.stderr
+    got = []
+    for k in range(3):
+        header = exr_header(tmp_path / "o" / "r0c0" / f"r0c0.{k:06d}.exr")
+        t = header["timeCode"]
+        got.append((t.seconds, t.frame, t.fieldPhase))  # type: ignore[attr-defined]
+        assert header["framesPerSecond"] == Fraction(50)
+    assert got == [(0, 24, False), (0, 24, True), (1, 0, False)]  # 10:00:00:48, :49, 10:00:01:00
