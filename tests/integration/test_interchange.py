@@ -208,3 +208,41 @@ def test_exr_time_code_at_50_counts_frame_pairs(tmp_path: Path, run_cli) -> None
         got.append((t.seconds, t.frame, t.fieldPhase))  # type: ignore[attr-defined]
         assert header["framesPerSecond"] == Fraction(50)
     assert got == [(0, 24, False), (0, 24, True), (1, 0, False)]  # 10:00:00:48, :49, 10:00:01:00
+
+
+# ---- printing ------------------------------------------------------------------------------------------------
+def png_phys(path: Path) -> tuple[int, int, int]:
+    """The pHYs chunk of a PNG, read from its bytes: pixels per unit x, y and the unit (1 = metre)."""
+    import struct
+
+    data = path.read_bytes()
+    at = 8
+    while at < len(data):
+        length, kind = struct.unpack(">I4s", data[at : at + 8])
+        if kind == b"pHYs":
+            return struct.unpack(">IIB", data[at + 8 : at + 17])  # type: ignore[return-value]
+        at += 12 + length
+    raise AssertionError(f"{path}: no pHYs chunk")
+
+
+@pytest.mark.parametrize(("square_mm", "dpi"), [(75.0, 150.0), (40.0, 300.0), (23.0, 97.0)])
+def test_board_png_prints_at_its_size(tmp_path: Path, run_cli, square_mm: float, dpi: float) -> None:  # type: ignore[no-untyped-def]
+    import cv2
+    from PIL import Image
+
+    from rigctl.board import BoardSpec
+
+    res = run_cli("board", "--out", str(tmp_path / "b"), "--square-mm", f"{square_mm:g}", "--dpi", f"{dpi:g}",
+                  "--marker-mm", f"{square_mm * 0.7:g}", "--squares", "5x4")  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    png = tmp_path / "b.png"
+    x, y, unit = png_phys(png)
+    assert unit == 1 and x == y and abs(x * 0.0254 - dpi) < 0.02 * dpi
+    # the squares as drawn, measured in pixels from the detected corners, printed at the stored resolution
+    img = cv2.imread(str(png), cv2.IMREAD_GRAYSCALE)
+    corners, ids, _, _ = cv2.aruco.CharucoDetector(BoardSpec.load(tmp_path / "b.yaml").board()).detectBoard(img)
+    assert ids is not None and len(ids) == 4 * 3
+    pts = corners.reshape(3, 4, 2)
+    square_px = (np.diff(pts[..., 0], axis=1).mean() + np.diff(pts[..., 1], axis=0).mean()) / 2
+    assert abs(square_px / x * 1000 - square_mm) < 0.02  # mm on paper
+    assert Image.open(png).info["dpi"] == pytest.approx((x * 0.0254, x * 0.0254), abs=0.01)
