@@ -32,6 +32,7 @@ from rigctl.registry import DeviceSet
 from rigctl.rig import Rig
 from rigctl.take import framesets, sidecars
 from rigctl.take.accounting import CameraStats
+from rigctl.take.index import read_index
 from rigctl.take.manifest import TAKE_SPEC, write_manifest
 from rigctl.take.writer import CameraWriter, DiskFullError
 from rigctl.timecode import start_timecode
@@ -447,7 +448,16 @@ class Recorder:
 
     def _frame_sets(self) -> list[framesets.FrameSet]:
         stamps = {n: np.array([c for _, c in self.stats[n].written], dtype=np.int64) for n in self.names}
-        return framesets.assemble(stamps, self.period_ns, self.t0_ns)
+        timecodes = None
+        if all(self.stats[n].first_timecode is not None for n in self.names):
+            # the same rule as the take's reader: by timecode, read back from the indexes just written
+            try:
+                indexes = {n: read_index(self._writers[n].index_path)[0] for n in self.names}
+                if all(len(indexes[n]) == len(stamps[n]) for n in self.names):
+                    timecodes = framesets.timecode_counts(indexes, self.format.fps)
+            except RigctlError as exc:
+                log.warning("frame sets by time, not timecode: %s", exc)
+        return framesets.assemble(stamps, self.period_ns, self.t0_ns, timecodes)
 
     def _finalise(self, stalled: list[str]) -> dict[str, Any]:
         """The manifest goes first (the reserve was just freed for it), then what can be rebuilt or

@@ -16,7 +16,7 @@ from rigctl.pixfmt import to_rgb
 from rigctl.take import framesets
 from rigctl.take.index import IndexProblem, read_index
 from rigctl.take.manifest import Manifest, read_manifest
-from rigctl.timecode import Timecode, TimecodeError, rate_of, start_timecode, unwrap
+from rigctl.timecode import Timecode, TimecodeError, rate_of, start_timecode
 
 
 class TakeReader:
@@ -81,17 +81,10 @@ class TakeReader:
     def frame_sets(self) -> list[framesets.FrameSet]:
         """Frame sets assembled from the indexes (the same rule the recorder used)."""
         stamps = {n: self.index[n]["capture_ns"].astype(np.int64) for n in self.names}
-        flags = [self.index[n]["flags"] for n in self.names if len(self.index[n])]
-        use_tc = bool(flags) and all(np.all(f & FrameFlags.TIMECODE) for f in flags)
-        timecodes = None
-        if use_tc:
-            # one rate and drop flag for the whole take, else counts of different scales would be compared
-            drops = {bool(v) for f in flags for v in np.unique(f & FrameFlags.DROP_FRAME)}
-            if len(drops) > 1:
-                raise TakeError(f"{self.folder}: some frames count drop-frame timecode and some do not")
-            rate, drop = self.timecode_rate(drops.pop())
-            first = min(int(self.index[n]["timecode"][0]) for n in self.names if len(self.index[n]))
-            timecodes = {n: unwrap(self.index[n]["timecode"], first, rate, drop) for n in self.names}
+        try:
+            timecodes = framesets.timecode_counts(self.index, self.fps)
+        except TimecodeError as exc:
+            raise TakeError(f"{self.folder}: {exc}") from None
         t0 = self.manifest.timing.get("t0_ns")
         return framesets.assemble(stamps, self.period_ns, t0, timecodes)
 

@@ -246,3 +246,38 @@ def test_board_png_prints_at_its_size(tmp_path: Path, run_cli, square_mm: float,
     square_px = (np.diff(pts[..., 0], axis=1).mean() + np.diff(pts[..., 1], axis=0).mean()) / 2
     assert abs(square_px / x * 1000 - square_mm) < 0.02  # mm on paper
     assert Image.open(png).info["dpi"] == pytest.approx((x * 0.0254, x * 0.0254), abs=0.01)
+
+
+def test_the_recorder_assembles_by_timecode_as_the_reader_does(tmp_path: Path) -> None:
+    """Simulated cameras whose frames carry timecode (r0c1's one frame ahead, as a mis-jammed camera would be):
+    the recorder's frame sets, sets.csv and ALE follow the timecode, and agree with the reader's."""
+    from rigctl.recorder import Recorder, TakePlan
+    from rigctl.registry import open_cameras
+    from rigctl.rig import load_rig
+
+    rig = load_rig("sim-3x3")
+    start = Timecode.parse("09:59:59:20", 25)
+
+    class WithTimecode(CameraWriter):
+        def write(self, frame: Frame, frame_set: int = -1) -> None:
+            frame.timecode = start + (self.frames + (1 if self.camera == "r0c1" else 0))
+            super().write(frame, frame_set)
+
+    devices = open_cameras(rig, ["motion=false", "noise=0"], ["r0c0", "r0c1"])
+    rec = Recorder(rig, devices, TakePlan.spread("t", [tmp_path], sorted(devices.cameras)), writer_factory=WithTimecode)
+    rec.arm()
+    rec.start(10)
+    assert rec.wait(timeout_s=60)
+    rec.finish()
+    reader = TakeReader(tmp_path / "t")
+    sets = reader.frame_sets
+    assert len(sets) == 11 and [s.number for s in sets if not s.complete(reader.names)] == [0, 10]
+    with open(tmp_path / "t" / "sets.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["timecode"] for r in rows] == [str(reader.set_timecode(s)) for s in sets]
+    assert rows[0]["timecode"] == "09:59:59:20" and rows[5]["timecode"] == "10:00:00:00"
+    assert [r["complete"] for r in rows] == ["0", *["1"] * 9, "0"]
+    ale = (tmp_path / "t" / "t.ale").read_text().splitlines()
+    data = {r.split("\t")[0]: r.split("\t") for r in ale[ale.index("Data") + 1 :]}
+    assert data["t_r0c0"][2:4] == ["09:59:59:20", "10:00:00:05"]
+    assert data["t_r0c1"][2:4] == ["09:59:59:21", "10:00:00:06"]
