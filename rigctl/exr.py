@@ -3,25 +3,32 @@
 Pictures go out as compositing software and game engines read EXR: scene-linear RGB (the cameras' BT.709
 transfer decoded), Rec. 709 primaries with a D65 white in ``chromaticities``, an ``A`` channel from the key
 matte with RGB premultiplied by it (what NUKE's Read node and Unreal's Img Media assume), and the frame's
-``timeCode`` and the take's ``framesPerSecond``.
+``timeCode`` and the take's ``framesPerSecond``. ACEScg (AP1 primaries) is an option, converted by OpenColorIO.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 from fractions import Fraction
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import OpenEXR
 from numpy.typing import NDArray
 
+from rigctl.errors import ParameterError
 from rigctl.timecode import Timecode, is_fractional
 
 log = logging.getLogger(__name__)
 
 # ITU-R BT.709 primaries and D65 white: (red x, y, green x, y, blue x, y, white x, y)
 REC709_CHROMATICITIES = (0.640, 0.330, 0.300, 0.600, 0.150, 0.060, 0.3127, 0.3290)
+# ACES AP1 primaries (ACEScg) and the ACES white (S-2014-004)
+AP1_CHROMATICITIES = (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767)
+# the colour spaces a picture can be written in: scene-linear Rec. 709 (default) or ACEScg
+COLOURS = {"rec709": REC709_CHROMATICITIES, "acescg": AP1_CHROMATICITIES}
 
 # BT.709 OETF: V = 1.099 L^0.45 - 0.099 above L = 0.018, V = 4.5 L below
 _BETA, _ALPHA, _SLOPE = 0.018, 1.099, 4.5
@@ -49,20 +56,40 @@ def frame_rate(fps: float) -> Fraction:
     return Fraction(fps).limit_denominator(1001)
 
 
-def picture(rgb: NDArray[np.floating], matte: NDArray[np.floating] | None) -> dict[str, NDArray[np.float32]]:
-    """``RGB`` (scene-linear, premultiplied by the matte) and ``A`` from BT.709 code values and a key matte.
+@functools.cache
+def _acescg() -> Any:
+    """OpenColorIO's processor from linear Rec. 709 to ACEScg, from its built-in ACES studio config."""
+    import PyOpenColorIO as ocio
 
-    Without a matte the picture is opaque (``A`` = 1), so every output reads the same way.
+    config = ocio.Config.CreateFromBuiltinConfig("studio-config-latest")
+    return config.getProcessor("Linear Rec.709 (sRGB)", "ACEScg").getDefaultCPUProcessor()
+
+
+def to_colour(linear: NDArray[np.floating], colour: str) -> NDArray[np.float32]:
+    """Scene-linear Rec. 709 RGB in ``colour`` (one of :data:`COLOURS`)."""
+    if colour not in COLOURS:
+        raise ParameterError(f"--colour {colour!r}: choose {' or '.join(COLOURS)}")
+    out = np.array(linear, dtype=np.float32, order="C")
+    if colour == "acescg":
+        _acescg().applyRGB(out)  # in place, on the contiguous copy
+    return out
+
+
+def picture(
+    rgb: NDArray[np.floating], matte: NDArray[np.floating] | None, colour: str = "rec709"
+) -> dict[str, NDArray[np.float32]]:
+    """``RGB`` (scene-linear in ``colour``, premultiplied by the matte) and ``A`` from BT.709 code values and a
+    key matte. Without a matte the picture is opaque (``A`` = 1), so every output reads the same way.
     """
-    linear = bt709_to_linear(rgb)
+    linear = to_colour(bt709_to_linear(rgb), colour)
     alpha = np.ones(linear.shape[:2], np.float32) if matte is None else np.clip(matte, 0, 1).astype(np.float32)
     return {"RGB": linear * alpha[..., None], "A": alpha}
 
 
-def picture_attributes(fps: float | None, timecode: Timecode | None) -> dict[str, object]:
-    """The standard attributes of a picture: ``chromaticities`` and, when known, ``framesPerSecond`` and
-    ``timeCode`` (SMPTE 12M packed, with its drop-frame flag)."""
-    attrs: dict[str, object] = {"chromaticities": REC709_CHROMATICITIES}
+def picture_attributes(fps: float | None, timecode: Timecode | None, colour: str = "rec709") -> dict[str, object]:
+    """The standard attributes of a picture: ``chromaticities`` of ``colour`` and, when known,
+    ``framesPerSecond`` and ``timeCode`` (SMPTE 12M packed, with its drop-frame flag)."""
+    attrs: dict[str, object] = {"chromaticities": COLOURS[colour]}
     if fps is not None:
         attrs["framesPerSecond"] = frame_rate(fps)
     if timecode is not None:

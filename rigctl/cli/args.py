@@ -7,6 +7,7 @@ import math
 import sys
 from typing import NoReturn
 
+from rigctl.exr import COLOURS
 from rigctl.layout import LAYOUTS
 
 
@@ -66,7 +67,14 @@ def fraction(text: str) -> float:
 
 
 def add_layout(p: argparse.ArgumentParser) -> None:
-    """``--layout`` of every command that writes per-frame, per-camera files (rigctl.layout)."""
+    """``--layout`` of every command that writes per-frame, per-camera files (rigctl.layout), and ``--colour``
+    of their EXR pictures (rigctl.exr)."""
+    p.add_argument(
+        "--colour",
+        default="rec709",
+        choices=tuple(COLOURS),
+        help="EXR pictures in scene-linear Rec. 709 (default) or ACEScg (AP1, through OpenColorIO)",
+    )
     p.add_argument(
         "--layout",
         default="frames",

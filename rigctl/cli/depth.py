@@ -51,7 +51,7 @@ def run(ns: argparse.Namespace) -> int:
     )
     bar = Progress(f"depth {ns.input.name}")
     try:
-        report = run_depth(ns.input, ns.out, opt, frames, progress=bar, layout=ns.layout)
+        report = run_depth(ns.input, ns.out, opt, frames, progress=bar, layout=ns.layout, colour=ns.colour)
     finally:
         bar.close()
     if ns.json:

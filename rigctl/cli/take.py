@@ -58,7 +58,9 @@ def run_export(ns: argparse.Namespace) -> int:
     reader = TakeReader(ns.take)
     bar = Progress(f"exporting {reader.manifest.take}")
     try:
-        result = export_take(reader, ns.out, ns.frames, ns.format, progress=bar.steps, layout=ns.layout)
+        result = export_take(
+            reader, ns.out, ns.frames, ns.format, progress=bar.steps, layout=ns.layout, colour=ns.colour
+        )
     finally:
         bar.close()
     print(

@@ -20,7 +20,7 @@ from rigctl.depth.grid import Grid, TakeGrid, load_grid_folder
 from rigctl.depth.key import Keyer
 from rigctl.depth.multibaseline import PRESETS, DepthResult, cross_check, estimate
 from rigctl.errors import ParameterError
-from rigctl.exr import picture, picture_attributes, write_exr
+from rigctl.exr import picture, picture_attributes, to_colour, write_exr
 from rigctl.layout import output_path
 from rigctl.pfm import write_pfm
 from rigctl.timecode import Timecode
@@ -117,6 +117,7 @@ class Target:
     fps: float | None = None
     timecode: Timecode | None = None
     flat: bool = False  # one picture (a grid folder): DIR/<camera>.<ext>
+    colour: str = "rec709"  # rigctl.exr.COLOURS
 
     def path(self, camera: str, ext: str) -> Path:
         p = self.out / f"{camera}{ext}" if self.flat else output_path(self.out, self.layout, self.frame, camera, ext)
@@ -137,7 +138,7 @@ def write_outputs(
         inv_z = np.where(np.isfinite(z) & (z > 0), 1.0 / z, 0.0).astype(np.float32)
         fin = np.where(np.isfinite(d), d, 0.0).astype(np.float32)
         # the picture scene-linear and premultiplied by the key matte, as NUKE and Unreal read it
-        channels: dict[str, F32] = {**picture(grid.images[name], res.matte), "depth.Z": inv_z}
+        channels: dict[str, F32] = {**picture(grid.images[name], res.matte, target.colour), "depth.Z": inv_z}
         channels["confidence.Y"] = res.confidence
         ox, oy = grid.offsets[name]
         row = [n for n in grid.names if abs(grid.offsets[n][1] - oy) < 0.25 and n != name]
@@ -152,7 +153,7 @@ def write_outputs(
             ratio = min(abs(grid.offsets[n][1] - oy) for n in col)
             channels["disparityV.y"] = (-fin * ratio).astype(np.float32)  # shift to the camera below
         attrs = {
-            **picture_attributes(target.fps, target.timecode),
+            **picture_attributes(target.fps, target.timecode, target.colour),
             "rigctl.camera": name,
             "rigctl.focal_px": f"{grid.focal_px:.6f}",
             "rigctl.spacing_x": f"{grid.spacing:.6f}",
@@ -170,11 +171,13 @@ def run_depth(
     formats: tuple[str, ...] = ("exr", "pfm", "png"),
     progress: Callable[[float, str], None] | None = None,
     layout: str = "frames",
+    colour: str = "rec709",
 ) -> dict[str, Any]:
     """Depth for a rectified take or a grid folder; writes outputs (in ``layout``, see rigctl.layout) and
     ``report.json``; returns the report."""
     t_start = time.perf_counter()
     output_path(out, layout, 0, "", "")  # an unknown layout is refused before any work
+    to_colour(np.zeros((1, 3), np.float32), colour)  # and an unknown colour space
     if (source / "take.yaml").exists():
         take = TakeGrid(source)
         numbers = take.frame_numbers()
@@ -192,7 +195,7 @@ def run_depth(
         sets = {s.number: s for s in take.reader.frame_sets}
 
         def target(n: int) -> Target:
-            return Target(out, layout, n, take.reader.fps, take.reader.set_timecode(sets[n]))
+            return Target(out, layout, n, take.reader.fps, take.reader.set_timecode(sets[n]), colour=colour)
     elif (source / "grid.yaml").exists():
         numbers = [0]
         grid0 = load_grid_folder(source)
@@ -202,7 +205,7 @@ def run_depth(
 
         def target(n: int) -> Target:
             # a grid folder is one picture: the frames layout keeps its outputs in DIR itself, as before
-            return Target(out, layout, n, flat=layout == "frames")
+            return Target(out, layout, n, flat=layout == "frames", colour=colour)
     else:
         raise ParameterError(f"{source}: not a take (take.yaml) or a grid folder (grid.yaml)")
     report: dict[str, Any] = {"source": str(source), "preset": opt.preset, "frames": {}}

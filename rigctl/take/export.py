@@ -10,7 +10,7 @@ import numpy as np
 
 from rigctl.depth.key import Keyer
 from rigctl.errors import ParameterError, TakeError
-from rigctl.exr import picture, picture_attributes, write_exr
+from rigctl.exr import picture, picture_attributes, to_colour, write_exr
 from rigctl.layout import output_path
 from rigctl.take.reader import TakeReader
 
@@ -40,6 +40,7 @@ def export_take(
     fmt: str = "png",
     progress: Callable[[int, int], None] | None = None,
     layout: str = "frames",
+    colour: str = "rec709",
 ) -> dict[str, int]:
     """Write every member of the chosen frame sets; returns counts of images written and members missing.
 
@@ -49,6 +50,7 @@ def export_take(
     if fmt not in ("png", "exr"):
         raise ParameterError(f"--format {fmt!r}: choose png or exr")
     output_path(out, layout, 0, "", "")  # an unknown layout is refused before any work
+    to_colour(np.zeros((1, 3), np.float32), colour)  # and an unknown colour space
     sets = reader.frame_sets
     if not sets:
         raise TakeError(f"{reader.folder}: the take holds no frames")
@@ -70,9 +72,9 @@ def export_take(
                 if not cv2.imwrite(str(path), bgr):
                     raise TakeError(f"{path}: cannot write")
             else:
-                attrs = picture_attributes(reader.fps, tc)
+                attrs = picture_attributes(reader.fps, tc, colour)
                 attrs.update({"rigctl:camera": name, "rigctl:frame_set": str(n)})
-                write_exr(path, picture(rgb, keyer.matte(rgb)), attrs)
+                write_exr(path, picture(rgb, keyer.matte(rgb), colour), attrs)
             written += 1
         if progress:
             progress(k + 1, len(chosen))

@@ -194,6 +194,24 @@ def test_exr_export_is_scene_linear_premultiplied_with_attributes(tmp_path: Path
     ]
 
 
+def test_exr_acescg_option(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    """ACEScg through OpenColorIO: grey stays grey, and a Rec. 709 red is the first column of the published
+    Rec. 709 to AP1 matrix (0.6131, 0.0702, 0.0206)."""
+    from rigctl.exr import AP1_CHROMATICITIES, to_colour
+
+    assert np.allclose(to_colour(np.array([[1.0, 0, 0]]), "acescg"), [[0.6131, 0.0702, 0.0206]], atol=2e-4)
+    folder = write_take(tmp_path / "t", 25.0, {"r0c0": labels("01:00:00:00", 1, 25.0)})
+    out = tmp_path / "aces"
+    res = run_cli("take", "export", str(folder), "--out", str(out), "--format", "exr", "--colour", "acescg")
+    assert res.returncode == 0, res.stderr
+    channels, header = read_exr(out / "000000" / "r0c0.exr")
+    expected = ((GREY / 255 + 0.099) / 1.099) ** (1 / 0.45)
+    assert np.allclose(channels["RGB"][20:28, 28:36], expected, atol=1e-4)
+    assert np.allclose(header["chromaticities"], AP1_CHROMATICITIES, atol=1e-6)
+    res = run_cli("take", "export", str(folder), "--out", str(out), "--format", "exr", "--colour", "p3")
+    assert res.returncode == 2 and "--colour" in res.stderr and len(res.stderr.strip().splitlines()) == 1
+
+
 def test_exr_time_code_at_50_counts_frame_pairs(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
     tcs = labels("10:00:00:48", 3, 50.0)
     folder = write_take(tmp_path / "t", 50.0, {"r0c0": tcs})
