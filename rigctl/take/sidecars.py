@@ -95,7 +95,7 @@ def write_ale(
         st = stats[name]
         n = st.frames_written
         span = st.written[-1][0] - st.written[0][0] + 1 if st.written else 0  # frames the clip spans
-        start = st.first_timecode or take_start
+        start = st.first_timecode if st.first_timecode is not None else take_start
         end = start + span
         drops = len(st.source_drops) + len(st.writer_drops) + len(st.error_frames) + len(st.not_written)
         rows.append("\t".join([f"{take}_{name}", "V", str(start), str(end), take, name, str(n), str(drops)]))
