@@ -1,30 +1,129 @@
-"""OpenEXR output with named channels and header attributes (OpenCV's EXR codec cannot name channels)."""
+"""OpenEXR output with named channels and header attributes (OpenCV's EXR codec cannot name channels).
+
+Pictures go out as compositing software and game engines read EXR: scene-linear RGB (the cameras' BT.709
+transfer decoded), Rec. 709 primaries with a D65 white in ``chromaticities``, an ``A`` channel from the key
+matte with RGB premultiplied by it (what NUKE's Read node and Unreal's Img Media assume), and the frame's
+``timeCode`` and the take's ``framesPerSecond``. ACEScg (AP1 primaries) is an option, converted by OpenColorIO.
+"""
 
 from __future__ import annotations
 
+import functools
+import logging
+from fractions import Fraction
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import OpenEXR
 from numpy.typing import NDArray
 
-from rigctl.errors import TakeError
+from rigctl.errors import ParameterError, TakeError
+from rigctl.timecode import Timecode, is_fractional
+
+log = logging.getLogger(__name__)
+
+# ITU-R BT.709 primaries and D65 white: (red x, y, green x, y, blue x, y, white x, y)
+REC709_CHROMATICITIES = (0.640, 0.330, 0.300, 0.600, 0.150, 0.060, 0.3127, 0.3290)
+# ACES AP1 primaries (ACEScg) and the ACES white (S-2014-004)
+AP1_CHROMATICITIES = (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767)
+# the colour spaces a picture can be written in: scene-linear Rec. 709 (default) or ACEScg
+COLOURS = {"rec709": REC709_CHROMATICITIES, "acescg": AP1_CHROMATICITIES}
+
+# BT.709 OETF: V = 1.099 L^0.45 - 0.099 above L = 0.018, V = 4.5 L below
+_BETA, _ALPHA, _SLOPE = 0.018, 1.099, 4.5
 
 
-def write_exr(path: Path, channels: dict[str, NDArray[np.floating]], attributes: dict[str, str] | None = None) -> None:
+def bt709_to_linear(v: NDArray[np.floating]) -> NDArray[np.float32]:
+    """Scene-linear light from BT.709 code values in [0, 1] (the inverse of the camera's OETF)."""
+    v = np.asarray(v, dtype=np.float32)
+    knee = np.float32(_SLOPE * _BETA)  # 0.081
+    high = ((np.maximum(v, knee) + np.float32(_ALPHA - 1)) / np.float32(_ALPHA)) ** np.float32(1 / 0.45)
+    return np.where(v < knee, v / np.float32(_SLOPE), high).astype(np.float32)
+
+
+def linear_to_bt709(linear: NDArray[np.floating]) -> NDArray[np.float32]:
+    """BT.709 code values of scene-linear light (the camera's OETF)."""
+    x = np.asarray(linear, dtype=np.float32)
+    high = np.float32(_ALPHA) * np.maximum(x, np.float32(_BETA)) ** np.float32(0.45) - np.float32(_ALPHA - 1)
+    return np.where(x < _BETA, x * np.float32(_SLOPE), high).astype(np.float32)
+
+
+def frame_rate(fps: float) -> Fraction:
+    """The exact rational rate: 30000/1001 for 29.97, 25/1 for 25."""
+    if is_fractional(fps):
+        return Fraction(round(fps) * 1000, 1001)
+    return Fraction(fps).limit_denominator(1001)
+
+
+@functools.cache
+def _acescg() -> Any:
+    """OpenColorIO's processor from linear Rec. 709 to ACEScg, from its built-in ACES studio config."""
+    import PyOpenColorIO as ocio
+
+    config = ocio.Config.CreateFromBuiltinConfig("studio-config-latest")
+    return config.getProcessor("Linear Rec.709 (sRGB)", "ACEScg").getDefaultCPUProcessor()
+
+
+def to_colour(linear: NDArray[np.floating], colour: str) -> NDArray[np.float32]:
+    """Scene-linear Rec. 709 RGB in ``colour`` (one of :data:`COLOURS`)."""
+    if colour not in COLOURS:
+        raise ParameterError(f"--colour {colour!r}: choose {' or '.join(COLOURS)}")
+    out = np.array(linear, dtype=np.float32, order="C")
+    if colour == "acescg":
+        _acescg().applyRGB(out)  # in place, on the contiguous copy
+    return out
+
+
+def picture(
+    rgb: NDArray[np.floating], matte: NDArray[np.floating] | None, colour: str = "rec709"
+) -> dict[str, NDArray[np.float32]]:
+    """``RGB`` (scene-linear in ``colour``, premultiplied by the matte) and ``A`` from BT.709 code values and a
+    key matte. Without a matte the picture is opaque (``A`` = 1), so every output reads the same way.
+    """
+    linear = to_colour(bt709_to_linear(rgb), colour)
+    alpha = np.ones(linear.shape[:2], np.float32) if matte is None else np.clip(matte, 0, 1).astype(np.float32)
+    return {"RGB": linear * alpha[..., None], "A": alpha}
+
+
+def picture_attributes(fps: float | None, timecode: Timecode | None, colour: str = "rec709") -> dict[str, object]:
+    """The standard attributes of a picture: ``chromaticities`` of ``colour`` and, when known,
+    ``framesPerSecond`` and ``timeCode`` (SMPTE 12M packed, with its drop-frame flag)."""
+    attrs: dict[str, object] = {"chromaticities": COLOURS[colour]}
+    if fps is not None:
+        attrs["framesPerSecond"] = frame_rate(fps)
+    if timecode is not None:
+        h, m, s, f = timecode.fields()
+        pair = 0
+        if timecode.rate > 30:  # ST 12-1 above 30 fps: the frame-pair number, the pair's second frame flagged
+            f, pair = divmod(f, 2)
+        attrs["timeCode"] = OpenEXR.TimeCode(h, m, s, f, int(timecode.drop), 0, pair, *([0] * 11))
+    return attrs
+
+
+def write_exr(
+    path: Path, channels: dict[str, NDArray[np.floating]], attributes: dict[str, object] | None = None
+) -> None:
     """Write a scanline EXR (ZIP) with float32 channels; ``RGB`` may be one H x W x 3 array."""
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    header: dict[str, object] = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     header.update(attributes or {})
     data = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in channels.items()}
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.exr")
     OpenEXR.File(header, data).write(str(tmp))
     tmp.replace(path)
 
 
 def read_exr(path: Path) -> tuple[dict[str, NDArray[np.float32]], dict[str, object]]:
-    """Channels and header of an EXR; a file OpenEXR cannot read is a :class:`TakeError` naming it."""
+    """Channels and the header; ``RGB`` comes back as one H x W x 3 array, ``A`` on its own. A file OpenEXR
+    cannot read is a :class:`TakeError` naming it."""
     try:
         f = OpenEXR.File(str(path))
-        return {k: np.asarray(v.pixels, dtype=np.float32) for k, v in f.channels().items()}, dict(f.header())
+        channels = {k: np.asarray(v.pixels, dtype=np.float32) for k, v in f.channels().items()}
+        header = dict(f.header())
     except (OSError, RuntimeError, ValueError, TypeError) as exc:  # OpenEXR's errors on a damaged file
         raise TakeError(f"{path}: not a readable EXR file: {exc}") from None
+    rgba = channels.pop("RGBA", None)
+    if rgba is not None:
+        channels["RGB"], channels["A"] = rgba[..., :3], rgba[..., 3]
+    return channels, header

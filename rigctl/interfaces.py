@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
+from rigctl.timecode import Timecode
+
 
 class FrameFlags(enum.IntFlag):
     """Per-frame flags, stored in the take's index next to each frame."""
@@ -26,6 +28,7 @@ class FrameFlags(enum.IntFlag):
     TIMESTAMP_MONOTONIC = 4  # capture timestamp is CLOCK_MONOTONIC
     TIMESTAMP_SOE = 8  # capture timestamp taken at start of exposure (else end of frame)
     FORMAT_CHANGED = 16  # first frame after the signal format changed
+    DROP_FRAME = 32  # the frame's timecode counts drop-frame (29.97 / 59.94 DF)
 
 
 @dataclass(frozen=True)
@@ -62,7 +65,7 @@ class Frame:
     host_ns: int
     flags: FrameFlags
     data: memoryview
-    timecode: str | None = None
+    timecode: Timecode | None = None
 
 
 @dataclass

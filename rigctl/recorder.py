@@ -31,9 +31,11 @@ from rigctl.registry import DeviceSet
 from rigctl.rig import Rig
 from rigctl.take import framesets, sidecars
 from rigctl.take.accounting import CameraStats
+from rigctl.take.index import read_index
 from rigctl.take.manifest import TAKE_SPEC, write_manifest
 from rigctl.take.reserve import create_reserve, release_reserve
 from rigctl.take.writer import CameraWriter, DiskFullError
+from rigctl.timecode import start_timecode
 
 log = logging.getLogger(__name__)
 
@@ -364,6 +366,8 @@ class Recorder:
             self._writer_busy[name] = frame
             try:
                 writer.write(frame)
+                if not st.written:
+                    st.first_timecode = frame.timecode
                 st.written.append((frame.sequence, frame.capture_ns))
                 st.bytes_written += len(frame.data)
             except RigctlError as exc:
@@ -446,7 +450,16 @@ class Recorder:
 
     def _frame_sets(self) -> list[framesets.FrameSet]:
         stamps = {n: np.array([c for _, c in self.stats[n].written], dtype=np.int64) for n in self.names}
-        return framesets.assemble(stamps, self.period_ns, self.t0_ns)
+        timecodes = None
+        if all(self.stats[n].first_timecode is not None for n in self.names):
+            # the same rule as the take's reader: by timecode, read back from the indexes just written
+            try:
+                indexes = {n: read_index(self._writers[n].index_path)[0] for n in self.names}
+                if all(len(indexes[n]) == len(stamps[n]) for n in self.names):
+                    timecodes = framesets.timecode_counts(indexes, self.format.fps)
+            except RigctlError as exc:
+                log.warning("frame sets by time, not timecode: %s", exc)
+        return framesets.assemble(stamps, self.period_ns, self.t0_ns, timecodes)
 
     def _finalise(self, stalled: list[str]) -> dict[str, Any]:
         """The manifest goes first (the reserve was just freed for it), then what can be rebuilt or
@@ -457,7 +470,8 @@ class Recorder:
         write_manifest(folder, self._manifest(status, sets))
         extras_failed = False
         try:
-            sidecars.write_sets_csv(folder / "sets.csv", sets, self.names, self.stats)
+            start = start_timecode(self.started_utc, self.format.fps)
+            sidecars.write_sets_csv(folder / "sets.csv", sets, self.names, self.stats, start)
             devices = {n: self.rig.camera(n).device for n in self.names}
             sidecars.write_log_csv(folder / "log.csv", self.names, devices, self.stats)
             sidecars.write_ale(
@@ -533,7 +547,7 @@ class Recorder:
                 "t0_ns": self.t0_ns,
                 "t1_ns": self.t1_ns,
                 "frame_period_ns": self.period_ns,
-                "start_timecode": sidecars.timecode_of(self.started_utc, fmt.fps),
+                "start_timecode": str(start_timecode(self.started_utc, fmt.fps)),
             },
             "checksum": "crc32" if self.checksum else "none",
             "devices": {"description": self.devices.description, "settings": self.devices.settings},

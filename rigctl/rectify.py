@@ -214,8 +214,9 @@ def rectify_take(
                     int(rec["sequence"]),
                     int(rec["capture_ns"]),
                     int(rec["host_ns"]),
-                    FrameFlags(int(rec["flags"])) & ~FrameFlags.TIMECODE,
+                    FrameFlags(int(rec["flags"])),
                     memoryview(np.ascontiguousarray(res).reshape(-1).data),
+                    reader.timecode(name, i),  # processed frames keep their source's timecode
                 )
                 writer.write(frame, int(rec["set"]))
                 done += 1

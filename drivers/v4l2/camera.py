@@ -6,11 +6,12 @@ import logging
 import time
 
 from rigctl.drivers.v4l2 import structs as S
-from rigctl.drivers.v4l2.device import V4L2Device
+from rigctl.drivers.v4l2.device import KernelTimecode, V4L2Device
 
 from rigctl.camera_base import CameraBase, SignalReport
 from rigctl.errors import DeviceError
 from rigctl.interfaces import CaptureFormat, Frame, FrameFlags
+from rigctl.timecode import Timecode, TimecodeError
 
 log = logging.getLogger(__name__)
 
@@ -24,6 +25,7 @@ class V4L2Camera(CameraBase):
         super().__init__(name, address)
         self.buffers = buffers
         self.device = V4L2Device(address)
+        self._bad_timecode = False
         self._last_seq: int | None = None
         self._next_signal_check = 0.0
         self._format_changed = False
@@ -70,8 +72,9 @@ class V4L2Camera(CameraBase):
             flags |= FrameFlags.TIMESTAMP_MONOTONIC
         if got.flags & S.BUF_FLAG_TSTAMP_SRC_MASK == S.BUF_FLAG_TSTAMP_SRC_SOE:
             flags |= FrameFlags.TIMESTAMP_SOE
-        if got.timecode is not None:
-            flags |= FrameFlags.TIMECODE
+        tc = self._timecode(got.timecode)
+        if tc is not None:
+            flags |= FrameFlags.TIMECODE | (FrameFlags.DROP_FRAME if tc.drop else FrameFlags.NONE)
         seq = got.sequence
         if self._last_seq is not None and seq <= self._last_seq:
             # a driver that numbers frames from elapsed time (vivid under load) can hand out a number
@@ -88,7 +91,19 @@ class V4L2Camera(CameraBase):
         if self._format_changed:
             flags |= FrameFlags.FORMAT_CHANGED
             self._format_changed = False
-        return Frame(self.name, seq, got.timestamp_ns, host, flags, target[:size], got.timecode)
+        return Frame(self.name, seq, got.timestamp_ns, host, flags, target[:size], tc)
+
+    def _timecode(self, raw: KernelTimecode | None) -> Timecode | None:
+        """The frame's timecode as a value; a label that cannot exist is left out (warned once), not guessed."""
+        if raw is None or self.format is None:
+            return None
+        try:
+            return raw.to_timecode(self.format.fps)
+        except TimecodeError as exc:
+            if not self._bad_timecode:
+                log.warning("%s: driver sent timecode fields %s: %s; frames without a timecode", self.address, raw, exc)
+            self._bad_timecode = True
+            return None
 
     def _check_signal(self) -> None:
         """Once a second: has the input's signal format changed under us? (the take records it and goes on)"""

@@ -15,11 +15,13 @@ import os
 import select
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 from rigctl.drivers.v4l2 import ioctls as I
 from rigctl.drivers.v4l2 import structs as S
 
 from rigctl.errors import DeviceError
+from rigctl.timecode import Timecode, rate_of
 
 
 def resolve_address(address: str) -> Path:
@@ -64,7 +66,25 @@ class Dequeued:
     timestamp_ns: int
     flags: int
     size: int
-    timecode: str | None
+    timecode: KernelTimecode | None
+
+
+class KernelTimecode(NamedTuple):
+    """The fields of the kernel's struct v4l2_timecode, as integers."""
+
+    type: int
+    flags: int
+    hours: int
+    minutes: int
+    seconds: int
+    frames: int
+
+    def to_timecode(self, fps: float) -> Timecode:
+        """The value of this label: rate from ``type`` (else the format's ``fps``), drop-frame from ``flags``.
+        Raises TimecodeError for a label that does not exist at that rate."""
+        rate = S.TC_TYPE_RATES.get(self.type) or rate_of(fps)[0]
+        drop = bool(self.flags & S.TC_FLAG_DROPFRAME)
+        return Timecode.from_fields(self.hours, self.minutes, self.seconds, self.frames, rate, drop)
 
 
 class V4L2Device:
@@ -349,7 +369,9 @@ class V4L2Device:
             timestamp_ns=int(ts.tv_sec) * 1_000_000_000 + int(ts.tv_usec) * 1000,
             flags=int(buf.flags),
             size=n,
-            timecode=f"{tc.hours:02d}:{tc.minutes:02d}:{tc.seconds:02d}:{tc.frames:02d}"
+            timecode=KernelTimecode(
+                int(tc.type), int(tc.flags), int(tc.hours), int(tc.minutes), int(tc.seconds), int(tc.frames)
+            )
             if buf.flags & S.BUF_FLAG_TIMECODE
             else None,
         )

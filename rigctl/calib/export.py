@@ -53,12 +53,18 @@ def write_opencv_yaml(calib: ArrayCalibration, path: Path) -> None:
         fs.release()
 
 
+COLMAP_PIXEL_ORIGIN = 0.5  # COLMAP's image coordinate of the top-left pixel's centre (OpenCV's is 0)
+
+
 def _camera_line(cam_id: int, calib: ArrayCalibration, name: str) -> str:
     cam = calib[name]
     w, h = cam.image_size
     d = np.zeros(8)
     d[: min(8, cam.dist.size)] = cam.dist.ravel()[:8]
-    fx, fy, cx, cy = cam.K[0, 0], cam.K[1, 1], cam.K[0, 2], cam.K[1, 2]
+    # OpenCV puts the centre of the top-left pixel at (0, 0), COLMAP at (0.5, 0.5): the same ray lands half a
+    # pixel further right and down in COLMAP's image coordinates
+    fx, fy = cam.K[0, 0], cam.K[1, 1]
+    cx, cy = cam.K[0, 2] + COLMAP_PIXEL_ORIGIN, cam.K[1, 2] + COLMAP_PIXEL_ORIGIN
     if np.any(d[4:] != 0):  # k3 and beyond: OpenCV's full model
         params = [fx, fy, cx, cy, d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7]]
         model = "FULL_OPENCV"

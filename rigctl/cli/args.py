@@ -7,6 +7,9 @@ import math
 import sys
 from typing import NoReturn
 
+from rigctl.exr import COLOURS
+from rigctl.layout import LAYOUTS
+
 
 class OneLineParser(argparse.ArgumentParser):
     """An ArgumentParser whose errors are one line on stderr and exit code 2 (no usage dump)."""
@@ -61,3 +64,21 @@ def fraction(text: str) -> float:
     if not (0 < value <= 1):
         raise argparse.ArgumentTypeError(f"must be a fraction in (0, 1] such as 0.04 or 4%, got {text!r}")
     return value
+
+
+def add_layout(p: argparse.ArgumentParser) -> None:
+    """``--layout`` of every command that writes per-frame, per-camera files (rigctl.layout), and ``--colour``
+    of their EXR pictures (rigctl.exr)."""
+    p.add_argument(
+        "--colour",
+        default="rec709",
+        choices=tuple(COLOURS),
+        help="EXR pictures in scene-linear Rec. 709 (default) or ACEScg (AP1, through OpenColorIO)",
+    )
+    p.add_argument(
+        "--layout",
+        default="frames",
+        choices=LAYOUTS,
+        help="frames: DIR/<frame:06d>/<camera>.<ext> (default); sequence: DIR/<camera>/<camera>.<frame:06d>.<ext>, "
+        "one image sequence per camera as NUKE and Unreal's Img Media read it",
+    )

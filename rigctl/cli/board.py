@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import cv2
+from PIL import Image
 
 from rigctl.board import DICTIONARIES, BoardSpec
 from rigctl.errors import ParameterError
@@ -47,13 +47,20 @@ def run(ns: argparse.Namespace) -> int:
     image = spec.image(px_per_square, margin)
     ns.out.parent.mkdir(parents=True, exist_ok=True)
     png, yml = ns.out.with_suffix(".png"), ns.out.with_suffix(".yaml")
-    if not cv2.imwrite(str(png), image, [cv2.IMWRITE_PNG_COMPRESSION, 9]):
-        raise ParameterError(f"{png}: cannot write the image")
+    # the PNG states its physical resolution (pHYs, whole pixels per metre): the one at which a square of
+    # px_per_square pixels is square_mm, so "print at 100 %" gives the board's size whatever the tool
+    px_per_m = round(px_per_square / (ns.square_mm / 1000))
+    dpi = px_per_m * 0.0254  # what the print gives exactly (--dpi rounded to whole pixels per square)
+    try:
+        # OpenCV cannot write pHYs; Pillow writes dpi as round(dpi / 0.0254) pixels per metre
+        Image.fromarray(image).save(png, format="PNG", dpi=(dpi, dpi), optimize=True)
+    except OSError as exc:
+        raise ParameterError(f"{png}: cannot write the image: {exc.strerror or exc}") from None
     # the printed square size follows from the DPI: record it so a user can check the print with a ruler
     spec.save(yml)
     h, w = image.shape
     print(
-        f"wrote {png} ({w}x{h} px = {w / ns.dpi * 25.4:.0f} x {h / ns.dpi * 25.4:.0f} mm at {ns.dpi:g} dpi; "
+        f"wrote {png} ({w}x{h} px = {w / dpi * 25.4:.0f} x {h / dpi * 25.4:.0f} mm at {dpi:.2f} dpi, stored in it; "
         f"squares {sx}x{sy} of {ns.square_mm:g} mm, markers {ns.marker_mm:g} mm, {ns.dictionary}) and {yml}"
     )
     return 0

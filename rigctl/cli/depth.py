@@ -7,7 +7,7 @@ import json
 import math
 from pathlib import Path
 
-from rigctl.cli.args import distance, far_distance
+from rigctl.cli.args import add_layout, distance, far_distance
 from rigctl.cli.progress import Progress
 from rigctl.cli.take import damaged_exit
 from rigctl.depth.multibaseline import PRESETS
@@ -20,9 +20,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "depth",
         help="per-camera disparity and depth of a rectified take or grid folder (EXR, PFM, PNG)",
         description="Multi-baseline depth: every other camera of the grid with its own baseline, only the keyed "
-        "subject, only the planned disparity range (from --near/--far). Writes <frame>/<camera>.exr (RGB, "
-        "disparityL/R, disparityV, depth.Z = 1/Z), .pfm (disparity, +inf where none) and .png (red near, blue far), "
-        "and report.json. Presets: " + "; ".join(f"{p.name}: {p.description}" for p in PRESETS.values()),
+        "subject, only the planned disparity range (from --near/--far). Writes <frame>/<camera>.exr (scene-linear "
+        "RGB and A, disparityL/R, disparityV, depth.Z = 1/Z), .pfm (disparity, +inf where none) and .png (red near, "
+        "blue far), and report.json (--layout sequence: <camera>/<camera>.<frame>.exr). Presets: "
+        + "; ".join(f"{p.name}: {p.description}" for p in PRESETS.values()),
     )
     p.add_argument("input", type=Path, metavar="INPUT", help="rectified take, ideal simulated take, or grid folder")
     p.add_argument("--out", type=Path, required=True, metavar="DIR")
@@ -37,6 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="leave out frame sets with a damaged or missing frame, list them in report.json and exit 5",
     )
+    add_layout(p)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run)
 
@@ -55,7 +57,16 @@ def run(ns: argparse.Namespace) -> int:
     )
     bar = Progress(f"depth {ns.input.name}")
     try:
-        report = run_depth(ns.input, ns.out, opt, frames, progress=bar, skip_damaged=ns.skip_damaged)
+        report = run_depth(
+            ns.input,
+            ns.out,
+            opt,
+            frames,
+            progress=bar,
+            skip_damaged=ns.skip_damaged,
+            layout=ns.layout,
+            colour=ns.colour,
+        )
     finally:
         bar.close()
     status = damaged_exit(report.get("damaged_skipped", []), ns.out / "report.json")

@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from rigctl.cli.args import add_layout
 from rigctl.cli.progress import Progress
 from rigctl.cli.record import format_summary
 from rigctl.errors import EXIT_DAMAGED
@@ -36,6 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="leave out frames that fail their checksum or are missing, list them in DIR/export.json and exit 5",
     )
+    add_layout(export)
     export.set_defaults(func=run_export)
 
 
@@ -67,7 +69,9 @@ def run_export(ns: argparse.Namespace) -> int:
     reader = TakeReader(ns.take, skip_damaged=ns.skip_damaged)
     bar = Progress(f"exporting {reader.manifest.take}")
     try:
-        result = export_take(reader, ns.out, ns.frames, ns.format, progress=bar.steps)
+        result = export_take(
+            reader, ns.out, ns.frames, ns.format, progress=bar.steps, layout=ns.layout, colour=ns.colour
+        )
     finally:
         bar.close()
     print(

@@ -20,8 +20,10 @@ from rigctl.depth.grid import Grid, SkippedFrameSet, TakeGrid, load_grid_folder
 from rigctl.depth.key import Keyer
 from rigctl.depth.multibaseline import PRESETS, DepthResult, cross_check, estimate
 from rigctl.errors import ParameterError
-from rigctl.exr import write_exr
+from rigctl.exr import picture, picture_attributes, to_colour, write_exr
+from rigctl.layout import output_path
 from rigctl.pfm import write_pfm
+from rigctl.timecode import Timecode
 
 F32 = NDArray[np.float32]
 
@@ -105,20 +107,39 @@ def colour_preview(disparity: F32, d_range: tuple[float, float]) -> NDArray[np.u
     return np.asarray(img)
 
 
+@dataclass(frozen=True)
+class Target:
+    """Where one frame's outputs go (``rigctl.layout``) and what the pictures carry: rate and timecode."""
+
+    out: Path
+    layout: str
+    frame: int
+    fps: float | None = None
+    timecode: Timecode | None = None
+    flat: bool = False  # one picture (a grid folder): DIR/<camera>.<ext>
+    colour: str = "rec709"  # rigctl.exr.COLOURS
+
+    def path(self, camera: str, ext: str) -> Path:
+        p = self.out / f"{camera}{ext}" if self.flat else output_path(self.out, self.layout, self.frame, camera, ext)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        return p
+
+
 def write_outputs(
-    folder: Path, name: str, grid: Grid, res: DepthResult, d_range: tuple[float, float], formats: tuple[str, ...]
+    target: Target, name: str, grid: Grid, res: DepthResult, d_range: tuple[float, float], formats: tuple[str, ...]
 ) -> None:
-    folder.mkdir(parents=True, exist_ok=True)
     d = res.disparity
     if "pfm" in formats:
-        write_pfm(folder / f"{name}.pfm", d)
+        write_pfm(target.path(name, ".pfm"), d)
     if "png" in formats:
-        cv2.imwrite(str(folder / f"{name}.png"), colour_preview(d, d_range))
+        cv2.imwrite(str(target.path(name, ".png")), colour_preview(d, d_range))
     if "exr" in formats:
         z = grid.depth(d)
         inv_z = np.where(np.isfinite(z) & (z > 0), 1.0 / z, 0.0).astype(np.float32)
         fin = np.where(np.isfinite(d), d, 0.0).astype(np.float32)
-        channels: dict[str, F32] = {"RGB": grid.images[name], "depth.Z": inv_z, "confidence.Y": res.confidence}
+        # the picture scene-linear and premultiplied by the key matte, as NUKE and Unreal read it
+        channels: dict[str, F32] = {**picture(grid.images[name], res.matte, target.colour), "depth.Z": inv_z}
+        channels["confidence.Y"] = res.confidence
         ox, oy = grid.offsets[name]
         row = [n for n in grid.names if abs(grid.offsets[n][1] - oy) < 0.25 and n != name]
         if any(grid.offsets[n][0] < ox for n in row):
@@ -132,13 +153,14 @@ def write_outputs(
             ratio = min(abs(grid.offsets[n][1] - oy) for n in col)
             channels["disparityV.y"] = (-fin * ratio).astype(np.float32)  # shift to the camera below
         attrs = {
+            **picture_attributes(target.fps, target.timecode, target.colour),
             "rigctl.camera": name,
             "rigctl.focal_px": f"{grid.focal_px:.6f}",
             "rigctl.spacing_x": f"{grid.spacing:.6f}",
             "rigctl.offset": f"{ox:.6f} {oy:.6f}",
             "rigctl.disparity": "pixels of the horizontal spacing; depth.Z holds 1/Z",
         }
-        write_exr(folder / f"{name}.exr", channels, attrs)
+        write_exr(target.path(name, ".exr"), channels, attrs)
 
 
 def run_depth(
@@ -149,12 +171,17 @@ def run_depth(
     formats: tuple[str, ...] = ("exr", "pfm", "png"),
     progress: Callable[[float, str], None] | None = None,
     skip_damaged: bool = False,
+    layout: str = "frames",
+    colour: str = "rec709",
 ) -> dict[str, Any]:
-    """Depth for a rectified take or a grid folder; writes outputs and ``report.json``; returns the report.
+    """Depth for a rectified take or a grid folder; writes outputs (in ``layout``, see rigctl.layout) and
+    ``report.json``; returns the report.
 
     A damaged frame of a take stops it (naming file and byte) unless ``skip_damaged``: then its frame set is
     left out and the damaged frames are listed in the report's ``damaged_skipped``."""
     t_start = time.perf_counter()
+    output_path(out, layout, 0, "", "")  # an unknown layout is refused before any work
+    to_colour(np.zeros((1, 3), np.float32), colour)  # and an unknown colour space
     take: TakeGrid | None = None
     if (source / "take.yaml").exists():
         take = TakeGrid(source, skip_damaged=skip_damaged)
@@ -170,8 +197,10 @@ def run_depth(
         def load(n: int) -> Grid:
             return take.grid(n)
 
-        def folder(n: int) -> Path:
-            return out / f"{n:06d}"
+        sets = {s.number: s for s in take.reader.frame_sets}
+
+        def target(n: int) -> Target:
+            return Target(out, layout, n, take.reader.fps, take.reader.set_timecode(sets[n]), colour=colour)
     elif (source / "grid.yaml").exists():
         numbers = [0]
         grid0 = load_grid_folder(source)
@@ -179,8 +208,9 @@ def run_depth(
         def load(n: int) -> Grid:
             return grid0
 
-        def folder(n: int) -> Path:
-            return out
+        def target(n: int) -> Target:
+            # a grid folder is one picture: the frames layout keeps its outputs in DIR itself, as before
+            return Target(out, layout, n, flat=layout == "frames", colour=colour)
     else:
         raise ParameterError(f"{source}: not a take (take.yaml) or a grid folder (grid.yaml)")
     report: dict[str, Any] = {"source": str(source), "preset": opt.preset, "frames": {}}
@@ -203,7 +233,7 @@ def run_depth(
         results = depth_grid(grid, opt, step)
         t0 = time.perf_counter()
         for cam, res in results.items():
-            write_outputs(folder(n), cam, grid, res, d_range, formats)
+            write_outputs(target(n), cam, grid, res, d_range, formats)
         t_write = time.perf_counter() - t0
         per_cam = {}
         for cam, res in results.items():

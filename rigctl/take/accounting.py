@@ -28,6 +28,7 @@ class CameraStats:
     format_changes: list[int] = field(default_factory=list)
     thumbnail: Any = None  # a small luma image for the shoot UI (uint8 array), when asked for
     preview_ns: int = 0
+    first_timecode: Any = None  # rigctl.timecode.Timecode of the first frame written, when frames carry one
 
     @property
     def frames_written(self) -> int:

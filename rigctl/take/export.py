@@ -1,4 +1,4 @@
-"""``rigctl take export``: frame sets as images, ``DIR/<frame>/<camera>.png`` (8-bit) or ``.exr`` (float).
+"""``rigctl take export``: frame sets as images, 8-bit PNG or scene-linear EXR, in a layout of rigctl.layout.
 
 A damaged frame stops the export (naming file and byte) unless the reader skips damaged frames; then it is
 left out and listed in ``DIR/export.json`` under ``skipped_damaged``.
@@ -13,8 +13,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from rigctl.depth.key import Keyer
 from rigctl.errors import ParameterError, TakeError
-from rigctl.exr import write_exr
+from rigctl.exr import picture, picture_attributes, to_colour, write_exr
+from rigctl.layout import output_path
 from rigctl.take.reader import TakeReader
 
 
@@ -42,19 +44,27 @@ def export_take(
     frames: str | None = None,
     fmt: str = "png",
     progress: Callable[[int, int], None] | None = None,
+    layout: str = "frames",
+    colour: str = "rec709",
 ) -> dict[str, int]:
-    """Write every member of the chosen frame sets; returns counts of images written and members missing."""
+    """Write every member of the chosen frame sets; returns counts of images written and members missing.
+
+    PNG holds the camera's BT.709 picture as captured (8-bit); EXR holds it scene-linear with the key matte
+    as ``A`` (premultiplied), ``chromaticities``, ``framesPerSecond`` and the frame's ``timeCode``.
+    """
     if fmt not in ("png", "exr"):
         raise ParameterError(f"--format {fmt!r}: choose png or exr")
+    output_path(out, layout, 0, "", "")  # an unknown layout is refused before any work
+    to_colour(np.zeros((1, 3), np.float32), colour)  # and an unknown colour space
     sets = reader.frame_sets
     if not sets:
         raise TakeError(f"{reader.folder}: the take holds no frames")
     chosen = parse_range(frames, len(sets))
+    keyer = Keyer()
     written = missing = 0
     for k, n in enumerate(chosen):
         fs = sets[n]
-        folder = out / f"{n:06d}"
-        folder.mkdir(parents=True, exist_ok=True)
+        tc = reader.set_timecode(fs)
         for name in reader.names:
             if name not in fs.members:
                 missing += 1
@@ -62,12 +72,16 @@ def export_take(
             rgb = reader.frame_rgb_or_none(name, fs.members[name])
             if rgb is None:
                 continue  # damaged, skipped: listed in reader.damaged
+            path = output_path(out, layout, n, name, f".{fmt}")
+            path.parent.mkdir(parents=True, exist_ok=True)
             if fmt == "png":
                 bgr = np.clip(np.rint(rgb[..., ::-1] * 255.0), 0, 255).astype(np.uint8)
-                if not cv2.imwrite(str(folder / f"{name}.png"), bgr):
-                    raise TakeError(f"{folder / (name + '.png')}: cannot write")
+                if not cv2.imwrite(str(path), bgr):
+                    raise TakeError(f"{path}: cannot write")
             else:
-                write_exr(folder / f"{name}.exr", {"RGB": rgb}, {"rigctl:camera": name, "rigctl:frame_set": str(n)})
+                attrs = picture_attributes(reader.fps, tc, colour)
+                attrs.update({"rigctl:camera": name, "rigctl:frame_set": str(n)})
+                write_exr(path, picture(rgb, keyer.matte(rgb), colour), attrs)
             written += 1
         if progress:
             progress(k + 1, len(chosen))

@@ -3,8 +3,8 @@
 Genlock makes the sensors scan together but does not tell the host which captured frames belong
 together (sequence numbers restart on every start, cameras start at different moments). Frames are
 therefore grouped by capture timestamp, within half a frame period of each set's time, tracking the
-rig's phase; or by timecode when every frame carries one. A camera missing from a set leaves an
-explicit gap: later sets are never shifted.
+rig's phase; or by timecode (its frame count, exact at drop-frame rates) when every frame carries one.
+A camera missing from a set leaves an explicit gap: later sets are never shifted.
 """
 
 from __future__ import annotations
@@ -13,6 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
+from rigctl.interfaces import FrameFlags
+from rigctl.timecode import Timecode, TimecodeError, rate_of, unwrap
 
 
 @dataclass(frozen=True)
@@ -23,6 +26,7 @@ class FrameSet:
     time_ns: int
     members: dict[str, int]
     spread_ns: int
+    timecode: int | None = None  # frames since midnight (unwrapped past it) when assembled by timecode
 
     def complete(self, cameras: list[str]) -> bool:
         return all(c in self.members for c in cameras)
@@ -83,6 +87,23 @@ def assemble(
     return sets
 
 
+def timecode_counts(indexes: dict[str, NDArray[np.void]], fps: float) -> dict[str, NDArray[np.int64]] | None:
+    """Per camera, the timecode counts of its index records (unwrapped past midnight) when every frame of
+    every camera carries one; else None (sets are then assembled by time)."""
+    flags = [idx["flags"] for idx in indexes.values() if len(idx)]
+    if not flags or not all(np.all(f & FrameFlags.TIMECODE) for f in flags):
+        return None
+    # one rate and drop flag for the whole take, else counts of different scales would be compared
+    drops = {bool(v) for f in flags for v in np.unique(f & FrameFlags.DROP_FRAME)}
+    if len(drops) > 1:
+        raise TimecodeError("some frames count drop-frame timecode and some do not")
+    rate, _ = rate_of(fps)
+    drop = drops.pop()
+    Timecode(0, rate, drop)  # refuses drop-frame at a rate that has none
+    first = min(int(idx["timecode"][0]) for idx in indexes.values() if len(idx))
+    return {n: unwrap(idx["timecode"], first, rate, drop) for n, idx in indexes.items()}
+
+
 def _by_timecode(timestamps: dict[str, NDArray[np.int64]], timecodes: dict[str, NDArray[np.int64]]) -> list[FrameSet]:
     start = min(int(tc[0]) for tc in timecodes.values() if len(tc))
     end = max(int(tc[-1]) for tc in timecodes.values() if len(tc))
@@ -93,9 +114,8 @@ def _by_timecode(timestamps: dict[str, NDArray[np.int64]], timecodes: dict[str, 
     out = []
     for n, members in enumerate(slots):
         times = [int(timestamps[c][i]) for c, i in members.items()]
-        out.append(
-            FrameSet(n, int(np.median(times)) if times else 0, members, (max(times) - min(times)) if times else 0)
-        )
+        t = int(np.median(times)) if times else 0
+        out.append(FrameSet(n, t, members, (max(times) - min(times)) if times else 0, start + n))
     return out
 
 

@@ -14,7 +14,8 @@ frame, so a reader can tell a complete frame from one torn by a crash and never 
     40     4    size of the frame in bytes
     44     4    CRC-32 of the frame bytes (0 when checksums are off)
     48     4    frame set number assigned at capture (-1: none yet)
-    52     4    timecode as frames since midnight (valid when flags has TIMECODE)
+    52     4    timecode as frames since midnight (valid when flags has TIMECODE) at the nominal rate of the
+                take's fps, drop-frame when flags has DROP_FRAME (rigctl.timecode.Timecode)
     56     4    reserved (0)
     60     4    CRC-32 of bytes 0..59
 """

@@ -27,6 +27,7 @@ from rigctl.take import framesets
 from rigctl.take.index import RECORD_SIZE, IndexProblem, read_index
 from rigctl.take.manifest import Manifest, read_manifest
 from rigctl.take.reserve import remove_stale_reserves
+from rigctl.timecode import Timecode, TimecodeError, rate_of, start_timecode
 
 log = logging.getLogger(__name__)
 
@@ -172,11 +173,12 @@ class TakeReader:
     def frame_sets(self) -> list[framesets.FrameSet]:
         """Frame sets assembled from the indexes (the same rule the recorder used)."""
         stamps = {n: self.index[n]["capture_ns"].astype(np.int64) for n in self.names}
-        flags = [self.index[n]["flags"] for n in self.names if len(self.index[n])]
-        use_tc = bool(flags) and all(np.all(f & FrameFlags.TIMECODE) for f in flags)
-        timecodes = {n: self.index[n]["timecode"].astype(np.int64) for n in self.names} if use_tc else None
+        try:
+            timecodes = framesets.timecode_counts(self.index, self.fps)
+        except TimecodeError as exc:
+            raise TakeError(f"{self.folder}: {exc}") from None
         if timecodes is not None and not all(np.all(np.diff(tc) > 0) for tc in timecodes.values()):
-            # timecodes that repeat or go back (a damaged index, or midnight): capture times still order frames
+            # timecodes that repeat or go back (a damaged index): capture times still order frames
             log.warning(
                 "%s: timecodes do not increase in every index; frame sets assembled by capture time", self.folder
             )
@@ -185,6 +187,37 @@ class TakeReader:
             self._check_timecode_span(timecodes)
         t0 = self.manifest.timing.get("t0_ns")
         return framesets.assemble(stamps, self.period_ns, t0, timecodes)
+
+    def timecode_rate(self, drop: bool) -> tuple[int, bool]:
+        """The nominal rate of the take's timecode counts (from its fps), and the drop flag as recorded."""
+        try:
+            rate, _ = rate_of(self.fps)
+            Timecode(0, rate, drop)
+        except TimecodeError as exc:
+            raise TakeError(f"{self.folder}: format.fps {self.fps:g}: {exc}") from None
+        return rate, drop
+
+    def timecode(self, name: str, i: int) -> Timecode | None:
+        """The timecode frame ``i`` of ``name`` carried from its source, or None."""
+        rec = self.index[name][i]
+        flags = FrameFlags(int(rec["flags"]))
+        if not flags & FrameFlags.TIMECODE:
+            return None
+        rate, drop = self.timecode_rate(bool(flags & FrameFlags.DROP_FRAME))
+        try:
+            return Timecode(int(rec["timecode"]), rate, drop)
+        except TimecodeError as exc:
+            path = self.index_path(name)
+            raise TakeError(f"{path}: record {i}: {exc}") from None
+
+    def set_timecode(self, fs: framesets.FrameSet) -> Timecode:
+        """The timecode of a frame set: its members' own, else the take's time-of-day start plus the set number
+        (the same rule as the ALE and the shoot UI)."""
+        for name, i in fs.members.items():
+            tc = self.timecode(name, i)
+            if tc is not None:
+                return tc
+        return start_timecode(str(self.raw.get("started_utc", "")), self.fps) + fs.number
 
     def _check_timecode_span(self, timecodes: dict[str, NDArray[np.int64]]) -> None:
         """Frame sets by timecode make one slot per timecode from the first to the last: a damaged or hostile

@@ -16,8 +16,10 @@ import zlib
 from pathlib import Path
 
 from rigctl.errors import EXIT_DEVICE, TakeError
-from rigctl.interfaces import Frame
+from rigctl.interfaces import Frame, FrameFlags
 from rigctl.take import index
+
+_TC_FLAGS = int(FrameFlags.TIMECODE | FrameFlags.DROP_FRAME)
 
 
 class DiskFullError(TakeError):
@@ -37,15 +39,6 @@ def _write_all(fd: int, data: memoryview, path: Path) -> None:
                 raise DiskFullError(f"{path}: destination full (no space left on device)") from None
             raise TakeError(f"{path}: write failed: {exc.strerror}") from None
         view = view[n:]
-
-
-def timecode_frames(tc: str | None, fps: float) -> int:
-    """``HH:MM:SS:FF`` (or ``;`` for drop-frame) as a frame count since midnight; 0 when absent."""
-    if not tc:
-        return 0
-    parts = tc.replace(";", ":").split(":")
-    h, m, s, f = (int(p) for p in parts)
-    return round(((h * 60 + m) * 60 + s) * fps) + f
 
 
 class CameraWriter:
@@ -79,13 +72,17 @@ class CameraWriter:
         data = frame.data
         _write_all(self._essence, data, self.essence_path)
         crc = zlib.crc32(data) if self.checksum else 0
-        tc = timecode_frames(frame.timecode, self.fps)
+        flags = int(frame.flags) & ~_TC_FLAGS
+        tc = 0
+        if frame.timecode is not None:  # the count goes in as it came; rate and drop flag are the take's
+            tc = frame.timecode.frames
+            flags |= FrameFlags.TIMECODE | (FrameFlags.DROP_FRAME if frame.timecode.drop else 0)
         index.pack_into(
             self._record,
             frame.sequence,
             frame.capture_ns,
             frame.host_ns,
-            int(frame.flags),
+            flags,
             self.offset,
             len(data),
             crc,

@@ -7,6 +7,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import logging
+import math
 import shutil
 import threading
 import time
@@ -26,6 +27,7 @@ from rigctl.registry import DeviceSet, open_cameras, open_control, open_tally
 from rigctl.rig import Rig
 from rigctl.take.manifest import read_manifest, write_manifest
 from rigctl.tally import TallyService
+from rigctl.timecode import start_timecode
 
 log = logging.getLogger(__name__)
 
@@ -77,11 +79,9 @@ class Snapshot:
     last_take: str = ""
 
 
-def timecode(seconds: float, fps: float) -> str:
-    frames = round(seconds * fps)
-    f = frames % max(1, round(fps))
-    s = frames // max(1, round(fps))
-    return f"{s // 3600:02d}:{(s // 60) % 60:02d}:{s % 60:02d}:{f:02d}"
+def timecode(started_utc: str, fps: float, seconds: float) -> str:
+    """The running timecode of a take: its time-of-day start (the ALE's Start) plus the frames since."""
+    return str(start_timecode(started_utc, fps) + math.floor(seconds * fps))
 
 
 class Session:
@@ -315,7 +315,7 @@ class Session:
             recording=self.recording,
             busy=self.busy,
             duration_s=max(0.0, duration),
-            timecode=timecode(max(0.0, duration), self.rig.fps),
+            timecode=timecode(rec.started_utc if rec else "", self.rig.fps, max(0.0, duration)),
             skew_p50_us=float(np.percentile(skew, 50)) if skew is not None else None,
             skew_p99_us=float(np.percentile(skew, 99)) if skew is not None else None,
             disk_free_gb=free_gb,

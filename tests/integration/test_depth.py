@@ -295,3 +295,34 @@ def test_best_names_the_preset_to_use_when_no_camera_shares_a_row_or_column() ->
         estimate(g, "r0c0", (2.0, 10.0), PRESETS["best"], keyer=None)
     r = estimate(g, "r0c0", (2.0, 10.0), PRESETS["balanced"], keyer=None)  # the plane sweep takes any layout
     assert np.median(np.abs(r.disparity[20:-20, 20:-20] - 6.0)) < 0.5
+
+
+def test_cli_depth_sequence_layout_carries_linear_rgb_alpha_and_timecode(ideal_take: Path, tmp_path: Path) -> None:
+    from fractions import Fraction
+
+    from rigctl.exr import REC709_CHROMATICITIES, bt709_to_linear, read_exr
+    from rigctl.take.reader import TakeReader
+
+    out = tmp_path / "seq"
+    res = run_rigctl(
+        "depth", str(ideal_take), "--out", str(out), "--near", "1.95", "--far", "3.0", "--cameras", "r1c1",
+        "--layout", "sequence",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    # one folder per camera holding a numbered sequence, for NUKE (r1c1.######.exr) and Unreal's Img Media
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("r1c1.*")) == [
+        "r1c1/r1c1.000000.exr", "r1c1/r1c1.000000.pfm", "r1c1/r1c1.000000.png",
+    ]  # fmt: skip
+    channels, header = read_exr(out / "r1c1" / "r1c1.000000.exr")
+    reader = TakeReader(ideal_take)
+    fs = reader.frame_sets[0]
+    code = reader.frame_rgb("r1c1", fs.members["r1c1"])
+    a = channels["A"]
+    solid = a == 1.0
+    assert 0.1 < solid.mean() < 0.9 and (a == 0).any()  # the subject keyed against the green screen
+    # scene-linear: the camera's code values decoded, premultiplied by A
+    assert np.allclose(channels["RGB"], bt709_to_linear(code) * a[..., None], atol=1e-6)
+    assert np.allclose(header["chromaticities"], REC709_CHROMATICITIES, atol=1e-6)
+    assert header["framesPerSecond"] == Fraction(25)
+    t = header["timeCode"]
+    assert f"{t.hours:02d}:{t.minutes:02d}:{t.seconds:02d}:{t.frame:02d}" == str(reader.set_timecode(fs))

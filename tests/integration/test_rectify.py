@@ -129,3 +129,43 @@ def test_board_writes_a_detectable_target(tmp_path: Path, run_cli) -> None:  # t
     assert ids is not None and len(ids) == 5 * 3  # every inner corner
     res = run_cli("board", "--out", str(tmp_path / "c"), "--marker-mm", "80")
     assert res.returncode == 2 and "--marker-mm 80.0 must be positive and smaller" in res.stderr
+
+
+def test_rectified_take_keeps_the_source_timecodes(take: Path, tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    """Frames that carry timecode (here 23:59:59:24 and 00:00:00:00 at 25 fps, across midnight) keep it
+    through rectify; frame sets are then built on it."""
+    import shutil
+
+    from rigctl.interfaces import FrameFlags
+    from rigctl.take import index
+    from rigctl.timecode import Timecode
+
+    src = tmp_path / "tc"
+    shutil.copytree(take, src)
+    labels = [Timecode.parse("23:59:59:24", 25), Timecode.parse("00:00:00:00", 25)]
+    reader = TakeReader(src)
+    for name in reader.names:  # the index as a driver with timecode would have written it
+        buf = bytearray(index.RECORD_SIZE)
+        with open(reader.index_path(name), "wb") as f:
+            for rec, tc in zip(reader.index[name], labels, strict=True):
+                flags = int(rec["flags"]) | FrameFlags.TIMECODE
+                fields = [int(rec[k]) for k in ("sequence", "capture_ns", "host_ns")]
+                index.pack_into(
+                    buf,
+                    *fields,
+                    flags,
+                    int(rec["offset"]),
+                    int(rec["size"]),
+                    int(rec["crc"]),
+                    int(rec["set"]),
+                    tc.frames,
+                )
+                f.write(buf)
+    out = tmp_path / "rect"
+    res = run_cli("rectify", str(src), "--calibration", str(take / "truth" / "calibration.yaml"), "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    rect = TakeReader(out)
+    for name in rect.names:
+        assert [str(rect.timecode(name, i)) for i in range(2)] == ["23:59:59:24", "00:00:00:00"]
+    assert [str(rect.set_timecode(s)) for s in rect.frame_sets] == ["23:59:59:24", "00:00:00:00"]
+    assert all(s.complete(rect.names) for s in rect.frame_sets)
