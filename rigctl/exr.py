@@ -114,10 +114,34 @@ def write_exr(
     tmp.replace(path)
 
 
+# the most any EXR compression expands to (ZIP/deflate tops out near 1032:1, half floats read as float32 x2)
+MAX_EXPANSION = 4096
+
+
+def _check_window(path: Path, header: dict[str, Any]) -> None:
+    window = header.get("dataWindow")
+    channels = header.get("channels") or ()
+    try:
+        (x0, y0), (x1, y1) = np.asarray(window, dtype=np.int64).reshape(2, 2)
+    except (TypeError, ValueError):
+        raise TakeError(f"{path}: not a readable EXR file: no dataWindow") from None
+    pixels = max(0, int(x1) - int(x0) + 1) * max(0, int(y1) - int(y0) + 1)
+    need = pixels * max(1, len(channels)) * 4
+    size = path.stat().st_size
+    if need > MAX_EXPANSION * size + (1 << 20):
+        raise TakeError(
+            f"{path}: EXR header claims a {int(x1) - int(x0) + 1}x{int(y1) - int(y0) + 1} window, "
+            f"more than a {size}-byte file can hold: the file is damaged"
+        )
+
+
 def read_exr(path: Path) -> tuple[dict[str, NDArray[np.float32]], dict[str, object]]:
     """Channels and the header; ``RGB`` comes back as one H x W x 3 array, ``A`` on its own. A file OpenEXR
-    cannot read is a :class:`TakeError` naming it."""
+    cannot read is a :class:`TakeError` naming it, and so is a header whose pixels could not come from a file
+    of its size (OpenEXR allocates the whole window before it reads a chunk)."""
     try:
+        head = OpenEXR.File(str(path), header_only=True).header()
+        _check_window(path, head)
         f = OpenEXR.File(str(path))
         channels = {k: np.asarray(v.pixels, dtype=np.float32) for k, v in f.channels().items()}
         header = dict(f.header())
