@@ -107,11 +107,27 @@ class Rectifier:
         }
 
 
-def _bgr(reader: TakeReader, name: str, i: int) -> NDArray[np.uint8]:
+def frame_bgr(reader: TakeReader, name: str, i: int) -> NDArray[np.uint8]:
     if reader.pixel_format == "BGR3":
         return reader.frame_bytes(name, i).reshape(reader.height, reader.width, 3)
     rgb = reader.frame_rgb(name, i)
     return np.ascontiguousarray(from_rgb(rgb, "BGR3").reshape(reader.height, reader.width, 3))
+
+
+def rectifier_for_take(reader: TakeReader, calibration: Path) -> Rectifier:
+    """The rectifier of ``calibration`` for the cameras of a take, refused when a camera or the size differs."""
+    calib = load_calibration(calibration)
+    source = reader.folder
+    missing = [n for n in reader.names if n not in calib.cameras]
+    if missing:
+        raise CalibrationError(f"{calibration}: no calibration for camera(s) {', '.join(missing)} of take {source}")
+    sizes = {calib[n].image_size for n in reader.names}
+    if sizes != {(reader.width, reader.height)}:
+        raise CalibrationError(
+            f"{calibration}: calibrated image size {sorted(sizes)} does not match take {source} "
+            f"({reader.width}x{reader.height})"
+        )
+    return Rectifier(ArrayCalibration(calib.rig, {n: calib[n] for n in reader.names}, calib.reference, calib.meta))
 
 
 def rectify_take(
@@ -122,19 +138,8 @@ def rectify_take(
 ) -> dict[str, Any]:
     """Rectify every frame of every camera of ``source`` into the new take ``out``."""
     reader = TakeReader(source)
-    calib = load_calibration(calibration)
-    missing = [n for n in reader.names if n not in calib.cameras]
-    if missing:
-        raise CalibrationError(f"{calibration}: no calibration for camera(s) {', '.join(missing)} of take {source}")
-    sizes = {calib[n].image_size for n in reader.names}
-    if sizes != {(reader.width, reader.height)}:
-        raise CalibrationError(
-            f"{calibration}: calibrated image size {sorted(sizes)} does not match take {source} "
-            f"({reader.width}x{reader.height})"
-        )
-    sub = ArrayCalibration(calib.rig, {n: calib[n] for n in reader.names}, calib.reference, calib.meta)
     t_tables = time.perf_counter()
-    rect = Rectifier(sub)
+    rect = rectifier_for_take(reader, calibration)
     t_tables = time.perf_counter() - t_tables
     if out.exists():
         raise TakeError(f"{out}: already exists; takes are never overwritten")
@@ -151,7 +156,7 @@ def rectify_take(
         try:
             for i in range(len(idx)):
                 rec = idx[i]
-                img = _bgr(reader, name, i)
+                img = frame_bgr(reader, name, i)
                 t0 = time.perf_counter()
                 res = rect.frame(name, img)
                 t_remap += time.perf_counter() - t0
