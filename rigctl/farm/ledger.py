@@ -28,7 +28,7 @@ class Ledger:
                 if not isinstance(frames, dict):
                     raise TypeError
             except (OSError, ValueError, KeyError, TypeError):
-                raise TakeError(f"{self.path}: not a process ledger (expected {{\"frames\": {{...}}}})") from None
+                raise TakeError(f'{self.path}: not a process ledger (expected {{"frames": {{...}}}})') from None
             self.frames = frames
 
     def done(self, name: str) -> bool:

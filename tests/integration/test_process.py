@@ -5,6 +5,7 @@ workers started as real ``dask`` subprocesses on 127.0.0.1, one of them killed m
 from __future__ import annotations
 
 import filecmp
+import importlib
 import json
 import os
 import signal
@@ -14,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from tests_support import run_rigctl
+from tests_support import rigctl_exe, run_rigctl
 
 from rigctl.depth.run import DepthOptions
 from rigctl.farm.frame import frame_name
@@ -53,7 +54,7 @@ def single_process(take: Path, tmp_path_factory: pytest.TempPathFactory) -> Path
 def same_bytes(a: Path, b: Path) -> list[str]:
     """Files of ``a`` that are missing from ``b`` or differ from it byte for byte."""
     names = sorted(p.name for p in a.iterdir())
-    match, mismatch, errors = filecmp.cmpfiles(a, b, names, shallow=False)
+    _same, mismatch, errors = filecmp.cmpfiles(a, b, names, shallow=False)
     assert len(names) == 3 * len(CAMS)
     return mismatch + errors
 
@@ -148,12 +149,8 @@ def test_subprocess_cluster_survives_a_killed_worker_and_keeps_images_off_the_sc
     dask = str(Path(sys.executable).with_name("dask"))
     sched_file = tmp_path / "scheduler.json"
     common = {"env": dask_env(), "stdout": subprocess.DEVNULL, "stderr": subprocess.PIPE, "start_new_session": True}
-    procs = [
-        subprocess.Popen(
-            [dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard", "--scheduler-file",
-             str(sched_file)], **common,
-        )  # fmt: skip
-    ]
+    scheduler = [dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard"]
+    procs = [subprocess.Popen([*scheduler, "--scheduler-file", str(sched_file)], **common)]
     try:
         wait_for("the scheduler", sched_file.exists, 60)
         worker = [dask, "worker", "--scheduler-file", str(sched_file), "--host", "127.0.0.1", "--nthreads", "1"]
@@ -163,13 +160,13 @@ def test_subprocess_cluster_survives_a_killed_worker_and_keeps_images_off_the_sc
 
         with distributed.Client(address, timeout="30s") as c:
             c.wait_for_workers(2, timeout=90)
+            # the scheduler unpickles task specs: it imports their modules once, reading files, not images
+            c.run_on_scheduler(importlib.import_module, "rigctl.farm.frame")
         scheduler_io = proc_io(procs[0].pid)
 
         out = tmp_path / "out"
-        client = subprocess.Popen(
-            [*run_rigctl_cmd(), "process", str(take), "--out", str(out), "--scheduler", address, *FAST, "--json"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        )  # fmt: skip
+        argv = [*rigctl_exe(), "process", str(take), "--out", str(out), "--scheduler", address, *FAST, "--json"]
+        client = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         ledger = out / "process.json"
         wait_for("the first frame", ledger.exists)
         os.killpg(procs[2].pid, signal.SIGKILL)  # the second worker and its nanny, mid-run
@@ -193,12 +190,8 @@ def test_subprocess_cluster_survives_a_killed_worker_and_keeps_images_off_the_sc
     assert all(e["status"] == "done" for e in frames.values()) and len(frames) == FRAMES
     for name in frames:
         assert same_bytes(single_process / name, out / "depth" / name) == []
-    # the workers read 9 cameras of 480x270 UYVY per frame set from the take; the scheduler saw a fraction
+    # the workers read 9 cameras of 480x270 UYVY per frame set from the take; the scheduler's reads and writes
+    # (sockets and files) while the take was processed: about 26 kB here, a third of a frame set is the bar
     image_bytes = FRAMES * 9 * 480 * 270 * 2
-    assert handled < image_bytes / 4, (handled, image_bytes)
-
-
-def run_rigctl_cmd() -> list[str]:
-    from tests_support import rigctl_exe
-
-    return rigctl_exe()
+    print(f"scheduler handled {handled} bytes; the workers read {image_bytes} bytes of images")
+    assert handled < image_bytes / FRAMES / 3, (handled, image_bytes)

@@ -47,7 +47,7 @@ def test_ledger_is_rewritten_whole_and_refuses_what_is_not_one(tmp_path: Path) -
     assert Ledger(tmp_path).done("000001") and not Ledger(tmp_path).done("000000")
     assert [p.name for p in tmp_path.iterdir()] == ["process.json"]  # no temporary file left
     (tmp_path / "process.json").write_text("{not json")
-    with pytest.raises(TakeError, match="process.json: not a process ledger"):
+    with pytest.raises(TakeError, match=r"process\.json: not a process ledger"):
         Ledger(tmp_path)
 
 
