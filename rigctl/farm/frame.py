@@ -126,25 +126,31 @@ def publish(tmp: Path, final: Path) -> None:
 def compute_frame(job: FrameJob) -> dict[str, Any]:
     """Rectify (when needed), depth and export of one frame set; returns timings and small statistics."""
     t0 = time.perf_counter()
-    source = open_source(job.take, job.calibration)
-    grid = source.grid(job.frame)
-    t_load = time.perf_counter() - t0
-    results = depth_grid(grid, job.options)
-    t_depth = time.perf_counter() - t0 - t_load
-    d_range, why = planned_range(grid, job.options)
-    out = Path(job.out)
-    tmp = out / f"{PARTIAL_PREFIX}{frame_name(job.frame)}-{uuid.uuid4().hex[:12]}"
+    grid = open_source(job.take, job.calibration).grid(job.frame)
+    stats = depth_and_publish(grid, job.options, Path(job.out), frame_name(job.frame))
+    stats["timings_s"]["load"] = time.perf_counter() - t0 - sum(stats["timings_s"].values())
+    return stats
+
+
+def depth_and_publish(grid: Grid, options: DepthOptions, out: Path, name: str) -> dict[str, Any]:
+    """Depth of every requested camera of ``grid``, written to a temporary folder beside ``out/name`` and then
+    renamed into it file by file (``rigctl bench depth --size`` measures exactly this)."""
+    t0 = time.perf_counter()
+    results = depth_grid(grid, options)
+    t_depth = time.perf_counter() - t0
+    d_range, why = planned_range(grid, options)
+    tmp = out / f"{PARTIAL_PREFIX}{name}-{uuid.uuid4().hex[:12]}"
     try:
         for cam, res in results.items():
             write_outputs(tmp, cam, grid, res, d_range, FORMATS)
-        publish(tmp, out / frame_name(job.frame))
+        publish(tmp, out / name)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return {
         "cameras": list(results),
         "disparity_range_px": [float(d_range[0]), float(d_range[1])],
         "range_source": why,
-        "timings_s": {"load": t_load, "depth": t_depth, "write": time.perf_counter() - t0 - t_load - t_depth},
+        "timings_s": {"depth": t_depth, "write": time.perf_counter() - t0 - t_depth},
     }
 
 
