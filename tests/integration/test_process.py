@@ -195,3 +195,19 @@ def test_subprocess_cluster_survives_a_killed_worker_and_keeps_images_off_the_sc
     image_bytes = FRAMES * 9 * 480 * 270 * 2
     print(f"scheduler handled {handled} bytes; the workers read {image_bytes} bytes of images")
     assert handled < image_bytes / FRAMES / 3, (handled, image_bytes)
+
+
+def test_a_frame_set_stays_within_the_worker_memory_bound(tmp_path: Path) -> None:
+    from rigctl.farm.run import worker_memory_bytes
+
+    res = run_rigctl("bench", "depth", "--size", "480x270", "--json", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    r = json.loads(res.stdout)
+    assert r["size"] == [480, 270] and len(r["cameras"]) == 9 and r["seconds"] > 0
+    assert r["input_bytes"] == 9 * 480 * 270 * 3 * 4
+    assert r["input_bytes"] < r["peak_rss_bytes"] < worker_memory_bytes(480, 270, 9)
+
+
+def test_bench_size_refuses_a_bad_size() -> None:
+    res = run_rigctl("bench", "depth", "--size", "4k")
+    assert res.returncode == 2 and "--size: expected WIDTHxHEIGHT" in res.stderr and res.stderr.count("\n") == 1
