@@ -40,7 +40,9 @@ def scaled(grid: Grid, d_range: tuple[float, float], width: int, height: int) ->
 
     s = width / grid.shape[1]
     size = (width, height)
-    images = {n: np.asarray(cv2.resize(v, size, interpolation=cv2.INTER_LINEAR)) for n, v in grid.images.items()}
+    images = {
+        n: np.asarray(cv2.resize(v, size, interpolation=cv2.INTER_LINEAR), np.float32) for n, v in grid.images.items()
+    }
     out = Grid(list(grid.names), images, dict(grid.offsets), grid.focal_px * s, grid.spacing, grid.doffs * s)
     return out, (d_range[0] * s, d_range[1] * s)
 
