@@ -211,3 +211,23 @@ def test_a_frame_set_stays_within_the_worker_memory_bound(tmp_path: Path) -> Non
 def test_bench_size_refuses_a_bad_size() -> None:
     res = run_rigctl("bench", "depth", "--size", "4k")
     assert res.returncode == 2 and "--size: expected WIDTHxHEIGHT" in res.stderr and res.stderr.count("\n") == 1
+
+
+def test_a_take_not_yet_rectified_is_rectified_on_the_workers_as_rigctl_rectify_would(tmp_path: Path) -> None:
+    rig = (REPO / "rigs" / "sim-3x3.yaml").read_text()
+    rig = rig.replace("width_px: 960", "width_px: 480").replace("height_px: 540", "height_px: 270")
+    (tmp_path / "small.yaml").write_text(rig)
+    res = run_rigctl(
+        "record", str(tmp_path / "small.yaml"), "--take", "raw", "--frames", "2", "--out", str(tmp_path),
+        "--sim", "motion=false", "--force",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    raw, calib = tmp_path / "raw", tmp_path / "raw" / "truth" / "calibration.yaml"
+    refused = run_rigctl("process", str(raw), "--out", str(tmp_path / "p0"))
+    assert refused.returncode == 2 and "not rectified: give --calibration" in refused.stderr, refused.stderr
+    res = run_rigctl("process", str(raw), "--out", str(tmp_path / "p"), "--calibration", str(calib), *FAST)
+    assert res.returncode == 0, res.stderr
+    assert run_rigctl("rectify", str(raw), "--calibration", str(calib), "--out", str(tmp_path / "rect")).returncode == 0
+    assert run_rigctl("depth", str(tmp_path / "rect"), "--out", str(tmp_path / "d"), *FAST).returncode == 0
+    for name in ("000000", "000001"):
+        assert same_bytes(tmp_path / "d" / name, tmp_path / "p" / "depth" / name) == []
