@@ -150,15 +150,40 @@ def check_rectification(rect: Rectifier, path: Path) -> None:
             )
 
 
-def _bgr(reader: TakeReader, name: str, i: int) -> NDArray[np.uint8] | None:
+def frame_bgr(reader: TakeReader, name: str, i: int) -> NDArray[np.uint8]:
+    """Frame ``i`` as BGR (a damaged frame raises, naming file and byte)."""
+    return _to_bgr(reader, reader.frame_bytes(name, i))
+
+
+def frame_bgr_or_none(reader: TakeReader, name: str, i: int) -> NDArray[np.uint8] | None:
     """Frame ``i`` as BGR; None when it is damaged and the reader skips damaged frames."""
     data = reader.frame_or_none(name, i)
-    if data is None:
-        return None
+    return None if data is None else _to_bgr(reader, data)
+
+
+def _to_bgr(reader: TakeReader, data: NDArray[np.uint8]) -> NDArray[np.uint8]:
     if reader.pixel_format == "BGR3":
         return data.reshape(reader.height, reader.width, 3)
     rgb = to_rgb(data, reader.pixel_format, reader.width, reader.height)
     return np.ascontiguousarray(from_rgb(rgb, "BGR3").reshape(reader.height, reader.width, 3))
+
+
+def rectifier_for_take(reader: TakeReader, calibration: Path) -> Rectifier:
+    """The rectifier of ``calibration`` for the cameras of a take, refused when a camera or the size differs."""
+    calib = load_calibration(calibration)
+    source = reader.folder
+    missing = [n for n in reader.names if n not in calib.cameras]
+    if missing:
+        raise CalibrationError(f"{calibration}: no calibration for camera(s) {', '.join(missing)} of take {source}")
+    sizes = {calib[n].image_size for n in reader.names}
+    if sizes != {(reader.width, reader.height)}:
+        raise CalibrationError(
+            f"{calibration}: calibrated image size {sorted(sizes)} does not match take {source} "
+            f"({reader.width}x{reader.height})"
+        )
+    rect = Rectifier(ArrayCalibration(calib.rig, {n: calib[n] for n in reader.names}, calib.reference, calib.meta))
+    check_rectification(rect, calibration)
+    return rect
 
 
 def rectify_take(
@@ -173,21 +198,9 @@ def rectify_take(
     A damaged source frame stops it (naming file and byte; the CLI removes the partial new take), unless
     ``skip_damaged``: then the frame is left out and listed in the new take's ``damaged_skipped``."""
     reader = TakeReader(source, skip_damaged=skip_damaged)
-    calib = load_calibration(calibration)
-    missing = [n for n in reader.names if n not in calib.cameras]
-    if missing:
-        raise CalibrationError(f"{calibration}: no calibration for camera(s) {', '.join(missing)} of take {source}")
-    sizes = {calib[n].image_size for n in reader.names}
-    if sizes != {(reader.width, reader.height)}:
-        raise CalibrationError(
-            f"{calibration}: calibrated image size {sorted(sizes)} does not match take {source} "
-            f"({reader.width}x{reader.height})"
-        )
-    sub = ArrayCalibration(calib.rig, {n: calib[n] for n in reader.names}, calib.reference, calib.meta)
     t_tables = time.perf_counter()
-    rect = Rectifier(sub)
+    rect = rectifier_for_take(reader, calibration)
     t_tables = time.perf_counter() - t_tables
-    check_rectification(rect, calibration)
     if out.exists():
         raise TakeError(f"{out}: already exists; takes are never overwritten")
     out.mkdir(parents=True)
@@ -203,7 +216,7 @@ def rectify_take(
         try:
             for i in range(len(idx)):
                 rec = idx[i]
-                img = _bgr(reader, name, i)
+                img = frame_bgr_or_none(reader, name, i)
                 if img is None:
                     continue  # damaged and skipped: listed in reader.damaged, never given a fresh checksum
                 t0 = time.perf_counter()

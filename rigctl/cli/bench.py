@@ -20,6 +20,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--plot", type=Path, default=Path("bench-depth.png"), metavar="PNG")
     d.add_argument("--json", action="store_true")
     d.add_argument("--quick", action="store_true", help="realistic presenter and Motorcycle only")
+    d.add_argument(
+        "--size",
+        metavar="WxH",
+        help="instead: time and peak memory of one frame set of the ideal presenter scaled to this size (3840x2160)",
+    )
+    d.add_argument("--preset", default="best", help="with --size: the depth preset")
+    d.add_argument("--cameras", nargs="+", metavar="CAM", help="with --size: cameras to compute (default: all)")
     d.set_defaults(func=run_depth_bench)
     p.set_defaults(func=lambda ns: (p.print_help(), 2)[1])
 
@@ -29,6 +36,8 @@ def run_depth_bench(ns: argparse.Namespace) -> int:
     from rigctl.depth.bench import format_table, motorcycle, plot, run_bench
     from rigctl.errors import ParameterError
 
+    if ns.size:
+        return run_size_bench(ns)
     if ns.repeats < 1:
         raise ParameterError(f"--repeats must be at least 1, got {ns.repeats}")
     bar = Progress("bench depth")
@@ -43,4 +52,27 @@ def run_depth_bench(ns: argparse.Namespace) -> int:
     else:
         print(format_table(result))
         print(f"plot: {ns.plot}")
+    return 0
+
+
+def run_size_bench(ns: argparse.Namespace) -> int:
+    """One frame set at the given size in a fresh process: seconds and peak resident memory."""
+    import functools
+
+    from rigctl.benchdata import presenter
+    from rigctl.farm.membench import measure_size, parse_size
+
+    w, h = parse_size(ns.size)
+    cams = tuple(ns.cameras) if ns.cameras else None
+    r = measure_size(functools.partial(presenter, True), w, h, ns.preset, cams)
+    if ns.json:
+        print(json.dumps(r))
+        return 0
+    t = r["timings_s"]
+    print(
+        f"{w}x{h}, preset {r['preset']}, {len(r['cameras'])} cameras: {r['seconds']:.1f} s per frame set "
+        f"(depth {t['depth']:.1f} s, write {t['write']:.1f} s), peak memory {r['peak_rss_bytes'] / 2**30:.2f} GiB "
+        f"(input images {r['input_bytes'] / 2**30:.2f} GiB, {r['peak_rss_while_building_input_bytes'] / 2**30:.2f} GiB "
+        "while the input was built)"
+    )
     return 0

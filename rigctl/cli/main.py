@@ -29,6 +29,7 @@ from rigctl.cli import (
     depth,
     devices,
     plan,
+    process,
     record,
     rectify,
     take,
@@ -39,7 +40,7 @@ from rigctl.errors import EXIT_INTERRUPTED, EXIT_USAGE, RigctlError
 
 log = logging.getLogger(__name__)
 
-VERBS = (plan, devices, record, take, tally, control, board, calibrate, rectify, depth, bench, demo, tui)
+VERBS = (plan, devices, record, take, tally, control, board, calibrate, rectify, depth, process, bench, demo, tui)
 
 
 def build_parser() -> argparse.ArgumentParser:

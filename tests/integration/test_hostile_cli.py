@@ -29,7 +29,8 @@ def test_tally_transport_failures_are_device_errors_naming_the_port(run_cli, tmp
 
 def test_control_with_unknown_bridge_scheme_is_a_device_error(run_cli, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     rig = rig_with(tmp_path, camera_control={"bridge": "foo://bar"})
-    one_line(run_cli("control", str(rig), "--gain", "2"), EXIT_DEVICE, "bridge: device address 'foo://bar': unknown scheme")
+    expected = "bridge: device address 'foo://bar': unknown scheme"
+    one_line(run_cli("control", str(rig), "--gain", "2"), EXIT_DEVICE, expected)
 
 
 def test_a_pty_line_opens_again_with_even_parity(run_cli, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]

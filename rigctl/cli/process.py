@@ -1,0 +1,92 @@
+"""``rigctl process``: a take's frame sets on a Dask cluster (rectify when needed, depth, export)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from rigctl.cli.args import distance, far_distance
+from rigctl.cli.progress import Progress
+from rigctl.depth.multibaseline import PRESETS
+from rigctl.take.export import parse_range
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "process",
+        help="depth for every frame set of a take on a Dask cluster (local processes or a scheduler)",
+        description="Every frame set is a Dask task: rectify (when the take is not rectified: --calibration), depth "
+        "and export, written to DIR/depth/<frame>/<camera>.{exr,pfm,png} as rigctl depth writes them, with "
+        "DIR/process.json saying which frames are done. Workers read the take from storage they share; run again "
+        "to finish what a stopped run left (done frames are skipped unless --redo).",
+    )
+    p.add_argument("take", type=Path, metavar="TAKE")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR")
+    p.add_argument("--calibration", type=Path, metavar="C", help="calibration.yaml for a take not yet rectified")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a running Dask scheduler")
+    where.add_argument("--workers", type=int, default=2, metavar="N", help="local worker processes (default 2)")
+    p.add_argument(
+        "--memory-limit",
+        default="auto",
+        metavar="BYTES",
+        help="local workers' memory limit, e.g. 6GiB (default: the bound measured for the take's frame size)",
+    )
+    p.add_argument("--frames", metavar="A-B", help="frame sets (default: all complete ones)")
+    p.add_argument("--cameras", nargs="+", metavar="CAM", help="cameras to compute (default: all)")
+    p.add_argument("--preset", choices=list(PRESETS), default="best")
+    p.add_argument("--near", type=distance, metavar="M", help="nearest subject distance (planner range)")
+    p.add_argument("--far", type=far_distance, metavar="M", help="farthest subject distance (inf allowed)")
+    p.add_argument("--no-key", action="store_true", help="search every pixel (no green-screen key)")
+    p.add_argument("--redo", action="store_true", help="compute frames again even when done")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(func=run)
+
+
+def run(ns: argparse.Namespace) -> int:
+    import math
+    import os
+
+    if not ns.debug:  # Dask's own INFO lines (scheduler, nannies, workers inherit it) only with --debug
+        os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "warning")
+
+    from rigctl.depth.run import DepthOptions
+    from rigctl.farm.run import FarmOptions, Status, process_take, scheduler_url
+
+    opt = FarmOptions(
+        take=ns.take,
+        out=ns.out,
+        depth=DepthOptions(
+            preset=ns.preset,
+            near_m=ns.near,
+            far_m=ns.far if ns.far is not None else (math.inf if ns.near is not None else None),
+            key=not ns.no_key,
+            cameras=tuple(ns.cameras) if ns.cameras else None,
+        ),
+        calibration=ns.calibration,
+        frames=list(parse_range(ns.frames, 1_000_000)) if ns.frames else None,
+        redo=ns.redo,
+        scheduler=scheduler_url(ns.scheduler) if ns.scheduler else None,
+        workers=ns.workers,
+        memory_limit=ns.memory_limit,
+    )
+    bar = Progress(f"process {ns.take.name}")
+
+    def show(st: Status) -> None:
+        bar(st.finished / max(st.total, 1), st.line())
+
+    try:
+        summary = process_take(opt, progress=show)
+    finally:
+        bar.close()
+    if ns.json:
+        print(json.dumps(summary))
+    else:
+        print(
+            f"{summary['computed']} frame sets computed, {summary['failed']} failed, {summary['skipped_done']} "
+            f"already done; {summary['frames_per_second']:.2f} frames/s; ledger {summary['ledger']}"
+        )
+        for name, err in summary["failed_frames"].items():
+            print(f"  frame {name} failed: {err}")
+    return 1 if summary["failed"] else 0

@@ -1,0 +1,265 @@
+"""``rigctl process``: every frame set of a take as a task on a Dask cluster (an existing scheduler, or a local
+cluster of worker processes), outputs in ``rigctl depth``'s layout under ``DIR/depth``, a ledger in
+``DIR/process.json`` that makes a stopped run safe to run again.
+
+The client reads only the take's manifest and indexes (to list the frame sets); workers read the frames
+themselves from storage every one of them sees, so the scheduler carries paths and small dicts, never images.
+A worker that dies takes its task back to the scheduler, which runs it elsewhere (Dask's
+``distributed.scheduler.allowed-failures``); a frame that fails is recorded and the others go on.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+import shutil
+import time
+import uuid
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rigctl.depth.run import DepthOptions
+from rigctl.errors import ParameterError
+from rigctl.farm.frame import FORMATS, PARTIAL_PREFIX, FrameJob, frame_name, is_rectified, one_line, run_frame
+from rigctl.farm.ledger import Ledger
+
+log = logging.getLogger(__name__)
+
+_SCHEDULER = re.compile(
+    r"tcp://(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?):(?P<port>\d{1,5})"
+)
+
+
+def scheduler_url(text: str) -> str:
+    """A scheduler address ``tcp://HOST:PORT``; anything else is refused with one line."""
+    m = _SCHEDULER.fullmatch(text.strip())
+    if m is None or not 0 < int(m["port"]) < 65536:
+        raise ParameterError(f"--scheduler: expected tcp://HOST:PORT (port 1-65535), got {text!r}")
+    return text.strip()
+
+
+@dataclass
+class FarmOptions:
+    take: Path
+    out: Path
+    depth: DepthOptions = field(default_factory=DepthOptions)
+    calibration: Path | None = None
+    frames: list[int] | None = None
+    redo: bool = False
+    scheduler: str | None = None
+    workers: int = 2
+    memory_limit: str | int = "auto"
+
+
+def eta_text(seconds: float | None) -> str:
+    if seconds is None or not math.isfinite(seconds):
+        return "--:--"
+    s = int(seconds)
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
+
+
+@dataclass
+class Status:
+    """Counts for the progress line; ``clock`` is injected so rate and ETA are testable."""
+
+    total: int
+    skipped: int = 0
+    done: int = 0
+    failed: int = 0
+    clock: Callable[[], float] = time.monotonic
+    started: float = field(default=0.0)
+
+    def __post_init__(self) -> None:
+        self.started = self.clock()
+
+    @property
+    def finished(self) -> int:
+        return self.done + self.failed
+
+    def rate(self) -> float:
+        """Frame sets per second since the start (0 before the first one)."""
+        elapsed = self.clock() - self.started
+        return self.finished / elapsed if elapsed > 0 and self.finished else 0.0
+
+    def eta_s(self) -> float | None:
+        r = self.rate()
+        return (self.total - self.finished) / r if r > 0 else None
+
+    def line(self) -> str:
+        return (
+            f"{self.done} done, {self.failed} failed of {self.total}, {self.rate():.2f} frames/s, "
+            f"ETA {eta_text(self.eta_s())}"
+        )
+
+
+def frames_to_do(options: FarmOptions) -> tuple[list[int], list[int], Ledger]:
+    """(frame sets to compute, frame sets already done and skipped, the ledger), checked on the client."""
+    from rigctl.take.reader import TakeReader
+
+    take = options.take
+    if not (take / "take.yaml").exists():
+        raise ParameterError(f"{take}: not a take (no take.yaml)")
+    rectified = is_rectified(take)
+    if not rectified and options.calibration is None:
+        raise ParameterError(f"{take}: not rectified: give --calibration (from rigctl calibrate) to rectify on the way")
+    if rectified and options.calibration is not None:
+        raise ParameterError(f"{take}: already rectified; --calibration is only for takes that are not")
+    reader = TakeReader(take)
+    if options.calibration is not None:
+        from rigctl.rectify import rectifier_for_take
+
+        rectifier_for_take(reader, options.calibration)  # refuses a calibration of other cameras or size now
+    cams = options.depth.cameras
+    unknown = [c for c in cams or () if c not in reader.names]
+    if unknown:
+        raise ParameterError(f"--cameras: no camera {', '.join(unknown)} in {take} (it has {', '.join(reader.names)})")
+    numbers = [s.number for s in reader.complete_sets()]
+    if options.frames is not None:
+        missing = [f for f in options.frames if f not in numbers]
+        if missing:
+            raise ParameterError(f"{take}: frame set(s) {missing} are not complete frame sets of the take")
+        numbers = list(options.frames)
+    if not numbers:
+        raise ParameterError(f"{take}: the take has no complete frame set")
+    ledger = Ledger(options.out)
+    depth_dir = options.out / "depth"
+    names = list(cams or reader.names)
+    todo: list[int] = []
+    skipped: list[int] = []
+    for n in numbers:
+        folder = depth_dir / frame_name(n)
+        complete = all((folder / f"{c}.{ext}").exists() for c in names for ext in FORMATS)
+        (skipped if ledger.done(frame_name(n)) and complete and not options.redo else todo).append(n)
+    return todo, skipped, ledger
+
+
+def default_memory_limit(take: Path, cameras: int | None) -> int:
+    """The worker memory bound for a take's frame size (bytes): see :func:`worker_memory_bytes`."""
+    from rigctl.take.reader import TakeReader
+
+    reader = TakeReader(take)
+    return worker_memory_bytes(reader.width, reader.height, cameras or len(reader.names))
+
+
+# Peak resident memory of one frame set, measured with ``rigctl bench depth --size`` (preset best, every camera):
+# a fixed part (interpreter, OpenCV, Dask) and a part per pixel and camera (48 B measured between 960x540 and
+# 1920x1080). The worker limit is this with a margin of 25 %: Dask pauses a worker at 80 % of it and restarts
+# it at 95 %.
+BASE_BYTES = 600e6
+BYTES_PER_CAMERA_PIXEL = 50.0
+MARGIN = 1.25
+
+
+def worker_memory_bytes(width: int, height: int, cameras: int) -> int:
+    return int(MARGIN * (BASE_BYTES + BYTES_PER_CAMERA_PIXEL * width * height * cameras))
+
+
+@contextmanager
+def dask_client(options: FarmOptions) -> Iterator[Any]:
+    """A client of the given scheduler, or of a local cluster of ``workers`` processes with one thread each."""
+    from distributed import Client, LocalCluster
+
+    if options.scheduler:
+        try:
+            client = Client(options.scheduler, timeout="10s")
+        except (OSError, TimeoutError) as exc:
+            raise ParameterError(f"--scheduler {options.scheduler}: cannot reach it ({one_line(exc)})") from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    if options.workers < 1:
+        raise ParameterError(f"--workers must be at least 1, got {options.workers}")
+    limit = options.memory_limit
+    if limit == "auto":
+        limit = default_memory_limit(options.take, len(options.depth.cameras or ()) or None)
+    with (
+        LocalCluster(
+            n_workers=options.workers,
+            threads_per_worker=1,
+            processes=True,
+            memory_limit=limit,
+            host="127.0.0.1",
+            dashboard_address=None,
+            scheduler_kwargs={"dashboard": False},
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        yield client
+
+
+def process_take(
+    options: FarmOptions,
+    progress: Callable[[Status], None] | None = None,
+    clock: Callable[[], float] = time.monotonic,
+) -> dict[str, Any]:
+    """Run every frame set still to do; returns the summary (also what ``--json`` prints)."""
+    todo, skipped, ledger = frames_to_do(options)
+    depth_dir = options.out / "depth"
+    depth_dir.mkdir(parents=True, exist_ok=True)
+    for stale in depth_dir.glob(PARTIAL_PREFIX + "*"):  # left by a run that was stopped mid-write
+        shutil.rmtree(stale, ignore_errors=True)
+    status = Status(total=len(todo), skipped=len(skipped), clock=clock)
+    workers: dict[str, int] = {}
+    failed: dict[str, str] = {}
+    t0 = clock()
+    compute_seconds = 0.0
+    if todo:
+        from distributed import as_completed
+
+        with dask_client(options) as client:
+            t_compute = clock()
+            run_id = uuid.uuid4().hex[:8]
+            futures = {}
+            for n in todo:
+                job = FrameJob(
+                    str(options.take.resolve()),
+                    str(depth_dir.resolve()),
+                    n,
+                    options.depth,
+                    str(options.calibration.resolve()) if options.calibration else None,
+                )
+                futures[client.submit(run_frame, job, key=f"rigctl-frame-{frame_name(n)}-{run_id}", pure=False)] = n
+            if progress:
+                progress(status)
+            for fut in as_completed(futures):
+                n = futures[fut]
+                try:
+                    entry = fut.result()
+                except Exception as exc:  # the task itself could not run (KilledWorker, lost cluster, ...)
+                    entry = {"frame": n, "status": "failed", "worker": "", "seconds": 0.0, "error": one_line(exc)}
+                fut.release()
+                name = frame_name(n)
+                entry.pop("frame", None)
+                ledger.record(name, entry)
+                if entry["status"] == "done":
+                    status.done += 1
+                    workers[entry["worker"]] = workers.get(entry["worker"], 0) + 1
+                else:
+                    status.failed += 1
+                    failed[name] = entry.get("error", "")
+                if progress:
+                    progress(status)
+            compute_seconds = clock() - t_compute
+    elif not ledger.path.exists():
+        ledger.save()
+    seconds = clock() - t0
+    return {
+        "take": str(options.take),
+        "out": str(options.out),
+        "ledger": str(ledger.path),
+        "frames": len(todo) + len(skipped),
+        "computed": status.done,
+        "failed": status.failed,
+        "skipped_done": len(skipped),
+        "failed_frames": failed,
+        "frames_by_worker": workers,
+        "seconds": seconds,
+        "compute_seconds": compute_seconds,  # from the first task submitted to the last result (no cluster start)
+        "frames_per_second": status.done / compute_seconds if compute_seconds > 0 and status.done else 0.0,
+    }

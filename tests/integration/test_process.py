@@ -1,0 +1,233 @@
+"""``rigctl process`` on real Dask clusters: a LocalCluster of worker processes, and a scheduler with two
+workers started as real ``dask`` subprocesses on 127.0.0.1, one of them killed mid-run. Small simulated takes
+(480x270, the fast preset on two cameras) keep each frame set around a second."""
+
+from __future__ import annotations
+
+import filecmp
+import importlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from tests_support import rigctl_exe, run_rigctl
+
+from rigctl.depth.run import DepthOptions
+from rigctl.farm.frame import frame_name
+from rigctl.farm.run import FarmOptions, Status, process_take
+
+REPO = Path(__file__).resolve().parents[2]
+CAMS = ("r1c1", "r1c0")
+FAST = ["--preset", "fast", "--cameras", *CAMS]
+FRAMES = 6
+
+
+@pytest.fixture(scope="module")
+def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An ideal simulated take (already rectified) at 480x270, six frame sets."""
+    out = tmp_path_factory.mktemp("farm")
+    rig = (REPO / "rigs" / "sim-3x3.yaml").read_text()
+    rig = rig.replace("width_px: 960", "width_px: 480").replace("height_px: 540", "height_px: 270")
+    (out / "small.yaml").write_text(rig)
+    res = run_rigctl(
+        "record", str(out / "small.yaml"), "--take", "t", "--frames", str(FRAMES), "--out", str(out),
+        "--sim", "ideal=true", "--force",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    return out / "t"
+
+
+@pytest.fixture(scope="module")
+def single_process(take: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """What ``rigctl depth`` writes for the same frames in one process: the reference for byte identity."""
+    out = tmp_path_factory.mktemp("single")
+    res = run_rigctl("depth", str(take), "--out", str(out), *FAST)
+    assert res.returncode == 0, res.stderr
+    return out
+
+
+def same_bytes(a: Path, b: Path) -> list[str]:
+    """Files of ``a`` that are missing from ``b`` or differ from it byte for byte."""
+    names = sorted(p.name for p in a.iterdir())
+    _same, mismatch, errors = filecmp.cmpfiles(a, b, names, shallow=False)
+    assert len(names) == 3 * len(CAMS)
+    return mismatch + errors
+
+
+def test_local_cluster_of_processes_matches_rigctl_depth_byte_for_byte(
+    take: Path, single_process: Path, tmp_path: Path
+) -> None:
+    res = run_rigctl("process", str(take), "--out", str(tmp_path), "--workers", "2", *FAST, "--json")
+    assert res.returncode == 0, res.stderr
+    summary = json.loads(res.stdout)
+    assert summary["computed"] == FRAMES and summary["failed"] == 0
+    ledger = json.loads((tmp_path / "process.json").read_text())["frames"]
+    assert sorted(ledger) == [frame_name(n) for n in range(FRAMES)]
+    for name, entry in ledger.items():
+        assert entry["status"] == "done" and entry["worker"].startswith("tcp://127.0.0.1:") and entry["seconds"] > 0
+        assert same_bytes(single_process / name, tmp_path / "depth" / name) == []
+    assert not list((tmp_path / "depth").glob(".partial-*"))
+
+
+def test_a_rerun_after_an_interruption_computes_only_the_missing_frames(take: Path, tmp_path: Path) -> None:
+    opt = FarmOptions(take, tmp_path, DepthOptions(preset="fast", cameras=CAMS), workers=1)
+
+    def stop_after_two(st: Status) -> None:
+        if st.done == 2:
+            raise KeyboardInterrupt  # Ctrl-C on the client: the cluster goes down with it
+
+    with pytest.raises(KeyboardInterrupt):
+        process_take(opt, progress=stop_after_two)
+    first = json.loads((tmp_path / "process.json").read_text())["frames"]
+    assert len(first) == 2 and all(e["status"] == "done" for e in first.values())
+    stamps = {name: (tmp_path / "depth" / name / "r1c1.pfm").stat().st_mtime_ns for name in first}
+    (tmp_path / "depth" / ".partial-000004-deadbeef").mkdir()  # what a write cut short leaves
+
+    summary = process_take(opt)
+    assert summary["skipped_done"] == 2 and summary["computed"] == FRAMES - 2 and summary["failed"] == 0
+    ledger = json.loads((tmp_path / "process.json").read_text())["frames"]
+    assert len(ledger) == FRAMES and all(e["status"] == "done" for e in ledger.values())
+    assert {n: (tmp_path / "depth" / n / "r1c1.pfm").stat().st_mtime_ns for n in first} == stamps
+    assert not list((tmp_path / "depth").glob(".partial-*"))
+
+    again = process_take(FarmOptions(take, tmp_path, opt.depth, workers=1, frames=[0], redo=True))
+    assert again["computed"] == 1 and again["skipped_done"] == 0
+
+
+def test_a_failed_frame_is_reported_and_the_others_complete(take: Path, tmp_path: Path) -> None:
+    (tmp_path / "depth").mkdir()
+    (tmp_path / "depth" / frame_name(1)).write_text("not a folder")  # frame 1 cannot be published
+    res = run_rigctl("process", str(take), "--out", str(tmp_path), "--workers", "2", "--frames", "0-2", *FAST)
+    assert res.returncode == 1
+    assert "frame 000001 failed: FileExistsError" in res.stdout, res.stdout
+    ledger = json.loads((tmp_path / "process.json").read_text())["frames"]
+    assert ledger["000001"]["status"] == "failed" and "000001" in ledger["000001"]["error"]
+    assert ledger["000000"]["status"] == ledger["000002"]["status"] == "done"
+
+
+@pytest.mark.parametrize("url", ["http://127.0.0.1:8786", "tcp://127.0.0.1", "tcp://:8786", "tcp://h:99999", "x"])
+def test_a_bad_scheduler_address_is_one_line(take: Path, tmp_path: Path, url: str) -> None:
+    res = run_rigctl("process", str(take), "--out", str(tmp_path), "--scheduler", url)
+    assert res.returncode == 2
+    assert res.stderr.strip().count("\n") == 0 and "expected tcp://HOST:PORT" in res.stderr, res.stderr
+
+
+def test_a_folder_that_is_not_a_take_is_one_line(tmp_path: Path) -> None:
+    res = run_rigctl("process", str(tmp_path / "nothing"), "--out", str(tmp_path / "out"))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and "not a take" in res.stderr, res.stderr
+
+
+def proc_io(pid: int) -> int:
+    """Bytes the process has read and written through system calls (sockets included)."""
+    fields = dict(line.split(": ") for line in Path(f"/proc/{pid}/io").read_text().splitlines())
+    return int(fields["rchar"]) + int(fields["wchar"])
+
+
+def dask_env() -> dict[str, str]:
+    env = dict(os.environ, DASK_LOGGING__DISTRIBUTED="warning")
+    env.update({v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")})
+    return env
+
+
+def wait_for(what: str, check, timeout: float = 120.0) -> None:  # type: ignore[no-untyped-def]
+    deadline = time.monotonic() + timeout
+    while not check():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"gave up waiting for {what}")
+        time.sleep(0.2)
+
+
+@pytest.mark.slow
+def test_subprocess_cluster_survives_a_killed_worker_and_keeps_images_off_the_scheduler(
+    take: Path, single_process: Path, tmp_path: Path
+) -> None:
+    dask = str(Path(sys.executable).with_name("dask"))
+    sched_file = tmp_path / "scheduler.json"
+    common = {"env": dask_env(), "stdout": subprocess.DEVNULL, "stderr": subprocess.PIPE, "start_new_session": True}
+    scheduler = [dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard"]
+    procs = [subprocess.Popen([*scheduler, "--scheduler-file", str(sched_file)], **common)]
+    try:
+        wait_for("the scheduler", sched_file.exists, 60)
+        worker = [dask, "worker", "--scheduler-file", str(sched_file), "--host", "127.0.0.1", "--nthreads", "1"]
+        procs += [subprocess.Popen([*worker, "--no-dashboard", "--name", f"w{i}"], **common) for i in range(2)]
+        address = json.loads(sched_file.read_text())["address"]
+        import distributed
+
+        with distributed.Client(address, timeout="30s") as c:
+            c.wait_for_workers(2, timeout=90)
+            # the scheduler unpickles task specs: it imports their modules once, reading files, not images
+            c.run_on_scheduler(importlib.import_module, "rigctl.farm.frame")
+        scheduler_io = proc_io(procs[0].pid)
+
+        out = tmp_path / "out"
+        argv = [*rigctl_exe(), "process", str(take), "--out", str(out), "--scheduler", address, *FAST, "--json"]
+        client = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        ledger = out / "process.json"
+        wait_for("the first frame", ledger.exists)
+        os.killpg(procs[2].pid, signal.SIGKILL)  # the second worker and its nanny, mid-run
+        procs[2].wait(30)
+        stdout, stderr = client.communicate(timeout=300)
+        assert client.returncode == 0, stderr
+        handled = proc_io(procs[0].pid) - scheduler_io
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGTERM)
+        for p in procs:
+            try:
+                p.wait(30)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+
+    summary = json.loads(stdout)
+    assert summary["computed"] == FRAMES and summary["failed"] == 0
+    frames = json.loads(ledger.read_text())["frames"]
+    assert all(e["status"] == "done" for e in frames.values()) and len(frames) == FRAMES
+    for name in frames:
+        assert same_bytes(single_process / name, out / "depth" / name) == []
+    # the workers read 9 cameras of 480x270 UYVY per frame set from the take; the scheduler's reads and writes
+    # (sockets and files) while the take was processed: about 26 kB here, a third of a frame set is the bar
+    image_bytes = FRAMES * 9 * 480 * 270 * 2
+    print(f"scheduler handled {handled} bytes; the workers read {image_bytes} bytes of images")
+    assert handled < image_bytes / FRAMES / 3, (handled, image_bytes)
+
+
+def test_a_frame_set_stays_within_the_worker_memory_bound(tmp_path: Path) -> None:
+    from rigctl.farm.run import worker_memory_bytes
+
+    res = run_rigctl("bench", "depth", "--size", "480x270", "--json", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    r = json.loads(res.stdout)
+    assert r["size"] == [480, 270] and len(r["cameras"]) == 9 and r["seconds"] > 0
+    assert r["input_bytes"] == 9 * 480 * 270 * 3 * 4
+    assert r["input_bytes"] < r["peak_rss_bytes"] < worker_memory_bytes(480, 270, 9)
+
+
+def test_bench_size_refuses_a_bad_size() -> None:
+    res = run_rigctl("bench", "depth", "--size", "4k")
+    assert res.returncode == 2 and "--size: expected WIDTHxHEIGHT" in res.stderr and res.stderr.count("\n") == 1
+
+
+def test_a_take_not_yet_rectified_is_rectified_on_the_workers_as_rigctl_rectify_would(tmp_path: Path) -> None:
+    rig = (REPO / "rigs" / "sim-3x3.yaml").read_text()
+    rig = rig.replace("width_px: 960", "width_px: 480").replace("height_px: 540", "height_px: 270")
+    (tmp_path / "small.yaml").write_text(rig)
+    res = run_rigctl(
+        "record", str(tmp_path / "small.yaml"), "--take", "raw", "--frames", "2", "--out", str(tmp_path),
+        "--sim", "motion=false", "--force",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    raw, calib = tmp_path / "raw", tmp_path / "raw" / "truth" / "calibration.yaml"
+    refused = run_rigctl("process", str(raw), "--out", str(tmp_path / "p0"))
+    assert refused.returncode == 2 and "not rectified: give --calibration" in refused.stderr, refused.stderr
+    res = run_rigctl("process", str(raw), "--out", str(tmp_path / "p"), "--calibration", str(calib), *FAST)
+    assert res.returncode == 0, res.stderr
+    assert run_rigctl("rectify", str(raw), "--calibration", str(calib), "--out", str(tmp_path / "rect")).returncode == 0
+    assert run_rigctl("depth", str(tmp_path / "rect"), "--out", str(tmp_path / "d"), *FAST).returncode == 0
+    for name in ("000000", "000001"):
+        assert same_bytes(tmp_path / "d" / name, tmp_path / "p" / "depth" / name) == []
