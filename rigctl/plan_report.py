@@ -211,7 +211,7 @@ def _every_pair(rig: Rig, groups: _Offsets, per_group: list[PairPlan]) -> list[P
     """Every pair of the rig in ``combinations`` order, each with its group's numbers."""
     at = {(int(r), int(c)): i for i, (r, c) in enumerate(zip(groups.rows, groups.cols, strict=True))}
     return [
-        replace(per_group[at[(b.row - a.row, abs(b.col - a.col))]], name=f"{a.name}-{b.name}")
+        replace(per_group[at[(b.row - a.row, abs(b.col - a.col))]], name=f"{a.name}-{b.name}", same_offset_pairs=1)
         for a, b in combinations(rig.cameras, 2)
     ]
 

@@ -102,22 +102,32 @@ class TakeReader:
     def status(self) -> str:
         return self.manifest.status
 
-    def _resolve(self, text: str, field: str) -> Path:
-        """A path of the manifest, refused unless it resolves inside the take folder."""
+    def _resolve(self, text: str, name: str, kind: str) -> Path:
+        """A path of the manifest, refused unless it resolves inside the take folder, or is this camera's file
+        in the take's folder on another destination (``<dest>/<take>/cameras/<camera>.<kind>``, as the
+        recorder writes a take spread over several disks)."""
         p = self.folder / text
+        real = p.resolve()
         try:
-            p.resolve().relative_to(self.folder.resolve())
+            real.relative_to(self.folder.resolve())
+            return p
         except ValueError:
-            raise TakeError(
-                f"{self.folder / 'take.yaml'}: {field} {text!r} points outside the take folder: refused"
-            ) from None
-        return p
+            pass
+        if (
+            real.name == f"{name}.{kind}"
+            and real.parent.name == "cameras"
+            and real.parent.parent.name == self.manifest.take
+        ):
+            return p
+        raise TakeError(
+            f"{self.folder / 'take.yaml'}: cameras.{name}.{kind} {text!r} points outside the take folder: refused"
+        ) from None
 
     def essence_path(self, name: str) -> Path:
-        return self._resolve(self.manifest.cameras[name].essence, f"cameras.{name}.essence")
+        return self._resolve(self.manifest.cameras[name].essence, name, "essence")
 
     def index_path(self, name: str) -> Path:
-        path = self._resolve(self.manifest.cameras[name].index, f"cameras.{name}.index")
+        path = self._resolve(self.manifest.cameras[name].index, name, "index")
         if not path.exists():
             raise TakeError(f"{path}: index file of camera {name} is missing")
         return path

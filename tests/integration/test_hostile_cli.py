@@ -106,7 +106,9 @@ def test_grouped_and_listed_plans_agree(tmp_path: Path, monkeypatch: pytest.Monk
     for g in grouped.pairs:
         same = [p for p in listed.pairs if (p.dx_m, p.dy_m) == pytest.approx((g.dx_m, g.dy_m))]
         assert len(same) == g.same_offset_pairs and by_name[g.name].parallax_px == g.parallax_px
-    assert grouped.over_budget_count == len(listed.over_budget)
+    assert grouped.over_budget_count == listed.over_budget_count == len(listed.over_budget)
+    assert all(p.same_offset_pairs == 1 for p in listed.pairs)
+    assert f"{len(listed.over_budget)} of 36 pairs exceed the budget" in plan_report.format_plan(listed, rig)
 
 
 # ---- 6. rig files ---------------------------------------------------------------------------------------------
