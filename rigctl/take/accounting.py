@@ -28,6 +28,7 @@ class CameraStats:
     format_changes: list[int] = field(default_factory=list)
     thumbnail: Any = None  # a small luma image for the shoot UI (uint8 array), when asked for
     preview_ns: int = 0
+    drop_in_s: float | None = None  # time left before the first writer drop at the queue's trend (None: steady)
 
     @property
     def frames_written(self) -> int:
