@@ -156,3 +156,24 @@ def test_queue_trend_is_quiet_while_steady_and_zero_when_full() -> None:
     assert trend.seconds_to_full() is None
     trend.add(4.0, 25)
     assert trend.seconds_to_full() == 0.0
+
+
+def test_an_unfinished_demo_folder_is_replaced_without_flags_a_finished_one_is_kept(tmp_path: Path) -> None:
+    from rigctl.demo import MARKER, prepare_folder
+    from rigctl.errors import ParameterError
+
+    out = tmp_path / "demo"
+    prepare_folder(out, fresh=False)
+    assert (out / MARKER).exists()
+    (out / "takes").mkdir()  # a step failed here: no report
+    prepare_folder(out, fresh=False)
+    assert not (out / "takes").exists() and (out / MARKER).exists()
+    (out / "report.md").write_text("# finished\n")
+    with pytest.raises(ParameterError, match="exists and is not empty"):
+        prepare_folder(out, fresh=False)
+    other = tmp_path / "mine"
+    other.mkdir()
+    (other / "keep.txt").write_text("not a demo")
+    with pytest.raises(ParameterError):
+        prepare_folder(other, fresh=False)
+    assert (other / "keep.txt").exists()
