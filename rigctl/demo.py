@@ -19,6 +19,7 @@ import numpy as np
 from rigctl.errors import ParameterError
 
 Say = Callable[[str], None]
+MARKER = ".rigctl-demo"
 
 
 def _montage(folder: Path, names: list[str], out: Path) -> Path:
@@ -40,25 +41,34 @@ def _montage(folder: Path, names: list[str], out: Path) -> Path:
     return out
 
 
+def prepare_folder(out: Path, fresh: bool) -> None:
+    """Make ``out`` the demo's empty folder, marked as an unfinished demo until its report is written."""
+    if out.exists() and any(out.iterdir()):
+        # an unfinished demo (a step failed or was interrupted) is replaced without asking; a finished demo's
+        # figures, or a folder that is no demo's, only with --fresh
+        unfinished = (out / MARKER).exists() and not (out / "report.md").exists()
+        if not fresh and not unfinished:
+            raise ParameterError(f"{out}: exists and is not empty (choose another --out, or --fresh to replace it)")
+        shutil.rmtree(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / MARKER).write_text("rigctl demo: until report.md is written, the next demo here replaces this folder\n")
+
+
 def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh: bool = False) -> Path:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from rigctl.benchdata import presenter
     from rigctl.calib.report import format_table as calib_table
     from rigctl.calib.report import write_plots
     from rigctl.calib.run import calibrate
-    from rigctl.cli.main import main as cli
     from rigctl.depth.bench import better, comparisons, motorcycle, plot, run_bench
     from rigctl.depth.bench import format_table as bench_table
     from rigctl.depth.run import DepthOptions, run_depth
     from rigctl.plan_report import format_plan, plan_rig
+    from rigctl.recording import record_take
     from rigctl.rectify import rectify_take
     from rigctl.rig import load_rig
 
-    if out.exists() and any(out.iterdir()):
-        if not fresh:
-            raise ParameterError(f"{out}: exists and is not empty (choose another --out, or --fresh to replace it)")
-        shutil.rmtree(out)
-    out.mkdir(parents=True, exist_ok=True)
+    prepare_folder(out, fresh)
     takes = out / "takes"
     timings: dict[str, float] = {}
     t_all = time.perf_counter()
@@ -67,12 +77,19 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
         say(f"== {name}")
         return time.perf_counter()
 
-    def record(take: str, frames: int, *sim: str) -> None:
-        args = ["record", "--take", take, "--frames", str(frames), "--out", str(takes)]
-        if cli(args + [a for s in sim for a in ("--sim", s)]):
-            raise ParameterError(f"recording the {take} take failed")
-
     rig = load_rig("sim-3x3")
+
+    def record(take: str, frames: int, *sim: str) -> None:
+        # a planned take of a few frame sets: preflight says go whenever memory holds it, on any disk
+        bar = progress_factory(f"recording {take}")
+        try:
+            result = record_take(rig, take, [takes], frames=frames, sim=list(sim), progress=bar)
+        finally:
+            bar.close()
+        say(f"preflight {result.preflight.outcome}: " + "; ".join(v.message for v in result.preflight.verdicts))
+        if result.recorder.error is not None:
+            raise result.recorder.error
+
     t0 = step("plan: equations (1) and (2) for the paper's rig geometry, subject 1 m deep")
     plan = plan_rig(rig, subject_depth_m=1.0)
     plan_text = format_plan(plan, rig)

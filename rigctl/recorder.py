@@ -34,6 +34,7 @@ from rigctl.take.accounting import CameraStats
 from rigctl.take.index import read_index
 from rigctl.take.manifest import TAKE_SPEC, write_manifest
 from rigctl.take.reserve import create_reserve, release_reserve
+from rigctl.take.trend import QueueTrend
 from rigctl.take.writer import CameraWriter, DiskFullError
 from rigctl.timecode import start_timecode
 
@@ -98,7 +99,7 @@ class Recorder:
         self.plan = plan
         self.cameras: dict[str, Camera] = devices.cameras
         self.names = sorted(self.cameras, key=lambda n: rig.camera_names.index(n))
-        self.format = CaptureFormat(rig.width_px, rig.height_px, rig.model.format.pixel_format, rig.fps)
+        self.format = self.capture_format(rig)
         self.period_ns = round(1e9 / rig.fps)
         self.checksum = checksum
         self.buffers = buffers_per_camera or self.default_buffers(self.format)
@@ -106,6 +107,8 @@ class Recorder:
         self.writer_factory = writer_factory
         self.notes = list(notes or [])
         self.stats = {n: CameraStats(n, pool_size=self.buffers) for n in self.names}
+        self.trends = {n: QueueTrend(self.buffers) for n in self.names}
+        self._trend_lock = threading.Lock()
         self.t0_ns: int | None = None
         self.t1_ns: int | None = None
         self.started_utc = ""
@@ -137,6 +140,10 @@ class Recorder:
         packed = np.frombuffer(frame.data, np.uint8, count=fmt.bytes_per_frame).reshape(fmt.height, fmt.width * 2)
         start = 1 if fmt.pixel_format == "UYVY" else 0
         return np.ascontiguousarray(packed[:: 2 * step, start :: 2 * step])
+
+    @staticmethod
+    def capture_format(rig: Rig) -> CaptureFormat:
+        return CaptureFormat(rig.width_px, rig.height_px, rig.model.format.pixel_format, rig.fps)
 
     @staticmethod
     def default_buffers(fmt: CaptureFormat, budget_bytes: int = 3 << 30, cameras: int = 9) -> int:
@@ -253,10 +260,21 @@ class Recorder:
             self.t1_ns = max(self.t0_ns, now + ((self.t0_ns - now) % self.period_ns))
         self._stop.set()
 
-    def wait(self, timeout_s: float | None = None, progress: Callable[[float], None] | None = None) -> bool:
-        """Wait until every camera passed T1 (or ended, or the take failed); True when finished."""
+    def wait(
+        self,
+        timeout_s: float | None = None,
+        progress: Callable[[float], None] | None = None,
+        watch: Callable[[float | None], None] | None = None,
+        watch_every_s: float = 0.25,
+    ) -> bool:
+        """Wait until every camera passed T1 (or ended, or the take failed); True when finished. ``watch``
+        gets the time left before the first writer drop (:meth:`sample_queues`) every ``watch_every_s``."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        next_watch = 0.0
         while True:
+            if watch is not None and time.monotonic() >= next_watch:
+                next_watch = time.monotonic() + watch_every_s
+                watch(self.sample_queues())
             if self.error is not None:
                 return True
             if self.t1_ns is not None:
@@ -275,6 +293,18 @@ class Recorder:
         past = now - self.t1_ns
         quiet = now - st.last_host_ns > 500_000_000 if st.last_host_ns else True
         return (past > 4 * self.period_ns and quiet) or past > 10_000_000_000
+
+    def sample_queues(self, now_s: float | None = None) -> float | None:
+        """Add every writer queue's depth to its trend; returns the least time left before a camera's first
+        writer drop (None: no queue is growing). Each camera's figure is kept in its stats for the UI."""
+        now = time.monotonic() if now_s is None else now_s
+        with self._trend_lock:
+            for name in self.names:
+                trend = self.trends[name]
+                trend.add(now, self.stats[name].queued)
+                self.stats[name].drop_in_s = trend.seconds_to_full()
+        left = [s.drop_in_s for s in self.stats.values() if s.drop_in_s is not None]
+        return min(left) if left else None
 
     # ---- threads ----------------------------------------------------------------------------------
     def _in_window(self, t: int) -> int:

@@ -9,8 +9,11 @@ exact.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import logging
 import os
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -18,6 +21,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -276,15 +280,57 @@ class SimArray:
         rgb = np.asarray(cv2.multiply(res.rgb, self._effects[name]), dtype=np.float32)
         return from_rgb(np.clip(rgb, 0.0, 1.0, out=rgb), self.format.pixel_format)
 
+    @cached_property
+    def _disk_cache(self) -> Path | None:
+        """Where rendered states are kept across runs: one folder per rig, settings and simulator source
+        (same inputs, same bytes). ``RIGCTL_SIM_CACHE=off`` disables it."""
+        root = os.environ.get("RIGCTL_SIM_CACHE", "")
+        if root == "off":
+            return None
+        base = Path(root) if root else Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "rigctl-sim"
+        h = hashlib.sha256()
+        h.update(json.dumps([self.rig.to_dict(), self.requested.model_dump(mode="json")], sort_keys=True).encode())
+        for module in (scenes.__file__, __file__, sys.modules[render.__module__].__file__):
+            if module:
+                h.update(Path(module).read_bytes())
+        return base / h.hexdigest()[:24]
+
+    def _cached_state(self, state: int) -> list[NDArray[np.uint8]] | None:
+        folder = self._disk_cache
+        if folder is None:
+            return None
+        try:
+            with np.load(folder / f"state-{state}.npz") as data:
+                out = [data[n] for n in self.names]
+        except (OSError, KeyError, ValueError):
+            return None
+        return out if all(a.nbytes == self.format.bytes_per_frame for a in out) else None
+
+    def _keep_state(self, state: int, frames: list[NDArray[np.uint8]]) -> None:
+        folder = self._disk_cache
+        if folder is None:
+            return
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            tmp = folder / f".state-{state}-{os.getpid()}-{threading.get_ident()}.npz"
+            arrays: dict[str, Any] = dict(zip(self.names, frames, strict=True))  # keywords numpy's stubs mistype
+            np.savez(tmp, **arrays)
+            os.replace(tmp, folder / f"state-{state}.npz")
+        except OSError as exc:  # a cache that cannot be written only costs the next run its time
+            log.debug("render cache not written: %s", exc)
+
     def frames(self, state: int) -> list[NDArray[np.uint8]]:
-        """Rendered bytes of every camera for one scene state (cached)."""
+        """Rendered bytes of every camera for one scene state (cached in memory and on disk)."""
         with self._lock:
             cached = self._frames.get(state)
         if cached is not None:
             return cached
-        scene = self.scene(state)
-        with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
-            out = list(pool.map(lambda n: self._render_camera(scene, n), self.names))
+        out = self._cached_state(state)
+        if out is None:
+            scene = self.scene(state)
+            with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+                out = list(pool.map(lambda n: self._render_camera(scene, n), self.names))
+            self._keep_state(state, out)
         with self._lock:
             self._frames[state] = out
         return out

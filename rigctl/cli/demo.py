@@ -18,7 +18,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "OpenCV. Writes OUT/report.md with its figures. Takes a few minutes on two cores.",
     )
     p.add_argument("--out", type=Path, default=Path("rigctl-demo"), metavar="DIR", help="(default: ./rigctl-demo)")
-    p.add_argument("--fresh", action="store_true", help="replace DIR if it holds an earlier demo")
+    p.add_argument(
+        "--fresh", action="store_true", help="replace a finished demo in DIR (an unfinished one is always replaced)"
+    )
     p.set_defaults(func=run)
 
 

@@ -4,15 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
+import sys
 from pathlib import Path
-from types import FrameType
 
 from rigctl.cli.progress import Progress
 from rigctl.errors import ParameterError
-from rigctl.preflight import PreflightError, check_destinations
-from rigctl.recorder import Recorder, TakePlan
-from rigctl.registry import open_cameras
+from rigctl.preflight import PreflightReport
+from rigctl.recording import record_take
 from rigctl.rig import load_rig
 from rigctl.take.names import check_take_name
 from rigctl.take.reader import TakeReader
@@ -45,7 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="DIR",
         help="further destinations: cameras are spread over --out and these",
     )
-    p.add_argument("--force", action="store_true", help="record even if preflight finds the disks too slow")
+    p.add_argument(
+        "--force", action="store_true", help="record even if preflight refuses (disk far too slow, too little space)"
+    )
     p.add_argument("--no-checksum", action="store_true", help="skip per-frame CRC-32 (saves CPU at high rates)")
     p.add_argument(
         "--buffers",
@@ -66,47 +66,45 @@ def run(ns: argparse.Namespace) -> int:
         raise ParameterError(f"--seconds must be positive, got {ns.seconds}")
     frames = ns.frames if ns.frames is not None else (round(ns.seconds * rig.fps) if ns.seconds else None)
     sim = list(ns.sim) + ([f"scene={ns.scene}"] if ns.scene else [])
-    devices = open_cameras(rig, sim)
-    destinations = [ns.out, *ns.dest]
-    plan = TakePlan.spread(name, destinations, sorted(devices.cameras, key=rig.camera_names.index))
-    per_camera_bps = rig.width_px * rig.height_px * 2 * rig.fps
-    by_dest: dict[Path, list[str]] = {}
-    for cam, folder in plan.camera_folders.items():
-        by_dest.setdefault(folder.parent.parent, []).append(cam)
-    report = check_destinations(by_dest, per_camera_bps, frames / rig.fps if frames else None)
-    if not report.ok and not ns.force:
-        devices.close()
-        raise PreflightError(
-            report.problems[0] + (f" (and {len(report.problems) - 1} more)" if len(report.problems) > 1 else "")
-        )
-    if ns.buffers is not None and ns.buffers < 2:
-        raise ParameterError(f"--buffers must be at least 2, got {ns.buffers}")
-    recorder = Recorder(rig, devices, plan, checksum=not ns.no_checksum, buffers_per_camera=ns.buffers)
     bar = Progress(f"recording {name}")
-    previous = signal.getsignal(signal.SIGINT)
 
-    def on_interrupt(signum: int, frame: FrameType | None) -> None:
-        recorder.stop()
+    def say(text: str) -> None:
+        if bar.enabled:
+            sys.stderr.write("\n")
+        print(f"rigctl record: {text}", file=sys.stderr, flush=True)
+
+    def show_preflight(report: PreflightReport) -> None:
+        for line in report.lines():
+            if not line.startswith("preflight refuse"):  # a refusal is the command's error line
+                say(line)
 
     try:
-        recorder.arm()
-        signal.signal(signal.SIGINT, on_interrupt)
-        recorder.start(frames)
-        recorder.wait(progress=bar)
+        result = record_take(
+            rig,
+            name,
+            [ns.out, *ns.dest],
+            frames=frames,
+            sim=sim,
+            checksum=not ns.no_checksum,
+            buffers_per_camera=ns.buffers,
+            force=ns.force,
+            progress=bar,
+            catch_interrupt=True,
+            say=say,
+            on_preflight=show_preflight,
+        )
     finally:
-        signal.signal(signal.SIGINT, previous)
-        manifest = recorder.finish()
         bar.close()
-    reader = TakeReader(plan.folder, skip_damaged=True)  # the summary of what was written
+    reader = TakeReader(result.folder, skip_damaged=True)  # the summary of what was written
     summary = reader.summary()
-    summary["path"] = str(plan.folder)
+    summary["path"] = str(result.folder)
     if ns.json:
         print(json.dumps(summary, indent=2))
     else:
         print(format_summary(summary))
-    if recorder.error is not None:
-        raise recorder.error
-    return 0 if manifest else 1
+    if result.recorder.error is not None:
+        raise result.recorder.error
+    return 0 if result.manifest else 1
 
 
 def format_summary(s: dict) -> str:

@@ -29,6 +29,7 @@ class CameraStats:
     thumbnail: Any = None  # a small luma image for the shoot UI (uint8 array), when asked for
     preview_ns: int = 0
     first_timecode: Any = None  # rigctl.timecode.Timecode of the first frame written, when frames carry one
+    drop_in_s: float | None = None  # time left before the first writer drop at the queue's trend (None: steady)
 
     @property
     def frames_written(self) -> int:

@@ -28,6 +28,7 @@ from rigctl.tui.session import Session, Snapshot, TileStatus
 KEYS = [
     ("r", "start / stop recording on every camera"),
     ("q", "quit (asks first while recording)"),
+    ("m", "measure the destination's write speed again (preflight uses the new figure)"),
     ("c", "mark the last take circled, with a note"),
     ("n", "mark the last take no-good, with a note"),
     ("t", "set tally: program and preview cameras"),
@@ -91,6 +92,8 @@ class CameraTile(Static):
             style="bold red" if drops else "green" if recording else "",
         )
         text.append(f"queue {t.queue_fill:4.0%}  {t.mb_s:6.1f} MB/s\n", style="yellow" if t.queue_fill > 0.5 else "")
+        if t.drop_in_s is not None:
+            text.append(f"falling behind: drops in ~{t.drop_in_s:.0f} s\n", style="bold red")
         for key, result in t.settings.items():
             confirmed = result.state is SettingState.CONFIRMED
             text.append(f"{key} {result.requested} {result.state}\n", style="green" if confirmed else "yellow")
@@ -101,7 +104,10 @@ class CameraTile(Static):
             text.append_text(self._thumb)
         self.update(text)
         self.set_class(recording, "recording")
-        self.set_class(not t.signal or t.stale or not t.format_ok or t.locked is False or drops > 0, "problem")
+        behind = t.drop_in_s is not None
+        self.set_class(
+            not t.signal or t.stale or not t.format_ok or t.locked is False or drops > 0 or behind, "problem"
+        )
 
 
 class GlobalBar(Static):
@@ -175,7 +181,7 @@ class Confirm(ModalScreen[bool]):
         self.dismiss(False)
 
 
-class Notice(ModalScreen[None]):
+class Notice(ModalScreen[str | None]):
     BINDINGS = [Binding("escape,enter,space", "dismiss", "close")]
     DEFAULT_CSS = (
         "Notice { align: center middle; } #notice { width: 90; height: auto; border: thick $warning; padding: 1 2; }"
@@ -189,6 +195,39 @@ class Notice(ModalScreen[None]):
     def compose(self) -> ComposeResult:
         body = "\n".join(f"  • {line}" for line in self.lines)
         yield Static(f"[b]{self.title_text}[/b]\n\n{body}\n\n(escape closes)", id="notice")
+
+
+class Refused(Notice):
+    """Preflight refused the take: the reasons, and what can be done about them from here."""
+
+    BINDINGS = [
+        Binding("escape,enter,space", "dismiss", "close"),
+        Binding("f", "choose('force')", "record anyway"),
+        Binding("m", "choose('measure')", "measure again"),
+    ]
+
+    def __init__(self, lines: list[str], forcible: bool) -> None:
+        super().__init__("Recording refused: preflight failed", lines)
+        self.forcible = forcible
+
+    def compose(self) -> ComposeResult:
+        body = "\n".join(f"  • {line}" for line in self.lines)
+        keys = "[b]m[/b] measure the disk again   "
+        if self.forcible:
+            keys += "[b]f[/b] record anyway (asks first)   "
+        yield Static(f"[b]{self.title_text}[/b]\n\n{body}\n\n{keys}[b]escape[/b] closes", id="notice")
+
+    def action_choose(self, what: str) -> None:
+        if what == "force" and not self.forcible:
+            return
+        self.dismiss(what)
+
+
+FORCE_RISK = (
+    "Record anyway? Preflight says this destination cannot keep up (or has too little room): frames the disk "
+    "cannot take in time are dropped and counted as writer drops, and a full disk ends the take. The take "
+    "itself stays readable."
+)
 
 
 class Ask(ModalScreen[str | None]):
@@ -270,6 +309,7 @@ class ShootApp(App[None]):
     BINDINGS = [
         Binding("r", "record", "record / stop"),
         Binding("q", "quit_app", "quit"),
+        Binding("m", "measure", "measure disk"),
         Binding("c", "mark('circled')", "circle"),
         Binding("n", "mark('no-good')", "no-good"),
         Binding("t", "tally", "tally"),
@@ -388,14 +428,44 @@ class ShootApp(App[None]):
             self.start_take()
 
     @work(thread=True, exclusive=True, group="take")
-    def start_take(self) -> None:
-        assert self.session is not None
+    def start_take(self, force: bool = False) -> None:
+        session = self.session
+        if session is None:
+            return
         try:
-            self.session.start()
+            session.start(force=force)
         except PreflightError as exc:
-            self.call_from_thread(self.push_screen, Notice("Recording refused: preflight failed", exc.problems))
+            self.call_from_thread(self.push_screen, Refused(exc.problems, exc.forcible), self._after_refusal)
         except RigctlError as exc:
             self.call_from_thread(self.push_screen, Notice("Recording refused", [str(exc)]))
+
+    def _after_refusal(self, choice: str | None) -> None:
+        if choice == "measure":
+            self.action_measure()
+        elif choice == "force":
+
+            def answer(yes: bool | None) -> None:
+                if yes and self.session is not None and not self.session.recording:
+                    self.start_take(force=True)
+
+            self.push_screen(Confirm(FORCE_RISK), answer)
+
+    def action_measure(self) -> None:
+        s = self.session
+        if s is None or s.busy or s.recording:
+            return
+        self.measure_disk()
+
+    @work(thread=True, exclusive=True, group="take")
+    def measure_disk(self) -> None:
+        session = self.session
+        if session is None:
+            return
+        session.busy = "measuring"
+        try:
+            session.measure()
+        finally:
+            session.busy = ""
 
     @work(thread=True, exclusive=True, group="take")
     def stop_take(self) -> None:

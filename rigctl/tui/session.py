@@ -21,8 +21,9 @@ from rigctl.camera_control import check_settings
 from rigctl.errors import RigctlError
 from rigctl.interfaces import SettingResult, SettingState, TallyState
 from rigctl.plan_report import plan_rig
-from rigctl.preflight import LOW_TIME_S, PreflightError, check_destinations, measure_write_speed
+from rigctl.preflight import LOW_TIME_S, PreflightError, PreflightReport, WriteSpeed, measure_write
 from rigctl.recorder import Recorder, TakePlan
+from rigctl.recording import enforce, preflight_take
 from rigctl.registry import DeviceSet, open_cameras, open_control, open_tally
 from rigctl.rig import Rig
 from rigctl.take.manifest import read_manifest, write_manifest
@@ -48,6 +49,7 @@ class TileStatus:
     source_drops: int = 0
     writer_drops: int = 0
     queue_fill: float = 0.0
+    drop_in_s: float | None = None  # writer queue trend: time left before its first writer drop
     age_ms: float | None = None
     stale: bool = False
     tally: str = ""
@@ -105,11 +107,12 @@ class Session:
         self.tally_state = TallyState()
         self._take_lock = threading.Lock()  # start, stop and close one at a time (stop's worker meets quit)
         self.closed = False
-        self._speeds: dict[Path, float] = {}  # destination write speed, measured before the cameras stream
+        self._speeds: dict[Path, WriteSpeed] = {}  # destination write speed, measured before the cameras stream
         self._skew: collections.deque[float] = collections.deque(maxlen=250)
         self._bytes: dict[str, tuple[float, int]] = {}
         self._disk_t = 0.0
         self._disk_cache: tuple[float | None, float | None] = (None, None)
+        self.last_preflight: PreflightReport | None = None
         plan = plan_rig(rig)
         self.planner = (
             f"subject {plan.subject_depth_m:.2f} m deep from {plan.near_m:.2f} m to {plan.far_m:.2f} m; "
@@ -132,8 +135,7 @@ class Session:
         self.busy = "arming"
         try:
             if self.out not in self._speeds:
-                with contextlib.suppress(OSError):  # preflight measures again and names the problem
-                    self._speeds[self.out] = measure_write_speed(self.out)
+                self.measure()
             rec = Recorder(self.rig, self.devices, TakePlan.spread(self.take_name, [self.out], self.names))
             rec.preview_every_ns = 200_000_000
             rec.arm()
@@ -141,8 +143,18 @@ class Session:
         finally:
             self.busy = ""
 
+    def measure(self) -> str:
+        """Measure the destination's write speed (again); returns what was measured. Measured while the
+        cameras stream, the figure can read lower than the disk is (the test shares the interpreter)."""
+        with contextlib.suppress(OSError):  # preflight measures again and names the problem
+            self._speeds[self.out] = measure_write(self.out)
+        speed = self._speeds.get(self.out)
+        self.message = f"{self.out}: writes {speed.describe()}" if speed else f"{self.out}: cannot measure"
+        return self.message
+
     def preflight(self) -> list[str]:
-        """Reasons not to record; empty when everything is ready."""
+        """Reasons not to record that no key can override; empty when every camera is ready. The
+        destination's verdict is left in :attr:`last_preflight`."""
         problems = []
         if self.recorder is None:
             return ["the cameras are not streaming (arming failed: see the message line)"]
@@ -155,29 +167,34 @@ class Session:
                 problems.append(f"{name}: delivers {st.format.describe()}, the take needs {want.describe()}")
             if st.reference_locked is False:
                 problems.append(f"{name}: reference not locked ({st.extra.get('reference', 'unlocked')})")
-        bps = want.bytes_per_frame * want.fps
-        self.out.mkdir(parents=True, exist_ok=True)
-        report = check_destinations({self.out: self.names}, bps, None, self._speeds)
-        problems += report.problems
         if (self.out / self.take_name).exists():
             problems.append(f"{self.out / self.take_name}: exists; takes are never overwritten")
+        with contextlib.suppress(OSError):
+            self.out.mkdir(parents=True, exist_ok=True)
+        self.last_preflight = preflight_take(self.rig, self.recorder.plan, None, self.recorder.buffers, self._speeds)
         return problems
 
-    def start(self) -> None:
-        """Preflight, then record from the next common frame instant. Raises PreflightError with every reason."""
+    def start(self, force: bool = False) -> None:
+        """Preflight, then record from the next common frame instant. Raises PreflightError with every reason;
+        ``force`` records despite a destination preflight refuses (never despite a camera problem)."""
         with self._take_lock:
             if self.closed:
                 raise RigctlError("the session is closed")
             problems = self.preflight()
+            report = self.last_preflight
+            assert report is not None
             if problems:
-                raise PreflightError("; ".join(problems), problems)
+                raise PreflightError("; ".join(problems + report.problems), problems + report.problems)
+            enforce(report, force)
             assert self.recorder is not None
             self.busy = "starting"
             try:
                 self.recorder.start()
                 self.recording = True
                 self._set_tally(TallyState.recording(self.rig.camera_names))
-                self.message = f"recording {self.take_name}"
+                self.message = f"recording {self.take_name}" + "".join(f"; {w}" for w in report.warnings)
+                if force and not report.ok:
+                    self.message += " (recording despite preflight)"
             finally:
                 self.busy = ""
 
@@ -264,6 +281,8 @@ class Session:
     def snapshot(self) -> Snapshot:
         rec = self.recorder
         now_ns = time.monotonic_ns()
+        if rec is not None and self.recording:
+            rec.sample_queues(now_ns / 1e9)
         tiles = []
         lasts = []
         for name in self.names:
@@ -284,6 +303,7 @@ class Session:
                 t.source_drops = len(cs.source_drops)
                 t.writer_drops = len(cs.writer_drops)
                 t.queue_fill = cs.queue_fill
+                t.drop_in_s = cs.drop_in_s
                 if cs.last_host_ns:
                     t.age_ms = (now_ns - cs.last_host_ns) / 1e6
                     t.stale = t.age_ms > 2000 * self.period_s

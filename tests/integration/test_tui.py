@@ -18,9 +18,10 @@ import pytest
 from tests_support import rigctl_exe
 
 from rigctl.interfaces import SettingResult, SettingState
+from rigctl.preflight import WriteSpeed
 from rigctl.rig import load_rig, rig_from_dict
 from rigctl.take.reader import TakeReader
-from rigctl.tui.app import CameraTile, Confirm, HelpScreen, Notice, PlannerScreen, ShootApp
+from rigctl.tui.app import CameraTile, Confirm, HelpScreen, Notice, PlannerScreen, Refused, ShootApp
 from rigctl.tui.session import Session, Snapshot, TileStatus
 
 # The shipped sim rig at half its size: these tests are about the shoot UI, and a quarter of the pixels keeps
@@ -388,18 +389,63 @@ def test_the_disk_is_measured_before_the_cameras_stream_not_at_every_take(
     fast_out: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Measured while nine capture threads stream, the test writes wait for the interpreter between blocks
-    and the disk reads slow enough to refuse the take: the session measures once, before the first arming."""
-    import rigctl.preflight
+    and the disk reads slow: the session measures once, before the first arming (and again only on m)."""
+    import rigctl.tui.session
 
     session = Session(RIG, fast_out, SIM)
     try:
         session.arm()
-        assert session._speeds[fast_out] > 0
+        assert session._speeds[fast_out].median_bps > 0
 
-        def no_measuring(folder: Path, nbytes: int = 0) -> float:
+        def no_measuring(folder: Path) -> WriteSpeed:
             raise AssertionError(f"{folder} measured again while the cameras stream")
 
-        monkeypatch.setattr(rigctl.preflight, "measure_write_speed", no_measuring)
+        monkeypatch.setattr(rigctl.tui.session, "measure_write", no_measuring)
         assert session.preflight() == []
+        assert session.last_preflight is not None and session.last_preflight.ok
     finally:
         session.close()
+
+
+def test_a_refused_take_can_be_measured_again_or_recorded_anyway_after_a_warning(
+    fast_out: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A disk far too slow (injected: 1 MB/s) refuses the open-ended take; m measures again (injected: still
+    slow) and says so; f asks, stating the risk, and y records anyway. Then q quits at once."""
+    import rigctl.tui.session
+
+    slow = WriteSpeed((1e6, 1e6, 1e6))
+    measured: list[Path] = []
+
+    def measure(folder: Path) -> WriteSpeed:
+        measured.append(folder)
+        return slow
+
+    monkeypatch.setattr(rigctl.tui.session, "measure_write", measure)
+    app = live_app(fast_out)
+
+    async def script(pilot: Any) -> None:
+        await armed(pilot)
+        assert measured == [fast_out]
+        await pilot.press("r")
+        await until(pilot, lambda: isinstance(app.screen, Refused), what="the refusal")
+        assert any("far more than it sustains" in line for line in app.screen.lines)
+        await pilot.press("m")
+        await until(pilot, lambda: len(measured) == 2 and not app.session.busy, what="measuring again")
+        assert "median 1 MB/s" in app.session.message
+        await pilot.press("r")
+        await until(pilot, lambda: isinstance(app.screen, Refused), what="the second refusal")
+        await pilot.press("f")
+        await until(pilot, lambda: isinstance(app.screen, Confirm), what="the confirmation")
+        assert "writer drops" in app.screen.question
+        await pilot.press("y")
+        await until(pilot, lambda: app.session.recording, what="recording anyway")
+        assert "despite preflight" in app.session.message
+        await pilot.pause(0.5)
+        await pilot.press("r")
+        await until(pilot, lambda: not app.session.recording and not app.session.busy, what="the take to end")
+        await pilot.press("q")
+        await until(pilot, lambda: not app.is_running, what="quitting")
+
+    run(app, script)
+    assert TakeReader(fast_out / "S01-01-T01").status in ("ended", "complete")
