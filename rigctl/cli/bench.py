@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from rigctl.cli import render
 from rigctl.cli.progress import Progress
 
 
@@ -21,6 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--json", action="store_true")
     d.add_argument("--quick", action="store_true", help="realistic presenter and Motorcycle only")
     d.set_defaults(func=run_depth_bench)
+    render.register_bench(what)
     p.set_defaults(func=lambda ns: (p.print_help(), 2)[1])
 
 

@@ -29,6 +29,7 @@ from rigctl.cli import (
     plan,
     record,
     rectify,
+    render,
     take,
     tally,
     tui,
@@ -37,7 +38,7 @@ from rigctl.errors import RigctlError
 
 log = logging.getLogger(__name__)
 
-VERBS = (plan, devices, record, take, tally, control, board, calibrate, rectify, depth, bench, demo, tui)
+VERBS = (plan, devices, record, take, tally, control, board, calibrate, rectify, depth, bench, demo, tui, render)
 
 
 def build_parser() -> argparse.ArgumentParser:
