@@ -124,9 +124,6 @@ class RenderInput:
                 f"{self.disparity_dir}: no disparity for frame {number} of {self.source} "
                 f"(expected {folder}/<camera>.pfm for cameras {', '.join(grid.names)})"
             )
-        missing = sorted(set(files) - set(found))
-        if missing:
-            log.warning("frame %d: no disparity for %s: not used as sources", number, ", ".join(missing))
         views = {}
         for n in grid.names:
             disp = None
@@ -143,4 +140,7 @@ class RenderInput:
             screen = self.keyer.screen_excess(rgb) > 0
             alpha = self.keyer.matte(rgb) if screen else np.ones((h, w), np.float32)
             views[n] = View(n, grid.offsets[n], rgb, alpha, disp, screen)
+        missing = sorted(set(files) - set(found))
+        if missing:
+            log.warning("frame %d: no disparity for %s: not used as sources", number, ", ".join(missing))
         return Frame(number, views, grid.focal_px, grid.spacing)
