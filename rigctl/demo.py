@@ -52,6 +52,8 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
     from rigctl.depth.run import DepthOptions, run_depth
     from rigctl.plan_report import format_plan, plan_rig
     from rigctl.rectify import rectify_take
+    from rigctl.registry import simulated_burnin_box
+    from rigctl.render.demo import novel_views_section
     from rigctl.rig import load_rig
 
     if out.exists() and any(out.iterdir()):
@@ -181,6 +183,9 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
         )
     lines += [
         "",
+        *novel_views_section(
+            takes / "presenter-rectified", out / "depth", out, simulated_burnin_box(takes / "presenter", rig.width_px)
+        ),
         "## Plan",
         "",
         "```",

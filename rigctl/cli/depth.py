@@ -32,6 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frames", metavar="A-B", help="frame sets (default: all complete ones)")
     p.add_argument("--no-key", action="store_true", help="search every pixel (no green-screen key)")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--check", action="store_true", help="add leave-one-out PSNR/SSIM (rigctl render) to report.json")
     p.set_defaults(func=run)
 
 
@@ -52,6 +53,11 @@ def run(ns: argparse.Namespace) -> int:
         report = run_depth(ns.input, ns.out, opt, frames, progress=bar)
     finally:
         bar.close()
+    if ns.check:
+        from rigctl.cli.render import leave_one_out_report
+
+        report["leave_one_out"] = leave_one_out_report(ns.input, ns.out, frames, ns.cameras)
+        (ns.out / "report.json").write_text(json.dumps(report, indent=1, default=float))
     if ns.json:
         print(json.dumps(report, default=float))
         return 0

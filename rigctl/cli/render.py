@@ -80,6 +80,19 @@ def simulator_hooks(source: Path, width: int) -> tuple[Any, Any]:
     return (truth if box is not None else None), box
 
 
+def leave_one_out_report(
+    source: Path, disparity: Path, frames: list[int] | None, cameras: list[str] | None
+) -> list[dict[str, Any]]:
+    """Leave-one-out rows for ``rigctl depth --check``: the cameras just computed, scored from the others."""
+    from rigctl.render.inputs import RenderInput
+    from rigctl.render.views import leave_one_out
+
+    inp = RenderInput(source, disparity)
+    numbers = inp.select(range(min(frames), max(frames) + 1) if frames else None)
+    box = simulator_hooks(source, inp.frame(numbers[0]).shape[1])[1]
+    return leave_one_out(inp, numbers, cameras, box)
+
+
 def run(ns: argparse.Namespace) -> int:
     from rigctl.render.inputs import RenderInput
     from rigctl.render.views import eyes_for, format_table, leave_one_out, path_positions, render_views

@@ -159,3 +159,25 @@ def test_bad_positions_and_modes_are_refused(take: Path, tmp_path: Path) -> None
     assert res.returncode == 2 and "COL,ROW" in res.stderr
     res = run_rigctl("render", str(take), "--disparity", truth, "--out", str(tmp_path))
     assert res.returncode == 2 and "--leave-one-out" in res.stderr
+
+
+def test_depth_check_adds_leave_one_out_to_the_report(take: Path, tmp_path: Path) -> None:
+    out = tmp_path / "depth"
+    res = run_rigctl(
+        "depth", str(take), "--out", str(out), "--near", "1.95", "--far", "3.0",
+        "--cameras", "r1c0", "r1c1", "r1c2", "--check", "--json",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    rows = json.loads((out / "report.json").read_text())["leave_one_out"]
+    assert {r["camera"] for r in rows} == {"r1c0", "r1c1", "r1c2"}
+    centre = next(r for r in rows if r["camera"] == "r1c1")
+    assert sorted(centre["sources"]) == ["r1c0", "r1c2"] and centre["psnr_db"] > 28
+
+
+def test_bench_render_reports_its_keys(tmp_path: Path) -> None:
+    res = run_rigctl("bench", "render", "--size", "480x270", "--repeats", "1", "--json", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    r = json.loads(res.stdout)
+    assert (r["width"], r["height"]) == (480, 270) and len(r["sources"]) >= 4 and r["stereo_pair_ms"] > 0
+    assert r["quality"]["leave_one_out_r1c1"]["psnr_db"] >= 33
+    assert r["ratio_to_paper"] == pytest.approx(r["stereo_pair_ms"] / (1000 / 90), rel=0.01)
