@@ -136,8 +136,8 @@ class Renderer:
             return Rendered(out, disp, [s.name for s in sources])
         d = np.ascontiguousarray(dfull[y0:y1, x0:x1])
         xg, yg = self.xgrid[y0:y1, x0:x1], self.ygrid[y0:y1, x0:x1]
-        acc = np.zeros((y1 - y0, x1 - x0, 4), np.float32)
-        wsum = np.zeros((y1 - y0, x1 - x0), np.float32)
+        blended: NDArray[np.uint8] | None = None
+        wsum: F32 | None = None
         for s in sources:
             du, dv = s.offset[0] - u, s.offset[1] - v
             closeness = 1.0 / (float(np.hypot(du, dv)) + 0.1) ** 2
@@ -150,14 +150,17 @@ class Renderer:
             # agreement in [eps, 1], times closeness (OpenCV calls throughout: numpy's temporaries cost 10x)
             agree = cv2.addWeighted(cv2.absdiff(seen, d), -closeness / self.agree_px, seen, 0.0, closeness)
             wgt = cv2.max(agree, np.full_like(agree, closeness * 1e-3))
-            cv2.add(acc, cv2.multiply(colour, cv2.merge((wgt, wgt, wgt, wgt)), dtype=cv2.CV_32F), dst=acc)
-            cv2.add(wsum, wgt, dst=wsum)
-        norm = cv2.multiply(wsum, np.full_like(wsum, 255.0))
-        rgba = cv2.divide(acc, cv2.merge((norm, norm, norm, norm)))
-        valid = d > NONE
-        rgba[~valid] = 0.0
+            if blended is None or wsum is None:
+                blended, wsum = colour, wgt
+            else:
+                # running weighted mean: (W a + w b) / (W + w), in 8 bits like a texture blend
+                blended = cv2.blendLinear(blended, colour, wsum, wgt)
+                wsum = cv2.add(wsum, wgt)
+        assert blended is not None
+        valid = (d > NONE).astype(np.uint8)
+        rgba = cv2.bitwise_and(blended, blended, mask=valid).astype(np.float32) * np.float32(1 / 255)
         out[y0:y1, x0:x1] = rgba
-        disp[y0:y1, x0:x1] = np.where(valid, d, np.inf)
+        disp[y0:y1, x0:x1] = np.where(valid > 0, d, np.inf)
         return Rendered(out, disp, [s.name for s in sources])
 
 
