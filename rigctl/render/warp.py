@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
@@ -136,8 +137,8 @@ class Renderer:
             return Rendered(out, disp, [s.name for s in sources])
         d = np.ascontiguousarray(dfull[y0:y1, x0:x1])
         xg, yg = self.xgrid[y0:y1, x0:x1], self.ygrid[y0:y1, x0:x1]
-        blended: NDArray[np.uint8] | None = None
-        wsum: F32 | None = None
+        blended: Any = None
+        wsum: Any = None
         for s in sources:
             du, dv = s.offset[0] - u, s.offset[1] - v
             closeness = 1.0 / (float(np.hypot(du, dv)) + 0.1) ** 2
