@@ -181,3 +181,13 @@ def test_bench_render_reports_its_keys(tmp_path: Path) -> None:
     assert (r["width"], r["height"]) == (480, 270) and len(r["sources"]) >= 4 and r["stereo_pair_ms"] > 0
     assert r["quality"]["leave_one_out_r1c1"]["psnr_db"] >= 33
     assert r["ratio_to_paper"] == pytest.approx(r["stereo_pair_ms"] / (1000 / 90), rel=0.01)
+
+
+def test_demo_section_has_every_camera_and_a_strip(take: Path, our_depth: Path, tmp_path: Path) -> None:
+    from rigctl.render.demo import novel_views_section
+
+    lines = novel_views_section(take, our_depth, tmp_path, (0, 15, 0, 110), steps=3)
+    rows = [line for line in lines if line.startswith("| r")]
+    assert len(rows) == 9 and "true disparity" in lines[4] and "our depth" in lines[4]
+    strip = cv2.imread(str(tmp_path / "novel-views.png"))
+    assert strip.shape == (180, 3 * 320, 3)
