@@ -123,7 +123,7 @@ def leave_one_out(
     rows = []
     for n in numbers:
         frame = inp.frame(n)
-        names = cameras or list(frame.views)
+        names = cameras or sorted(frame.views)
         unknown = [c for c in names if c not in frame.views]
         if unknown:
             raise ParameterError(f"{inp.source}: no camera {', '.join(unknown)} (cameras: {', '.join(frame.views)})")
