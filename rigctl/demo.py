@@ -66,6 +66,8 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
     from rigctl.plan_report import format_plan, plan_rig
     from rigctl.recording import record_take
     from rigctl.rectify import rectify_take
+    from rigctl.registry import simulated_burnin_box
+    from rigctl.render.demo import novel_views_section
     from rigctl.rig import load_rig
 
     prepare_folder(out, fresh)
@@ -198,6 +200,9 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
         )
     lines += [
         "",
+        *novel_views_section(
+            takes / "presenter-rectified", out / "depth", out, simulated_burnin_box(takes / "presenter", rig.width_px)
+        ),
         "## Plan",
         "",
         "```",

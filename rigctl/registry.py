@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from rigctl.address import Address, camera_address, line_address
@@ -170,3 +171,47 @@ def simulated_array(rig: Rig, sim: list[str]) -> Any:
     from rigctl.simulators.settings import parse_sim_args
 
     return SimArray(rig, parse_sim_args(sim))
+
+
+def simulated_view(take: Path, col: float, row: float) -> Any:
+    """What a camera at grid position (col, row) of a simulated, motion-free take would have seen: (RGB in
+    [0, 1], subject mask) from the simulator, or None when the take is not simulated. Only processing's
+    callers reach the simulator, through here."""
+    import yaml
+
+    from rigctl.errors import TakeError
+    from rigctl.rig import rig_from_dict
+    from rigctl.simulators.array import SimArray
+    from rigctl.simulators.settings import SimSettings
+    from rigctl.simulators.views import virtual_view
+
+    path = take / "truth" / "settings.yaml"
+    if not path.exists():
+        return None
+    raw = yaml.safe_load((take / "take.yaml").read_text())
+    rig = rig_from_dict(raw["rig"], str(take / "take.yaml"))
+    array = SimArray(rig, SimSettings.model_validate(yaml.safe_load(path.read_text())))
+    if not array.settings.ideal:
+        return None  # a realistic take is rectified with an estimated calibration: no exact truth view
+    if array.distinct_states != 1:
+        raise TakeError(f"{path}: truth views need a take with one scene state (motion=false, not the charuco scene)")
+    return virtual_view(array, 0, col, row)
+
+
+def simulated_array_view(array: Any, col: float, row: float) -> Any:
+    """(RGB, subject mask) of a virtual camera at grid position (col, row) of a simulated array's first
+    scene state."""
+    from rigctl.simulators.views import virtual_view
+
+    return virtual_view(array, 0, col, row)
+
+
+def simulated_burnin_box(take: Path, width: int) -> tuple[int, int, int, int] | None:
+    """(y0, y1, x0, x1) around the frame id a simulated take burns into every frame (it differs between
+    cameras by design, so image comparisons leave it out); None for takes that are not simulated."""
+    from rigctl.simulators.burnin import block_px
+
+    if not (take / "truth" / "settings.yaml").exists():
+        return None
+    b = block_px(width)
+    return 0, 3 * b + 6, 0, 34 * b + 8  # two rows of 32 blocks, with room for the rectification's warp

@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from rigctl.cli import render
 from rigctl.cli.progress import Progress
 
 
@@ -28,6 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--preset", default="best", help="with --size: the depth preset")
     d.add_argument("--cameras", nargs="+", metavar="CAM", help="with --size: cameras to compute (default: all)")
     d.set_defaults(func=run_depth_bench)
+    render.register_bench(what)
     p.set_defaults(func=lambda ns: (p.print_help(), 2)[1])
 
 

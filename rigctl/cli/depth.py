@@ -40,6 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_layout(p)
     p.add_argument("--json", action="store_true")
+    p.add_argument("--check", action="store_true", help="add leave-one-out PSNR/SSIM (rigctl render) to report.json")
     p.set_defaults(func=run)
 
 
@@ -69,6 +70,11 @@ def run(ns: argparse.Namespace) -> int:
         )
     finally:
         bar.close()
+    if ns.check:
+        from rigctl.cli.render import leave_one_out_report
+
+        report["leave_one_out"] = leave_one_out_report(ns.input, ns.out, frames, ns.cameras)
+        (ns.out / "report.json").write_text(json.dumps(report, indent=1, default=float))
     status = damaged_exit(report.get("damaged_skipped", []), ns.out / "report.json")
     if ns.json:
         print(json.dumps(report, default=float))

@@ -32,6 +32,7 @@ from rigctl.cli import (
     process,
     record,
     rectify,
+    render,
     take,
     tally,
     tui,
@@ -40,7 +41,9 @@ from rigctl.errors import EXIT_INTERRUPTED, EXIT_USAGE, RigctlError
 
 log = logging.getLogger(__name__)
 
-VERBS = (plan, devices, record, take, tally, control, board, calibrate, rectify, depth, process, bench, demo, tui)
+VERBS = (
+    plan, devices, record, take, tally, control, board, calibrate, rectify, depth, process, render, bench, demo, tui
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

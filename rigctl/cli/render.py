@@ -1,0 +1,146 @@
+"""``rigctl render``: novel views from colour + disparity, leave-one-out scoring; ``rigctl bench render``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from rigctl.cli.args import distance
+from rigctl.errors import ParameterError
+
+
+def position(text: str) -> tuple[float, float]:
+    """``COL,ROW`` in grid units (fractional allowed)."""
+    try:
+        col, row = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected COL,ROW in grid units such as 1.5,1, got {text!r}") from None
+    if not (math.isfinite(col) and math.isfinite(row)):
+        raise argparse.ArgumentTypeError(f"position must be finite, got {text!r}")
+    return col, row
+
+
+def size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WxH such as 1920x1080, got {text!r}") from None
+    if not (16 <= w <= 16384 and 16 <= h <= 16384):
+        raise argparse.ArgumentTypeError(f"size must be 16..16384 pixels each way, got {text!r}")
+    return w, h
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "render",
+        help="novel views from colour + disparity (DIBR), and leave-one-out scoring of a disparity",
+        description="Renders views anywhere in the array plane from the nearest cameras' colour and disparity: "
+        "OUT/<frame>/c<COL>r<ROW>.png and .exr (RGBA, alpha from the key; _L/_R with --stereo; path_NNNN with "
+        "--path). --leave-one-out renders each camera from the others and scores it against its own image "
+        "(PSNR, SSIM on the keyed subject).",
+    )
+    p.add_argument("input", type=Path, metavar="INPUT", help="rectified take, ideal simulated take, or grid folder")
+    p.add_argument("--disparity", type=Path, required=True, metavar="DIR", help="depth output or truth/disparity")
+    p.add_argument("--at", type=position, action="append", metavar="COL,ROW", help="view position (grid units)")
+    p.add_argument("--stereo", type=distance, metavar="IPD_M", help="an eye pair this far apart (metres)")
+    p.add_argument("--path", type=position, nargs="+", metavar="COL,ROW", help="a sequence along these positions")
+    p.add_argument("--steps", type=int, default=9, help="views along --path (default 9)")
+    p.add_argument("--leave-one-out", action="store_true", help="score each camera rendered from the others")
+    p.add_argument("--cameras", nargs="+", metavar="CAM", help="cameras for --leave-one-out (default: all)")
+    p.add_argument("--frames", metavar="A-B", help="frame sets (default: all complete ones)")
+    p.add_argument("--out", type=Path, metavar="OUT")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=run)
+
+
+def register_bench(what: argparse._SubParsersAction) -> None:
+    b = what.add_parser(
+        "render", help="time a stereo pair from the four nearest cameras; quality on the simulated take"
+    )
+    b.add_argument("--size", type=size, default=(1920, 1080), metavar="WxH", help="default 1920x1080")
+    b.add_argument("--repeats", type=int, default=10, help="timed pairs (the median is kept)")
+    b.add_argument("--json", action="store_true")
+    b.set_defaults(func=run_bench)
+
+
+def simulator_hooks(source: Path, width: int) -> tuple[Any, Any]:
+    """The simulator's truth views and burn-in window for a simulated take (both None otherwise)."""
+    from rigctl import registry
+
+    if not (source / "take.yaml").exists():
+        return None, None
+    box = registry.simulated_burnin_box(source, width)
+
+    def truth(col: float, row: float) -> Any:
+        return registry.simulated_view(source, col, row)
+
+    return (truth if box is not None else None), box
+
+
+def leave_one_out_report(
+    source: Path, disparity: Path, frames: list[int] | None, cameras: list[str] | None
+) -> list[dict[str, Any]]:
+    """Leave-one-out rows for ``rigctl depth --check``: the cameras just computed, scored from the others."""
+    from rigctl.render.inputs import RenderInput
+    from rigctl.render.views import leave_one_out
+
+    inp = RenderInput(source, disparity)
+    numbers = inp.select(range(min(frames), max(frames) + 1) if frames else None)
+    box = simulator_hooks(source, inp.frame(numbers[0]).shape[1])[1]
+    return leave_one_out(inp, numbers, cameras, box)
+
+
+def run(ns: argparse.Namespace) -> int:
+    from rigctl.render.inputs import RenderInput
+    from rigctl.render.views import eyes_for, format_table, leave_one_out, path_positions, render_views
+    from rigctl.take.export import parse_range
+
+    modes = sum(bool(x) for x in (ns.at, ns.path, ns.leave_one_out))
+    if modes != 1:
+        raise ParameterError("give one of --at COL,ROW, --path COL,ROW COL,ROW ... or --leave-one-out")
+    if not ns.leave_one_out and ns.out is None:
+        raise ParameterError("--out OUT is required to write views")
+    if ns.stereo is not None and ns.leave_one_out:
+        raise ParameterError("--stereo applies to --at and --path, not --leave-one-out")
+    inp = RenderInput(ns.input, ns.disparity)
+    numbers = inp.select(parse_range(ns.frames, max(inp.numbers) + 1) if ns.frames else None)
+    first = inp.frame(numbers[0])
+    truth, box = simulator_hooks(ns.input, first.shape[1])
+    if ns.leave_one_out:
+        rows = leave_one_out(inp, numbers, ns.cameras, box)
+        print(json.dumps({"leave_one_out": rows}) if ns.json else format_table(rows))
+        return 0
+    if ns.path:
+        points = path_positions(ns.path, ns.steps)
+
+        def eyes(frame: Any) -> list[Any]:
+            return [e for i, (c, r) in enumerate(points) for e in eyes_for(frame, c, r, ns.stereo, f"path_{i:04d}")]
+    else:
+
+        def eyes(frame: Any) -> list[Any]:
+            return [e for c, r in ns.at for e in eyes_for(frame, c, r, ns.stereo)]
+
+    rows = render_views(inp, numbers, eyes, ns.out, truth, box)
+    if ns.json:
+        print(json.dumps({"views": rows}))
+        return 0
+    for r in rows:
+        t = r.get("against_truth")
+        vs = f", against the simulator's view: PSNR {t['psnr_db']:.2f} dB, SSIM {t['ssim']:.4f}" if t else ""
+        print(f"{r['frame']}/{r['view']} at {r['col']:g},{r['row']:g} from {' '.join(r['sources'])}{vs}")
+    print(f"wrote {len(rows)} view(s) to {ns.out}")
+    return 0
+
+
+def run_bench(ns: argparse.Namespace) -> int:
+    from rigctl.benchdata import presenter_render
+    from rigctl.render.bench import bench_render, format_bench
+
+    if ns.repeats < 1:
+        raise ParameterError(f"--repeats must be at least 1, got {ns.repeats}")
+    result = bench_render(presenter_render(), ns.size, ns.repeats)
+    print(json.dumps(result) if ns.json else format_bench(result))
+    return 0

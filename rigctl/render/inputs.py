@@ -1,0 +1,146 @@
+"""Render input: the colour of a rectified grid (a rectified take, an ideal simulated take or a grid folder)
+and the disparity of its cameras read from a folder of PFM files (``<frame>/<camera>.pfm``: a depth output
+or a take's ``truth/disparity``). Nothing here depends on how the disparities were made."""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from rigctl.depth.grid import Grid, TakeGrid, load_grid_folder
+from rigctl.depth.key import Keyer
+from rigctl.errors import ParameterError, TakeError
+from rigctl.pfm import read_pfm
+from rigctl.rig import CAMERA_NAME
+
+log = logging.getLogger(__name__)
+
+F32 = NDArray[np.float32]
+
+
+@dataclass
+class View:
+    """One camera of a frame: RGB in [0, 1], its key (subject opacity) and its disparity (None: not given)."""
+
+    name: str
+    offset: tuple[float, float]  # position in the array plane, in horizontal spacings (x right, y down)
+    rgb: F32
+    alpha: F32
+    disparity: F32 | None
+    keyed: bool  # False when the image shows no screen (alpha is all ones)
+
+
+@dataclass
+class Frame:
+    number: int
+    views: dict[str, View]
+    focal_px: float
+    spacing: float  # horizontal spacing (metres for takes; the grid folder's unit otherwise)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        h, w = next(iter(self.views.values())).rgb.shape[:2]
+        return h, w
+
+    def position(self, col: float, row: float) -> tuple[float, float]:
+        """Grid units (column, row; ``1,1`` is r1c1) -> offset in the array plane, fitted to the cameras'
+        own offsets (a rectified take's cameras are not exactly on the lattice)."""
+        return grid_position(self.views, col, row)
+
+
+def grid_position(views: dict[str, View], col: float, row: float) -> tuple[float, float]:
+    if not (math.isfinite(col) and math.isfinite(row)):
+        raise ParameterError(f"position {col},{row}: must be finite grid units")
+    names = list(views)
+    rc = np.array([_row_col(n) for n in names], float)
+    off = np.array([views[n].offset for n in names], float)
+    design = np.column_stack([np.ones(len(names)), rc[:, 1], rc[:, 0]])
+    coef, *_ = np.linalg.lstsq(design, off, rcond=None)
+    x, y = np.array([1.0, col, row]) @ coef
+    if len({r for r, _c in rc.tolist()}) == 1 and row != rc[0, 0]:
+        raise ParameterError(f"position {col},{row}: the grid has one row ({int(rc[0, 0])}); row must be that")
+    if len({c for _r, c in rc.tolist()}) == 1 and col != rc[0, 1]:
+        raise ParameterError(f"position {col},{row}: the grid has one column ({int(rc[0, 1])}); col must be that")
+    return float(x), float(y)
+
+
+def _row_col(name: str) -> tuple[int, int]:
+    m = CAMERA_NAME.match(name)
+    if m is None:
+        raise ParameterError(f"camera {name!r} is not a grid position r{{row}}c{{col}}")
+    return int(m[1]), int(m[2])
+
+
+class RenderInput:
+    """A grid's frames together with their disparities from ``disparity_dir``."""
+
+    def __init__(self, source: Path, disparity_dir: Path, keyer: Keyer | None = None) -> None:
+        self.source = source
+        self.disparity_dir = disparity_dir
+        self.keyer = keyer or Keyer()
+        if not disparity_dir.is_dir():
+            raise ParameterError(f"{disparity_dir}: disparity folder does not exist")
+        self.take: TakeGrid | None = None
+        self.grid0: Grid | None = None
+        if (source / "take.yaml").exists():
+            self.take = TakeGrid(source)
+            self.numbers = self.take.frame_numbers()
+        elif (source / "grid.yaml").exists():
+            self.grid0 = load_grid_folder(source)
+            self.numbers = [0]
+        else:
+            raise ParameterError(f"{source}: not a take (take.yaml) or a grid folder (grid.yaml)")
+        if not self.numbers:
+            raise ParameterError(f"{source}: the take has no complete frame set")
+
+    def select(self, frames: range | None) -> list[int]:
+        if frames is None:
+            return list(self.numbers)
+        missing = [f for f in frames if f not in self.numbers]
+        if missing:
+            raise ParameterError(f"{self.source}: frame set(s) {missing} are not complete frame sets of the take")
+        return list(frames)
+
+    def _disparity_file(self, number: int, name: str) -> Path:
+        folder = self.disparity_dir / f"{number:06d}"
+        if self.grid0 is not None and not folder.is_dir():
+            folder = self.disparity_dir  # a grid folder's depth output has no frame level
+        return folder / f"{name}.pfm"
+
+    def frame(self, number: int) -> Frame:
+        grid = self.take.grid(number) if self.take is not None else self.grid0
+        assert grid is not None
+        h, w = grid.shape
+        files = {n: self._disparity_file(number, n) for n in grid.names}
+        found = {n: p for n, p in files.items() if p.exists()}
+        if not found:
+            folder = files[grid.names[0]].parent
+            raise TakeError(
+                f"{self.disparity_dir}: no disparity for frame {number} of {self.source} "
+                f"(expected {folder}/<camera>.pfm for cameras {', '.join(grid.names)})"
+            )
+        views = {}
+        for n in grid.names:
+            disp = None
+            if n in found:
+                disp = read_pfm(found[n])
+                if disp.shape != (h, w):
+                    raise TakeError(
+                        f"{found[n]}: disparity is {disp.shape[1]}x{disp.shape[0]} but {self.source} has "
+                        f"{w}x{h} images: the disparity folder does not match the input"
+                    )
+                if np.isnan(disp).any():
+                    raise TakeError(f"{found[n]}: disparity holds NaN (only +inf may mark a missing estimate)")
+            rgb = grid.images[n]
+            screen = self.keyer.screen_excess(rgb) > 0
+            alpha = self.keyer.matte(rgb) if screen else np.ones((h, w), np.float32)
+            views[n] = View(n, grid.offsets[n], rgb, alpha, disp, screen)
+        missing = sorted(set(files) - set(found))
+        if missing:
+            log.warning("frame %d: no disparity for %s: not used as sources", number, ", ".join(missing))
+        return Frame(number, views, grid.focal_px, grid.spacing)

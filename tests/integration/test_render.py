@@ -1,0 +1,199 @@
+"""Novel views on an ideal simulated presenter take: leave-one-out quality with the true disparity and with
+our depth, a view between cameras against the simulator's own render there, files on disk, a missing
+source camera, and disparity folders that do not match the take."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from tests_support import run_rigctl
+
+
+@pytest.fixture(scope="module")
+def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("render")
+    res = run_rigctl(
+        "record", "--take", "ideal", "--frames", "1", "--out", str(out),
+        "--sim", "ideal=true", "--sim", "motion=false", "--force",
+    )
+    assert res.returncode == 0, res.stderr
+    return out / "ideal"
+
+
+@pytest.fixture(scope="module")
+def our_depth(take: Path) -> Path:
+    out = take.parent / "depth"
+    res = run_rigctl("depth", str(take), "--out", str(out), "--near", "1.95", "--far", "3.0", "--json")
+    assert res.returncode == 0, res.stderr
+    return out
+
+
+def loo(take: Path, disparity: Path, *cams: str, warning: str = "") -> dict[str, dict]:
+    res = run_rigctl(
+        "render", str(take), "--disparity", str(disparity), "--leave-one-out", "--cameras", *cams, "--json"
+    )
+    assert res.returncode == 0, res.stderr
+    assert warning in res.stderr
+    rows = json.loads(res.stdout)["leave_one_out"]
+    assert {"frame", "camera", "psnr_db", "ssim", "pixels"} <= set(rows[0])
+    return {r["camera"]: r for r in rows}
+
+
+def test_leave_one_out_of_r1c1_with_true_disparity_reaches_33_db(take: Path) -> None:
+    rows = loo(take, take / "truth" / "disparity", "r1c1", "r0c0")
+    r = rows["r1c1"]
+    assert r["psnr_db"] >= 33.0 and r["ssim"] > 0.95, r
+    assert "r1c1" not in r["sources"] and len(r["sources"]) == 4  # never from itself
+    assert r["pixels"] > 100_000  # the keyed subject, not the whole image (518400)
+    assert r["pixels"] < 300_000
+
+
+def test_leave_one_out_with_our_depth_reaches_30_db(take: Path, our_depth: Path) -> None:
+    r = loo(take, our_depth, "r1c1")["r1c1"]
+    assert r["psnr_db"] >= 30.0, r
+
+
+def test_a_wrong_disparity_scores_far_worse(take: Path, tmp_path: Path) -> None:
+    """The score measures the disparity: the truth shifted by 3 px loses many dB."""
+    from rigctl.pfm import read_pfm, write_pfm
+
+    bad = tmp_path / "bad" / "000000"
+    bad.mkdir(parents=True)
+    for p in (take / "truth" / "disparity" / "000000").glob("*.pfm"):
+        write_pfm(bad / p.name, read_pfm(p) + 3.0)
+    good = loo(take, take / "truth" / "disparity", "r1c1")["r1c1"]["psnr_db"]
+    worse = loo(take, tmp_path / "bad", "r1c1")["r1c1"]["psnr_db"]
+    assert worse < good - 6.0, (good, worse)
+
+
+def test_view_between_cameras_is_within_2_db_of_leave_one_out(take: Path, tmp_path: Path) -> None:
+    truth = take / "truth" / "disparity"
+    out = tmp_path / "views"
+    res = run_rigctl("render", str(take), "--disparity", str(truth), "--at", "1.5,1", "--out", str(out), "--json")
+    assert res.returncode == 0, res.stderr
+    view = json.loads(res.stdout)["views"][0]
+    assert view["view"] == "c1.5r1" and "r1c1" in view["sources"] and "r1c2" in view["sources"]
+    against = view["against_truth"]["psnr_db"]
+    ref = loo(take, truth, "r1c1")["r1c1"]["psnr_db"]
+    assert against >= ref - 2.0, (against, ref)
+    # the files: 8-bit RGBA PNG and float RGBA EXR, alpha from the key (transparent screen, opaque body)
+    png = cv2.imread(str(out / "000000" / "c1.5r1.png"), cv2.IMREAD_UNCHANGED)
+    assert png.shape == (540, 960, 4)
+    alpha = png[..., 3]
+    assert 0.5 < np.mean(alpha == 0) < 0.9 and alpha[270, 480] == 255
+    from rigctl.exr import REC709_CHROMATICITIES, bt709_to_linear, read_exr
+
+    channels, header = read_exr(out / "000000" / "c1.5r1.exr")
+    a = channels["A"]
+    assert np.allclose(a, alpha / 255.0, atol=1 / 255 + 1e-6)
+    # scene-linear and premultiplied, as NUKE reads an EXR: the PNG's code values decoded, times A
+    rgb = cv2.cvtColor(png, cv2.COLOR_BGRA2RGBA)[..., :3] / 255.0
+    body = alpha == 255
+    assert np.allclose(channels["RGB"][body], bt709_to_linear(rgb[body]), atol=0.01)
+    assert np.allclose(header["chromaticities"], REC709_CHROMATICITIES, atol=1e-6)
+
+
+def test_stereo_pair_is_ipd_apart_and_shows_parallax(take: Path, tmp_path: Path) -> None:
+    out = tmp_path / "stereo"
+    res = run_rigctl(
+        "render", str(take), "--disparity", str(take / "truth" / "disparity"), "--at", "1,1", "--stereo", "0.06",
+        "--out", str(out), "--json",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    views = {v["view"]: v for v in json.loads(res.stdout)["views"]}
+    # 0.06 m through the rig's 0.12 m spacing: half a grid unit apart
+    assert views["c1r1_L"]["col"] == pytest.approx(0.75) and views["c1r1_R"]["col"] == pytest.approx(1.25)
+    left = cv2.imread(str(out / "000000" / "c1r1_L.png"), cv2.IMREAD_UNCHANGED)[..., 3] > 127
+    right = cv2.imread(str(out / "000000" / "c1r1_R.png"), cv2.IMREAD_UNCHANGED)[..., 3] > 127
+    body = slice(50, 450)  # above the desk, which spans the whole width
+    shift = np.nonzero(right[body])[1].mean() - np.nonzero(left[body])[1].mean()
+    assert abs(shift) > 5  # the subject moves between the eyes
+    for v in views.values():
+        assert v["against_truth"]["psnr_db"] > 30
+
+
+def test_path_writes_a_numbered_sequence(take: Path, tmp_path: Path) -> None:
+    out = tmp_path / "path"
+    res = run_rigctl(
+        "render", str(take), "--disparity", str(take / "truth" / "disparity"), "--path", "0,1", "2,1",
+        "--steps", "3", "--out", str(out),
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert sorted(p.name for p in (out / "000000").glob("*.png")) == [f"path_000{i}.png" for i in range(3)]
+
+
+def test_a_missing_source_camera_is_left_out(take: Path, tmp_path: Path) -> None:
+    disp = tmp_path / "disp"
+    shutil.copytree(take / "truth" / "disparity", disp)
+    (disp / "000000" / "r1c2.pfm").unlink()
+    r = loo(take, disp, "r1c1", warning="no disparity for r1c2: not used as sources")["r1c1"]
+    assert "r1c2" not in r["sources"] and len(r["sources"]) == 4
+    assert r["psnr_db"] >= 30.0
+
+
+def test_disparity_of_another_size_is_one_clear_line(take: Path, tmp_path: Path) -> None:
+    from rigctl.pfm import write_pfm
+
+    disp = tmp_path / "small" / "000000"
+    disp.mkdir(parents=True)
+    for name in ("r1c0", "r1c1", "r1c2"):
+        write_pfm(disp / f"{name}.pfm", np.full((270, 480), 20.0, np.float32))
+    res = run_rigctl("render", str(take), "--disparity", str(tmp_path / "small"), "--leave-one-out")
+    assert res.returncode != 0
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "small/000000/r1c" in lines[0] and "480x270" in lines[0] and "960x540" in lines[0], lines
+    assert "Traceback" not in res.stderr
+
+
+def test_disparity_of_other_frames_is_one_clear_line(take: Path, tmp_path: Path) -> None:
+    other = tmp_path / "other" / "000007"
+    other.mkdir(parents=True)
+    res = run_rigctl("render", str(take), "--disparity", str(tmp_path / "other"), "--at", "1,1", "--out", str(tmp_path))
+    assert res.returncode != 0
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "no disparity for frame 0" in lines[0], lines
+
+
+def test_bad_positions_and_modes_are_refused(take: Path, tmp_path: Path) -> None:
+    truth = str(take / "truth" / "disparity")
+    res = run_rigctl("render", str(take), "--disparity", truth, "--at", "1;1", "--out", str(tmp_path))
+    assert res.returncode == 2 and "COL,ROW" in res.stderr
+    res = run_rigctl("render", str(take), "--disparity", truth, "--out", str(tmp_path))
+    assert res.returncode == 2 and "--leave-one-out" in res.stderr
+
+
+def test_depth_check_adds_leave_one_out_to_the_report(take: Path, tmp_path: Path) -> None:
+    out = tmp_path / "depth"
+    res = run_rigctl(
+        "depth", str(take), "--out", str(out), "--near", "1.95", "--far", "3.0",
+        "--cameras", "r1c0", "r1c1", "r1c2", "--check", "--json",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    rows = json.loads((out / "report.json").read_text())["leave_one_out"]
+    assert {r["camera"] for r in rows} == {"r1c0", "r1c1", "r1c2"}
+    centre = next(r for r in rows if r["camera"] == "r1c1")
+    assert sorted(centre["sources"]) == ["r1c0", "r1c2"] and centre["psnr_db"] > 28
+
+
+def test_bench_render_reports_its_keys(tmp_path: Path) -> None:
+    res = run_rigctl("bench", "render", "--size", "480x270", "--repeats", "1", "--json", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    r = json.loads(res.stdout)
+    assert (r["width"], r["height"]) == (480, 270) and len(r["sources"]) >= 4 and r["stereo_pair_ms"] > 0
+    assert r["quality"]["leave_one_out_r1c1"]["psnr_db"] >= 33
+    assert r["ratio_to_paper"] == pytest.approx(r["stereo_pair_ms"] / (1000 / 90), rel=0.01)
+
+
+def test_demo_section_has_every_camera_and_a_strip(take: Path, our_depth: Path, tmp_path: Path) -> None:
+    from rigctl.render.demo import novel_views_section
+
+    lines = novel_views_section(take, our_depth, tmp_path, (0, 15, 0, 110), steps=3)
+    rows = [line for line in lines if line.startswith("| r")]
+    assert len(rows) == 9 and "true disparity" in lines[4] and "our depth" in lines[4]
+    strip = cv2.imread(str(tmp_path / "novel-views.png"))
+    assert strip.shape == (180, 3 * 320, 3)
