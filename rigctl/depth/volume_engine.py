@@ -1,0 +1,73 @@
+"""The ``best`` preset's engine as seen by ``estimate``: the sub-pixel cost volume (``costvolume.py``), the
+continuous refinement along the baselines and the outlier clean-up (``refine.py``), on the keyed subject's box.
+With fewer than three other views there is nothing to select occlusion-free views from, and the semi-global
+pair matcher (the ``pairs`` engine) is used instead, then refined the same way (the bench shows both)."""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+
+from rigctl.depth.costvolume import TRUNCATE, Views, VolumeParams, choose, volume_disparity
+from rigctl.depth.multibaseline import _Crop, _pairs_engine, _Search
+from rigctl.depth.pairs import neighbour
+from rigctl.depth.refine import clean, refine
+
+log = logging.getLogger(__name__)
+MIN_VIEWS = 3  # other views below which the pairs engine (semi-global) is the better start
+
+
+def volume_engine(job: _Search) -> _Crop:
+    p, stats = job.preset, job.stats
+    rel = {
+        n: (
+            job.grid.offsets[n][0] - job.grid.offsets[job.ref][0],
+            job.grid.offsets[n][1] - job.grid.offsets[job.ref][1],
+        )
+        for n in job.moving
+    }
+    params = VolumeParams(job.keep, window=p.window, radius=p.guided_radius, eps=p.guided_eps)
+    if len(job.moving) < MIN_VIEWS and min(job.grid.shape) >= 16:
+        stats["engine"] = f"pairs (only {len(job.moving)} other view(s)), refined along the baselines"
+        crop = _pairs_engine(job)
+        views = Views(job.grid.images, job.ref, rel, job.box, 1.0)
+        t0 = time.perf_counter()
+        start = np.where(np.isfinite(crop.disparity), crop.disparity, 0.0).astype(np.float32)
+        d, _ = refine(views, start, job.keep, p.guided_radius, p.guided_eps, p.lk_iterations, reach=0.5)
+        crop.disparity = np.where(np.isfinite(crop.disparity), d, crop.disparity).astype(np.float32)
+        stats["refine_s"] = time.perf_counter() - t0
+        return crop
+    stats["engine"] = "cost volume"
+    sw, views = volume_disparity(job.grid.images, job.ref, rel, job.box, job.d_range, params, stats)
+    t0 = time.perf_counter()
+    d = sw.disparity
+    if p.lk_iterations:
+        d, _ = refine(views, d, job.keep, p.guided_radius, p.guided_eps, p.lk_iterations)
+    if p.with_pairs and neighbour_count(job) and min(job.grid.shape) >= 16:
+        # the semi-global pairs hold large weakly textured areas and occlusion edges together; where the views
+        # agree better with them, they win, and are refined in turn
+        pairs = _pairs_engine(job).disparity
+        have = np.isfinite(pairs)
+        cand = np.where(have, pairs, d).astype(np.float32)
+        k = choose(views, [d, cand], params)
+        picked = (k == 1) & have
+        if p.lk_iterations and picked.any():
+            d2, _ = refine(views, cand, job.keep, p.guided_radius, p.guided_eps, p.lk_iterations, reach=0.5)
+            cand = d2
+        d = np.where(picked, cand, d).astype(np.float32)
+        stats["pairs_chosen_share"] = float(picked.mean())
+    d, outliers = clean(d)
+    stats["outliers_replaced"] = int(outliers.sum())
+    stats["refine_s"] = time.perf_counter() - t0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uniq = np.where(sw.cost > 1e-6, sw.mean_cost / np.maximum(sw.cost, 1e-6), 4.0)
+    distinct = np.clip((uniq - 1.0) / 0.5, 0, 1).astype(np.float32)
+    cost = np.minimum(sw.cost, TRUNCATE).astype(np.float32)
+    cost[sw.no_view] = sw.cost[sw.no_view]
+    return _Crop(d, cost, distinct, views.texture, views.bright, sw.bound, sw.no_view)
+
+
+def neighbour_count(job: _Search) -> int:
+    return sum(neighbour(job.grid, job.ref, dx, dy) is not None for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)))
