@@ -33,6 +33,8 @@ INVALID_COST = 1e3
 TRUNCATE = 1.5  # normalised-intensity difference above this is an occlusion or a mismatch, not more
 MAX_LEVELS = 96  # integer levels swept at full resolution; a wider range is swept at a coarser scale first
 FRACTION = 0.25  # step of the fractional sweep, px
+# matching cost: truncated intensity and gradient differences, weights and truncations of Hosni et al. (2013)
+ALPHA, TAU_I, TAU_G = 0.9, 7 / 255, 2 / 255
 
 
 def grey(rgb: F32) -> F32:
@@ -70,18 +72,29 @@ class Views:
         self.scale = scale
         self.box = tuple(round(v * scale) for v in box)
         y0, y1, x0, x1 = self.box
-        self.norm: dict[str, F32] = {}
+        self.feat: dict[str, F32] = {}  # per camera: intensity (matched to the reference's), d/dx, d/dy
+        greys = {}
         for n in [ref, *rel]:
             g = grey(images[n])
             if scale != 1.0:
                 g = np.asarray(cv2.resize(g, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA), np.float32)
-            self.norm[n], std = normalise(g)
-            if n == ref:
-                self.h, self.w = g.shape
-                self.texture = std[y0:y1, x0:x1]
-                self.bright = g[y0:y1, x0:x1]
-                self.guide = np.ascontiguousarray(g[y0:y1, x0:x1])
-        self.ref = np.ascontiguousarray(self.norm[ref][y0:y1, x0:x1])
+            greys[n] = g
+        g_ref = greys[ref]
+        self.h, self.w = g_ref.shape
+        _, std = normalise(g_ref)
+        self.texture = std[y0:y1, x0:x1]
+        self.bright = g_ref[y0:y1, x0:x1]
+        self.guide = np.ascontiguousarray(g_ref[y0:y1, x0:x1])
+        m_ref, s_ref = float(g_ref.mean()), float(g_ref.std())
+        for n, g in greys.items():
+            # one gain and offset per camera (exposure differences), not a local normalisation: a window
+            # statistic mixes a foreground edge with the background it moves over, and moves the edge
+            m, sd = float(g.mean()), float(g.std())
+            g = (g - m) * np.float32(s_ref / sd if sd > 1e-6 else 1.0) + np.float32(m_ref) if n != ref else g
+            gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
+            gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
+            self.feat[n] = np.ascontiguousarray(np.dstack([g, gx, gy]), dtype=np.float32)
+        self.ref = np.ascontiguousarray(self.feat[ref][y0:y1, x0:x1])
         self.rel = rel
         self.names = list(rel)
         self.gy, self.gx = np.mgrid[y0:y1, x0:x1].astype(np.float32)
@@ -98,7 +111,7 @@ class Views:
             y0, y1, x0, x1 = self.box
             m = np.array([[1, 0, x0 - d * rx], [0, 1, y0 - d * ry]], np.float32)
             out = cv2.warpAffine(
-                self.norm[name],
+                self.feat[name],
                 m,
                 (x1 - x0, y1 - y0),
                 flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
@@ -109,15 +122,18 @@ class Views:
             return np.asarray(out, np.float32), np.asarray(outside)
         mx = self.gx - d * np.float32(rx)
         my = self.gy - d * np.float32(ry)
-        out = cv2.remap(self.norm[name], mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        out = cv2.remap(self.feat[name], mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         return np.asarray(out, np.float32), np.asarray((mx < 0) | (mx > self.w - 1) | (my < 0) | (my > self.h - 1))
 
     def view_costs(self, d: float | F32, win: int) -> F32:
-        """(views, h, w): truncated absolute difference, box aggregated per view; INVALID outside the view."""
+        """(views, h, w): truncated absolute differences of intensity and gradient (Hosni et al.'s cost, scaled
+        to 0..TRUNCATE), box aggregated per view; INVALID outside the view."""
         out = np.empty((len(self.names), *self.shape), np.float32)
         for i, n in enumerate(self.names):
             warped, outside = self.warp(n, d)
-            ad = np.minimum(np.abs(warped - self.ref), TRUNCATE)
+            diff = np.abs(warped - self.ref)
+            ad = np.minimum(diff[..., 0], TAU_I) * np.float32((1 - ALPHA) * TRUNCATE / TAU_I)
+            ad += np.minimum(diff[..., 1] + diff[..., 2], TAU_G) * np.float32(ALPHA * TRUNCATE / TAU_G)
             agg = cv2.boxFilter(ad, -1, (win, win), borderType=cv2.BORDER_REFLECT)
             agg[outside] = INVALID_COST
             out[i] = agg
@@ -256,8 +272,10 @@ def volume_disparity(
     fine = sweep(full, cands, p, p.window, p.radius)
     stats["fractional_candidates"] = len(cands)
     stats["fractional_sweep_s"] = time.perf_counter() - t0
-    up = (lambda a: a) if s == 1.0 else (lambda a: cv2.resize(a.astype(np.uint8), (w, h), cv2.INTER_NEAREST) > 0)
-    fine.bound = np.asarray(up(coarse.bound)) & ((fine.disparity <= lo + 0.5) | (fine.disparity >= hi - 0.5))
+    bound = coarse.bound
+    if s != 1.0:
+        bound = np.asarray(cv2.resize(bound.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST)) > 0
+    fine.bound = np.asarray(bound) & ((fine.disparity <= lo + 0.5) | (fine.disparity >= hi - 0.5))
     fine.mean_cost = np.asarray(
         coarse.mean_cost if s == 1.0 else cv2.resize(coarse.mean_cost, (w, h), interpolation=cv2.INTER_LINEAR),
         np.float32,

@@ -16,22 +16,12 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.depth.costvolume import INVALID_COST, TRUNCATE, Aggregator, Views
+from rigctl.depth.costvolume import INVALID_COST, TAU_I, Aggregator, Views
 
 F32 = NDArray[np.float32]
 log = logging.getLogger(__name__)
 
-MIN_GRADIENT = 1e-3  # mean squared baseline gradient below which a pixel keeps the sweep's value
-
-
-def _gradients(views: Views) -> dict[str, tuple[F32, F32]]:
-    out = {}
-    for n in views.names:
-        img = views.norm[n]
-        gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
-        gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
-        out[n] = (np.asarray(gx, np.float32), np.asarray(gy, np.float32))
-    return out
+DAMPING = 2e-5  # squared baseline gradient (grey 0..1 per px) at which a fit is trusted half: about sensor noise
 
 
 def refine(
@@ -40,7 +30,6 @@ def refine(
     """Gauss-Newton along the baselines, over the ``keep`` views with the smallest residual at each pixel.
     Returns the refined map (within ``reach`` px of ``disp``) and the fit's strength (sum of g^2)."""
     agg = Aggregator(views.guide, radius, eps)
-    grads = _gradients(views)
     d = disp.astype(np.float32).copy()
     strength = np.zeros_like(d)
     nv = len(views.names)
@@ -49,26 +38,21 @@ def refine(
         jac = np.empty((nv, *d.shape), np.float32)
         for i, n in enumerate(views.names):
             rx, ry = views.rel[n]
-            warped, outside = views.warp(n, d)
-            mx = views.gx - d * np.float32(rx)
-            my = views.gy - d * np.float32(ry)
-            gxw = cv2.remap(grads[n][0], mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            gyw = cv2.remap(grads[n][1], mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            r = warped - views.ref
-            res[i] = np.where(outside, np.float32(INVALID_COST), r)
-            jac[i] = np.where(outside, 0.0, -(rx * gxw + ry * gyw))
+            warped, outside = views.warp(n, d)  # intensity, d/dx, d/dy at the warped points
+            res[i] = np.where(outside, np.float32(INVALID_COST), warped[..., 0] - views.ref[..., 0])
+            jac[i] = np.where(outside, 0.0, -(rx * warped[..., 1] + ry * warped[..., 2]))
         # view selection: the views whose local residual is smallest (an occluded view has a large one)
-        local = np.stack([cv2.boxFilter(np.minimum(np.abs(r), TRUNCATE), -1, (5, 5)) for r in res])
+        local = np.stack([cv2.boxFilter(np.minimum(np.abs(r), TAU_I), -1, (5, 5)) for r in res])
         local[np.abs(res) >= INVALID_COST * 0.5] = INVALID_COST
         k = min(keep, nv)
         cut = np.partition(local, k - 1, axis=0)[k - 1] if k < nv else np.full(d.shape, np.inf, np.float32)
         use = (local <= cut[None]) & (local < INVALID_COST * 0.5)
-        r_c = np.clip(np.where(use, res, 0.0), -TRUNCATE, TRUNCATE)
+        r_c = np.clip(np.where(use, res, 0.0), -4 * TAU_I, 4 * TAU_I)
         j_u = np.where(use, jac, 0.0)
         a = agg.smooth((j_u * j_u).sum(0) / np.float32(k))
         b = agg.smooth((j_u * r_c).sum(0) / np.float32(k))
-        strong = a > MIN_GRADIENT
-        step = np.where(strong, -b / np.maximum(a, MIN_GRADIENT), 0.0)
+        # damped (Levenberg): where the baseline gradient is weaker than the noise, the pixel barely moves
+        step = -b / (a + np.float32(DAMPING))
         d = np.clip(d + np.clip(step, -0.25, 0.25), disp - reach, disp + reach).astype(np.float32)
         strength = a
     return d, strength

@@ -52,7 +52,7 @@ def texture(
     tint = rng.uniform(0.7, 1.3, 3).astype(np.float32)
     for sigma, amp in scales:
         n = rng.standard_normal((h, w)).astype(np.float32)
-        n = cv2.GaussianBlur(n, (0, 0), sigma * TEX)
+        n = np.asarray(cv2.GaussianBlur(n, (0, 0), sigma * TEX), np.float32)
         n *= amp / max(float(n.std()), 1e-6)
         out += n[..., None] * tint[None, None]
     return np.clip(out, 0.0, 1.0)
@@ -175,7 +175,12 @@ def write_grid_folder(grid: Grid, folder: Path) -> Path:
         bgr = np.round(np.clip(grid.images[n][..., ::-1], 0, 1) * 255).astype(np.uint8)
         cv2.imwrite(str(folder / f"{n}.png"), bgr)
     spacing_y = min((abs(o[1]) for o in grid.offsets.values() if abs(o[1]) > 1e-6), default=1.0) * grid.spacing
-    spec = {"spacing_x": grid.spacing, "spacing_y": float(spacing_y), "focal_px": grid.focal_px, "doffs": grid.doffs}
+    spec: dict[str, object] = {
+        "spacing_x": grid.spacing,
+        "spacing_y": float(spacing_y),
+        "focal_px": grid.focal_px,
+        "doffs": grid.doffs,
+    }
     if grid.disparity_range is not None:
         spec["disparity_range_px"] = [float(v) for v in grid.disparity_range]
     (folder / "grid.yaml").write_text(yaml.safe_dump(spec, sort_keys=False))

@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from rigctl.depth.costvolume import TRUNCATE, Views, VolumeParams, choose, volume_disparity
+from rigctl.depth.costvolume import FRACTION, TRUNCATE, Views, VolumeParams, choose, volume_disparity
 from rigctl.depth.multibaseline import _Crop, _pairs_engine, _Search
 from rigctl.depth.pairs import neighbour
 from rigctl.depth.refine import clean, refine
@@ -44,7 +44,7 @@ def volume_engine(job: _Search) -> _Crop:
     t0 = time.perf_counter()
     d = sw.disparity
     if p.lk_iterations:
-        d, _ = refine(views, d, job.keep, p.guided_radius, p.guided_eps, p.lk_iterations)
+        d, _ = refine(views, d, job.keep, p.guided_radius, p.guided_eps, p.lk_iterations, reach=FRACTION)
     if p.with_pairs and neighbour_count(job) and min(job.grid.shape) >= 16:
         # the semi-global pairs hold large weakly textured areas and occlusion edges together; where the views
         # agree better with them, they win, and are refined in turn
