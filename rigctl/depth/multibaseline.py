@@ -479,7 +479,7 @@ def _pairs_engine(job: _Search) -> _Crop:
     base = fill_from_background(np.where(have, med, np.inf).astype(np.float32), np.asarray(~have, bool))
     base = np.where(np.isfinite(base), base, 0.5 * (d_range[0] + d_range[1])).astype(np.float32)
     stats["pairs"] = len(maps)
-    stats["levels"] = max(searched)  # disparities the widest pair searched, in its own pixels
+    stats["levels"] = max(searched, default=0)  # disparities the widest pair searched, in its own pixels
     stats["pairs_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

@@ -194,6 +194,9 @@ def run_depth(
                 progress((i + cams.index(cam) / len(cams)) / total, f"frame {n} camera {cam}")
 
         results = depth_grid(grid, opt, step)
+        if not any(np.isfinite(r.disparity).any() for r in results.values()):
+            notes = sorted({str(r.stats.get("note", "no camera found a match")) for r in results.values()})
+            raise ParameterError(f"{source}: frame {n}: no depth could be estimated: {'; '.join(notes)}")
         t0 = time.perf_counter()
         for cam, res in results.items():
             write_outputs(folder(n), cam, grid, res, d_range, formats)

@@ -29,7 +29,7 @@ def volume_engine(job: _Search) -> _Crop:
         for n in job.moving
     }
     params = VolumeParams(job.keep, window=p.window, radius=p.guided_radius, eps=p.guided_eps)
-    if len(job.moving) < MIN_VIEWS and min(job.grid.shape) >= 16:
+    if len(job.moving) < MIN_VIEWS and min(job.grid.shape) >= 16 and neighbour_count(job):
         stats["engine"] = f"pairs (only {len(job.moving)} other view(s)), refined along the baselines"
         crop = _pairs_engine(job)
         views = Views(job.grid.images, job.ref, rel, job.box, 1.0)
@@ -58,7 +58,8 @@ def volume_engine(job: _Search) -> _Crop:
             cand = d2
         d = np.where(picked, cand, d).astype(np.float32)
         stats["pairs_chosen_share"] = float(picked.mean())
-    d, outliers = clean(d)
+    lo, hi = job.d_range
+    d, outliers = clean(np.clip(d, lo - 1.0, hi + 1.0).astype(np.float32))
     stats["outliers_replaced"] = int(outliers.sum())
     stats["refine_s"] = time.perf_counter() - t0
     with np.errstate(divide="ignore", invalid="ignore"):
