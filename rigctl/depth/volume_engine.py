@@ -1,22 +1,28 @@
 """The ``best`` preset's engine as seen by ``estimate``: the sub-pixel cost volume (``costvolume.py``), the
 continuous refinement along the baselines and the outlier clean-up (``refine.py``), on the keyed subject's box.
-With fewer than three other views there is nothing to select occlusion-free views from, and the semi-global
-pair matcher (the ``pairs`` engine) is used instead, then refined the same way (the bench shows both)."""
+Chosen per input: with fewer than three other views there is nothing to select occlusion-free views from,
+and with disparities beyond WIDE_PX the semi-global pairs hold wide occlusion bands together; both use the
+``pairs`` engine (today's results there, unchanged). ``rigctl bench depth`` shows both engines on every dataset."""
 
 from __future__ import annotations
 
 import logging
 import time
 
+import cv2
 import numpy as np
 
-from rigctl.depth.costvolume import FRACTION, TRUNCATE, Views, VolumeParams, choose, volume_disparity
+from rigctl.depth.costvolume import FRACTION, TRUNCATE, VolumeParams, choose, volume_disparity
 from rigctl.depth.multibaseline import _Crop, _pairs_engine, _Search
 from rigctl.depth.pairs import neighbour
 from rigctl.depth.refine import clean, refine
 
 log = logging.getLogger(__name__)
 MIN_VIEWS = 3  # other views below which the pairs engine (semi-global) is the better start
+# disparity magnitude (px of one spacing) above which the pairs engine is used: wide disparities open wide
+# half-occluded bands and large weakly textured areas that semi-global smoothing holds together (the realistic
+# presenter, 85-128 px), while narrow ones (light fields, a few px) need the cost volume's sub-pixel accuracy
+WIDE_PX = 48.0
 
 
 def volume_engine(job: _Search) -> _Crop:
@@ -29,15 +35,13 @@ def volume_engine(job: _Search) -> _Crop:
         for n in job.moving
     }
     params = VolumeParams(job.keep, window=p.window, radius=p.guided_radius, eps=p.guided_eps)
-    if len(job.moving) < MIN_VIEWS and min(job.grid.shape) >= 16 and neighbour_count(job):
-        stats["engine"] = f"pairs (only {len(job.moving)} other view(s)), refined along the baselines"
+    lo, hi = job.d_range
+    few = len(job.moving) < MIN_VIEWS
+    wide = max(abs(lo), abs(hi)) > WIDE_PX
+    if (few or wide) and min(job.grid.shape) >= 16 and neighbour_count(job):
+        stats["engine"] = "pairs: " + (f"only {len(job.moving)} other view(s)" if few else f"range beyond {WIDE_PX} px")
         crop = _pairs_engine(job)
-        views = Views(job.grid.images, job.ref, rel, job.box, 1.0)
-        t0 = time.perf_counter()
-        start = np.where(np.isfinite(crop.disparity), crop.disparity, 0.0).astype(np.float32)
-        d, _ = refine(views, start, job.keep, p.guided_radius, p.guided_eps, p.lk_iterations, reach=0.5)
-        crop.disparity = np.where(np.isfinite(crop.disparity), d, crop.disparity).astype(np.float32)
-        stats["refine_s"] = time.perf_counter() - t0
+        crop.disparity = np.asarray(cv2.medianBlur(np.ascontiguousarray(crop.disparity), 5), np.float32)
         return crop
     stats["engine"] = "cost volume"
     sw, views = volume_disparity(job.grid.images, job.ref, rel, job.box, job.d_range, params, stats)
@@ -58,7 +62,6 @@ def volume_engine(job: _Search) -> _Crop:
             cand = d2
         d = np.where(picked, cand, d).astype(np.float32)
         stats["pairs_chosen_share"] = float(picked.mean())
-    lo, hi = job.d_range
     d, outliers = clean(np.clip(d, lo - 1.0, hi + 1.0).astype(np.float32))
     stats["outliers_replaced"] = int(outliers.sum())
     stats["refine_s"] = time.perf_counter() - t0
