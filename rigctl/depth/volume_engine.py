@@ -7,13 +7,15 @@ and with disparities beyond WIDE_PX the semi-global pairs hold wide occlusion ba
 from __future__ import annotations
 
 import logging
+import math
 import time
+from dataclasses import replace
 
 import cv2
 import numpy as np
 
 from rigctl.depth.costvolume import FRACTION, TRUNCATE, VolumeParams, choose, volume_disparity
-from rigctl.depth.multibaseline import _Crop, _pairs_engine, _Search
+from rigctl.depth.multibaseline import PRESETS, _Crop, _pairs_engine, _Search
 from rigctl.depth.pairs import neighbour
 from rigctl.depth.refine import clean, refine
 
@@ -40,7 +42,9 @@ def volume_engine(job: _Search) -> _Crop:
     wide = max(abs(lo), abs(hi)) > WIDE_PX
     if (few or wide) and min(job.grid.shape) >= 16 and neighbour_count(job):
         stats["engine"] = "pairs: " + (f"only {len(job.moving)} other view(s)" if few else f"range beyond {WIDE_PX} px")
-        crop = _pairs_engine(job)
+        pair_preset = PRESETS["pairs"]  # exactly the pairs preset's matching, window and views kept
+        keep = max(1, math.ceil(pair_preset.keep * len(job.moving)))
+        crop = _pairs_engine(replace(job, preset=pair_preset, keep=keep))
         crop.disparity = np.asarray(cv2.medianBlur(np.ascontiguousarray(crop.disparity), 5), np.float32)
         return crop
     stats["engine"] = "cost volume"
