@@ -15,7 +15,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     what = p.add_subparsers(dest="what", metavar="WHAT")
     d = what.add_parser(
         "depth",
-        help="every depth preset and the OpenCV baselines on the simulated presenter and Middlebury Motorcycle",
+        help="every depth preset and the OpenCV baselines on the simulated presenter, Middlebury Motorcycle and "
+        "the stratified light-field scenes",
     )
     d.add_argument("--repeats", type=int, default=1, help="runs per method (the median time is kept)")
     d.add_argument("--plot", type=Path, default=Path("bench-depth.png"), metavar="PNG")
@@ -35,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_depth_bench(ns: argparse.Namespace) -> int:
     from rigctl.benchdata import presenter
-    from rigctl.depth.bench import format_table, motorcycle, plot, run_bench
+    from rigctl.depth.bench import format_table, motorcycle, plot, run_bench, stratified
     from rigctl.errors import ParameterError
 
     if ns.size:
@@ -44,7 +45,7 @@ def run_depth_bench(ns: argparse.Namespace) -> int:
         raise ParameterError(f"--repeats must be at least 1, got {ns.repeats}")
     bar = Progress("bench depth")
     try:
-        datasets = ([] if ns.quick else [presenter(True)]) + [presenter(False), motorcycle()]
+        datasets = ([] if ns.quick else [presenter(True)]) + [presenter(False), motorcycle(), *stratified()]
         result = run_bench(datasets, repeats=ns.repeats, progress=bar)
     finally:
         bar.close()

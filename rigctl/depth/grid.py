@@ -109,6 +109,12 @@ def load_grid_folder(folder: Path) -> Grid:
         images[p.stem] = img[..., ::-1][..., :3] if img.ndim == 3 else img
     if not images:
         raise RigFileError(f"{folder}: no r{{row}}c{{col}}.png images")
+    first = next(iter(images))
+    for n, img in images.items():
+        if img.shape[:2] != images[first].shape[:2]:
+            h, w = img.shape[:2]
+            h0, w0 = images[first].shape[:2]
+            raise RigFileError(f"{folder / (n + '.png')}: image is {w}x{h}, but {first}.png is {w0}x{h0}: sizes differ")
     rng = spec.get("disparity_range_px")
     try:
         return grid_from_arrays(

@@ -47,7 +47,11 @@ class Preset:
     median: int = 0  # median filter of the result (0: none)
     sgm: tuple[float, float] | None = None  # semi-global smoothing at half resolution: (P1, P2) penalties
     sgm_fine: tuple[float, float] | None = None  # the same over the full-resolution refinement candidates
-    engine: str = "sweep"  # "sweep": our plane sweep; "pairs": OpenCV SGBM per pair, fused by every view
+    engine: str = "sweep"  # "sweep": plane sweep; "pairs": OpenCV SGBM per pair, fused; "volume": costvolume.py
+    guided_radius: int = 4  # "volume": guided-filter radius of the cost-volume filtering, px
+    guided_eps: float = 1e-4  # "volume": its regularisation (grey levels 0..1, squared)
+    with_pairs: bool = True  # "volume": the semi-global pairs are a second candidate, chosen per pixel by cost
+    lk_iterations: int = 3  # "volume": Gauss-Newton steps of the continuous refinement along the baselines
     description: str = ""
 
 
@@ -68,6 +72,16 @@ PRESETS = {
         ),
         Preset(
             "best",
+            "all",
+            0.5,
+            3,
+            refine=True,
+            engine="volume",
+            description="multi-view cost volume over the planned range, guided-filter aggregation, best half of "
+            "the views per pixel, quarter-pixel sweep, continuous least-squares refinement along the baselines",
+        ),
+        Preset(
+            "pairs",
             "all",
             0.375,
             7,
@@ -465,7 +479,7 @@ def _pairs_engine(job: _Search) -> _Crop:
     base = fill_from_background(np.where(have, med, np.inf).astype(np.float32), np.asarray(~have, bool))
     base = np.where(np.isfinite(base), base, 0.5 * (d_range[0] + d_range[1])).astype(np.float32)
     stats["pairs"] = len(maps)
-    stats["levels"] = max(searched)  # disparities the widest pair searched, in its own pixels
+    stats["levels"] = max(searched, default=0)  # disparities the widest pair searched, in its own pixels
     stats["pairs_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -539,7 +553,12 @@ def estimate(
 
     y0, y1, x0, x1 = box
     job = _Search(grid, ref, moving, box, (lo, hi), keep, preset, stats, fg[y0:y1, x0:x1])
-    crop = _pairs_engine(job) if preset.engine == "pairs" else _sweep_engine(job)
+    if preset.engine == "volume":
+        from rigctl.depth.volume_engine import volume_engine  # it builds on this module's pairs engine
+
+        crop = volume_engine(job)
+    else:
+        crop = _pairs_engine(job) if preset.engine == "pairs" else _sweep_engine(job)
     disp = crop.disparity
     if preset.median:
         disp = np.asarray(cv2.medianBlur(np.ascontiguousarray(disp, dtype=np.float32), preset.median), np.float32)

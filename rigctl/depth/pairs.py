@@ -56,11 +56,15 @@ def neighbour(grid: Grid, ref: str, dx: int, dy: int) -> str | None:
     return best
 
 
-def _capped(d_range: tuple[float, float], scale: float, extent: int) -> tuple[float, float]:
+def _capped(d_range: tuple[float, float], scale: float, extent: int) -> tuple[float, float] | None:
     """The pair's search range in its own pixels, no wider than the image it searches (a wider range cannot
-    match anything and makes the matcher allocate for nothing)."""
+    match anything, and OpenCV fails when its levels, in steps of 16, reach the image width); None when not
+    even 16 levels fit."""
     lo, hi = d_range[0] * scale, d_range[1] * scale
-    return lo, min(hi, lo + max(16, extent - 16))
+    room = ((extent - BLOCK - 1 - max(math.floor(lo), 0)) // 16) * 16  # a positive minimum shifts the search
+    if room < 16 or hi < -extent:
+        return None
+    return lo, min(hi, math.floor(lo) + room - 1)
 
 
 def nan_median(stack: F32) -> tuple[F32, F32]:
@@ -118,7 +122,10 @@ def pair_disparity(
         flip = rx < 0
         if flip:
             a, b = a[:, ::-1], b[:, ::-1]
-        m = make_sgbm(*_capped(d_range, scale, a.shape[1]), block)
+        rng = _capped(d_range, scale, a.shape[1])
+        if rng is None:
+            return np.full((y1 - y0, x1 - x0), np.inf, np.float32)
+        m = make_sgbm(*rng, block)
         d = _to_float(m.compute(np.ascontiguousarray(a), np.ascontiguousarray(b)), m)
         d = d[:, ::-1] if flip else d
     else:  # vertical: transposed, the camera below is the "right" image
@@ -127,7 +134,10 @@ def pair_disparity(
         flip = ry < 0
         if flip:
             a, b = a[:, ::-1], b[:, ::-1]
-        m = make_sgbm(*_capped(d_range, scale, a.shape[1]), block)
+        rng = _capped(d_range, scale, a.shape[1])
+        if rng is None:
+            return np.full((y1 - y0, x1 - x0), np.inf, np.float32)
+        m = make_sgbm(*rng, block)
         d = _to_float(m.compute(np.ascontiguousarray(a), np.ascontiguousarray(b)), m)
         d = (d[:, ::-1] if flip else d).T
     d = d[:, x0:x1] if abs(ry) < abs(rx) else d[y0:y1]

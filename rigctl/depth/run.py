@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from rigctl.depth.grid import Grid, SkippedFrameSet, TakeGrid, load_grid_folder
 from rigctl.depth.key import Keyer
+from rigctl.depth.metrics import score
 from rigctl.depth.multibaseline import PRESETS, DepthResult, cross_check, estimate
 from rigctl.errors import ParameterError
 from rigctl.exr import picture, picture_attributes, to_colour, write_exr
@@ -231,6 +232,9 @@ def run_depth(
                 progress((i + cams.index(cam) / len(cams)) / total, f"frame {n} camera {cam}")
 
         results = depth_grid(grid, opt, step)
+        if not any(np.isfinite(r.disparity).any() for r in results.values()):
+            notes = sorted({str(r.stats.get("note", "no camera found a match")) for r in results.values()})
+            raise ParameterError(f"{source}: frame {n}: no depth could be estimated: {'; '.join(notes)}")
         t0 = time.perf_counter()
         for cam, res in results.items():
             write_outputs(target(n), cam, grid, res, d_range, formats)
@@ -264,21 +268,3 @@ def run_depth(
     if progress:
         progress(1.0, "done")
     return report
-
-
-def score(disparity: F32, truth: F32, mask: NDArray[np.bool_]) -> dict[str, float | None]:
-    """Metrics on ``mask`` (pixels with ground truth): bad 0.5 / 1 / 2 px (a missing estimate counts as bad),
-    mean absolute error and RMS over the estimated pixels, share with no estimate."""
-    t = truth[mask]
-    d = disparity[mask]
-    have = np.isfinite(d)
-    err = np.abs(d - t)
-    bad = {f"bad_{x}": float(np.mean(~have | (err > x)) * 100) for x in (0.5, 1.0, 2.0)}
-    e = err[have]
-    return {
-        **bad,
-        "mae_px": float(e.mean()) if e.size else None,  # None: nothing was estimated
-        "rms_px": float(np.sqrt(np.mean(e**2))) if e.size else None,
-        "no_estimate_pct": float(np.mean(~have) * 100) if t.size else 0.0,
-        "pixels": int(t.size),
-    }

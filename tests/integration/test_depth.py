@@ -267,11 +267,11 @@ def occlusion_grid(d_back: float = 5.0, d_front: float = 15.0, h: int = 120, w: 
     return grid_from_arrays(images, 1000.0, 0.12, 0.12 * 0.65), truth
 
 
-def test_best_decides_at_an_occlusion_and_cross_checks_between_cameras() -> None:
+def test_pairs_decides_at_an_occlusion_and_cross_checks_between_cameras() -> None:
     from rigctl.depth.run import DepthOptions, depth_grid
 
     g, truth = occlusion_grid()
-    opt = DepthOptions(preset="best", key=False, cameras=("r1c1", "r1c2"), disparity_range=(2.0, 20.0))
+    opt = DepthOptions(preset="pairs", key=False, cameras=("r1c1", "r1c2"), disparity_range=(2.0, 20.0))
     out = depth_grid(g, opt)
     res, t = out["r1c1"], truth["r1c1"]
     inner = (slice(8, -8), slice(8, -8))
@@ -288,13 +288,14 @@ def test_best_decides_at_an_occlusion_and_cross_checks_between_cameras() -> None
     assert not np.isnan(res.disparity).any() and not np.isnan(res.confidence).any()
 
 
-def test_best_names_the_preset_to_use_when_no_camera_shares_a_row_or_column() -> None:
+def test_pairs_names_the_preset_to_use_when_no_camera_shares_a_row_or_column() -> None:
     g0 = plane_grid(6.0, rows=2, cols=2)
     g = grid_from_arrays({"r0c0": g0.images["r0c0"], "r1c1": g0.images["r1c1"]}, 1000.0, 0.12, 0.12 * 0.65)
     with pytest.raises(ParameterError, match=r"no other camera on its row or column.*--preset balanced"):
-        estimate(g, "r0c0", (2.0, 10.0), PRESETS["best"], keyer=None)
-    r = estimate(g, "r0c0", (2.0, 10.0), PRESETS["balanced"], keyer=None)  # the plane sweep takes any layout
-    assert np.median(np.abs(r.disparity[20:-20, 20:-20] - 6.0)) < 0.5
+        estimate(g, "r0c0", (2.0, 10.0), PRESETS["pairs"], keyer=None)
+    for name in ("balanced", "best"):  # the plane sweep and the cost volume take any layout
+        r = estimate(g, "r0c0", (2.0, 10.0), PRESETS[name], keyer=None)
+        assert np.median(np.abs(r.disparity[20:-20, 20:-20] - 6.0)) < 0.5, name
 
 
 def test_cli_depth_sequence_layout_carries_linear_rgb_alpha_and_timecode(ideal_take: Path, tmp_path: Path) -> None:

@@ -1,0 +1,292 @@
+"""A multi-view cost volume that is sub-pixel accurate by construction (the ``best`` preset's engine).
+
+1. Integer sweep over the planned range: every other camera is warped by d times its own baseline, the
+   absolute difference of locally normalised intensity (gain and offset invariant) is truncated and box
+   aggregated per view, each pixel keeps the best ``keep`` views (occlusion-aware view selection), and the
+   combined cost is filtered by a guided filter with the reference image as guide (cost-volume filtering,
+   Hosni et al. 2013: edge-aware aggregation that stays unbiased on slanted surfaces). Wide ranges are swept at
+   a coarser scale first.
+2. Fractional sweep: quarter-pixel candidates around the integer result, same cost, a parabola through the
+   best three.
+3. Continuous refinement (``refine.py``): multi-view photometric least squares along the baselines, which has
+   no preferred fractional value, so nothing locks to the sampling grid.
+
+Memory is a few images per view: levels are streamed, never stored as a volume.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+F32 = NDArray[np.float32]
+log = logging.getLogger(__name__)
+
+INVALID_COST = 1e3
+TRUNCATE = 1.5  # normalised-intensity difference above this is an occlusion or a mismatch, not more
+MAX_LEVELS = 96  # integer levels swept at full resolution; a wider range is swept at a coarser scale first
+FRACTION = 0.25  # step of the fractional sweep, px
+# matching cost: truncated intensity and gradient differences, weights and truncations of Hosni et al. (2013)
+ALPHA, TAU_I, TAU_G = 0.9, 7 / 255, 2 / 255
+
+
+def grey(rgb: F32) -> F32:
+    return np.asarray(cv2.cvtColor(np.ascontiguousarray(rgb, np.float32), cv2.COLOR_RGB2GRAY), dtype=np.float32)
+
+
+def normalise(g: F32, win: int = 7) -> tuple[F32, F32]:
+    """Locally normalised intensity, and the local standard deviation (texture)."""
+    mean = cv2.boxFilter(g, -1, (win, win), borderType=cv2.BORDER_REFLECT)
+    sq = cv2.boxFilter(g * g, -1, (win, win), borderType=cv2.BORDER_REFLECT)
+    std = np.sqrt(np.maximum(sq - mean * mean, 0.0))
+    return np.asarray((g - mean) / (std + 0.01), dtype=np.float32), np.asarray(std, dtype=np.float32)
+
+
+def combine(costs: F32, keep: int) -> F32:
+    """Per pixel the mean of the ``keep`` smallest view costs; views that cannot see the point do not count."""
+    part = costs if keep >= costs.shape[0] else np.partition(costs, keep - 1, axis=0)[:keep]
+    seen = part < INVALID_COST * 0.5
+    n = seen.sum(0)
+    total = np.where(seen, part, 0).sum(0)
+    return np.asarray(np.where(n > 0, total / np.maximum(n, 1), INVALID_COST), dtype=np.float32)
+
+
+class Views:
+    """Normalised reference crop and normalised views at one scale, with warps by a disparity."""
+
+    def __init__(
+        self,
+        images: dict[str, F32],
+        ref: str,
+        rel: dict[str, tuple[float, float]],
+        box: tuple[int, int, int, int],
+        scale: float = 1.0,
+    ) -> None:
+        self.scale = scale
+        self.box = tuple(round(v * scale) for v in box)
+        y0, y1, x0, x1 = self.box
+        self.feat: dict[str, F32] = {}  # per camera: intensity (matched to the reference's), d/dx, d/dy
+        greys = {}
+        for n in [ref, *rel]:
+            g = grey(images[n])
+            if scale != 1.0:
+                g = np.asarray(cv2.resize(g, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA), np.float32)
+            greys[n] = g
+        g_ref = greys[ref]
+        self.h, self.w = g_ref.shape
+        _, std = normalise(g_ref)
+        self.texture = std[y0:y1, x0:x1]
+        self.bright = g_ref[y0:y1, x0:x1]
+        self.guide = np.ascontiguousarray(g_ref[y0:y1, x0:x1])
+        m_ref, s_ref = float(g_ref.mean()), float(g_ref.std())
+        for n, g in greys.items():
+            # one gain and offset per camera (exposure differences), not a local normalisation: a window
+            # statistic mixes a foreground edge with the background it moves over, and moves the edge
+            m, sd = float(g.mean()), float(g.std())
+            g = (g - m) * np.float32(s_ref / sd if sd > 1e-6 else 1.0) + np.float32(m_ref) if n != ref else g
+            gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
+            gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
+            self.feat[n] = np.ascontiguousarray(np.dstack([g, gx, gy]), dtype=np.float32)
+        self.ref = np.ascontiguousarray(self.feat[ref][y0:y1, x0:x1])
+        self.rel = rel
+        self.names = list(rel)
+        self.gy, self.gx = np.mgrid[y0:y1, x0:x1].astype(np.float32)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.ref.shape[0], self.ref.shape[1]
+
+    def warp(self, name: str, d: float | F32) -> tuple[F32, NDArray[np.bool_]]:
+        """View ``name`` sampled where the reference's pixels lie at disparity ``d`` (a number or a map), and
+        where that falls outside the view."""
+        rx, ry = self.rel[name]
+        if isinstance(d, float):
+            y0, y1, x0, x1 = self.box
+            m = np.array([[1, 0, x0 - d * rx], [0, 1, y0 - d * ry]], np.float32)
+            out = cv2.warpAffine(
+                self.feat[name],
+                m,
+                (x1 - x0, y1 - y0),
+                flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                borderMode=cv2.BORDER_REPLICATE,
+            )
+            xs, ys = self.gx[0] - d * rx, self.gy[:, 0] - d * ry
+            outside = ((ys < 0) | (ys > self.h - 1))[:, None] | ((xs < 0) | (xs > self.w - 1))[None, :]
+            return np.asarray(out, np.float32), np.asarray(outside)
+        mx = self.gx - d * np.float32(rx)
+        my = self.gy - d * np.float32(ry)
+        out = cv2.remap(self.feat[name], mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        return np.asarray(out, np.float32), np.asarray((mx < 0) | (mx > self.w - 1) | (my < 0) | (my > self.h - 1))
+
+    def view_costs(self, d: float | F32, win: int) -> F32:
+        """(views, h, w): truncated absolute differences of intensity and gradient (Hosni et al.'s cost, scaled
+        to 0..TRUNCATE), box aggregated per view; INVALID outside the view."""
+        out = np.empty((len(self.names), *self.shape), np.float32)
+        for i, n in enumerate(self.names):
+            warped, outside = self.warp(n, d)
+            diff = np.abs(warped - self.ref)
+            ad = np.minimum(diff[..., 0], TAU_I) * np.float32((1 - ALPHA) * TRUNCATE / TAU_I)
+            ad += np.minimum(diff[..., 1] + diff[..., 2], TAU_G) * np.float32(ALPHA * TRUNCATE / TAU_G)
+            agg = cv2.boxFilter(ad, -1, (win, win), borderType=cv2.BORDER_REFLECT)
+            agg[outside] = INVALID_COST
+            out[i] = agg
+        return out
+
+
+@dataclass(frozen=True)
+class VolumeParams:
+    keep: int  # views kept per pixel
+    window: int = 3  # per-view box window before view selection (px, odd)
+    radius: int = 4  # guided filter radius (px at full resolution)
+    eps: float = 1e-4  # guided filter regularisation (grey levels in 0..1, squared)
+
+
+class Aggregator:
+    """Cost-volume filtering: the guided filter with the reference image as guide, its statistics computed
+    once per camera (OpenCV's implementation, one pass per slice)."""
+
+    def __init__(self, guide: F32, radius: int, eps: float) -> None:
+        self.radius = max(1, radius)
+        self.filter: Any = None
+        if min(guide.shape) > 2 * self.radius:
+            self.filter = cv2.ximgproc.createGuidedFilter(np.ascontiguousarray(guide), self.radius, eps)
+
+    def __call__(self, cost: F32) -> F32:
+        return self.smooth(np.minimum(cost, TRUNCATE))  # an invisible level must not spread INVALID around
+
+    def smooth(self, c: F32) -> F32:
+        c = np.ascontiguousarray(c, np.float32)
+        if self.filter is None:
+            k = 2 * self.radius + 1
+            return np.asarray(cv2.boxFilter(c, -1, (k, k), borderType=cv2.BORDER_REFLECT), np.float32)
+        return np.asarray(self.filter.filter(c), np.float32)
+
+
+@dataclass
+class Sweep:
+    disparity: F32
+    cost: F32  # aggregated cost of the chosen match
+    mean_cost: F32  # the average over candidates (distinctiveness: mean / best)
+    bound: NDArray[np.bool_]  # the best lay at the first or last level
+    no_view: NDArray[np.bool_]  # no view sees the point at the chosen disparity
+
+
+def sweep(views: Views, candidates: list[float | F32], p: VolumeParams, win: int, radius: int) -> Sweep:
+    """Winner-take-all over ``candidates`` (constant disparities or per-pixel maps, in increasing order),
+    streamed, with the costs of the best's two neighbours kept for a parabola fit."""
+    agg = Aggregator(views.guide, radius, p.eps)
+    shape = views.shape
+    best = np.full(shape, np.inf, np.float32)
+    k_best = np.zeros(shape, np.int32)
+    c_minus = np.full(shape, np.inf, np.float32)
+    c_plus = np.full(shape, np.inf, np.float32)
+    total = np.zeros(shape, np.float32)
+    prev = np.full(shape, np.inf, np.float32)
+    seen_any = np.zeros(shape, bool)
+    for k, d in enumerate(candidates):
+        raw = combine(views.view_costs(d, win), p.keep)
+        seen = raw < INVALID_COST * 0.5
+        c = np.where(seen, agg(raw), np.float32(INVALID_COST))
+        c_plus = np.where(k_best == k - 1, c, c_plus)  # the level right after the current best
+        better = c < best
+        k_best = np.where(better, k, k_best)
+        c_minus = np.where(better, prev, c_minus)
+        c_plus = np.where(better, np.inf, c_plus)
+        best = np.minimum(best, c)
+        total += np.minimum(c, TRUNCATE)
+        seen_any |= seen
+        prev = c
+    n = len(candidates)
+    stack_at = _pick(candidates, k_best, shape)
+    step = _pick(candidates, np.minimum(k_best + 1, n - 1), shape) - _pick(candidates, np.maximum(k_best - 1, 0), shape)
+    interior = np.isfinite(c_minus) & np.isfinite(c_plus) & (c_minus < INVALID_COST) & (c_plus < INVALID_COST)
+    den = c_minus + c_plus - 2 * best
+    ok = interior & (den > 1e-9)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sub = np.where(ok, 0.5 * (c_minus - c_plus) / np.where(ok, den, 1.0), 0.0)
+    sub = np.clip(sub, -0.5, 0.5) * np.where(ok, step * 0.5, 0.0)
+    disp = (stack_at + sub).astype(np.float32)
+    bound = ((k_best == 0) | (k_best == n - 1)) if n > 2 else np.zeros(shape, bool)
+    return Sweep(disp, best, total / np.float32(max(n, 1)), np.asarray(bound), ~seen_any | (best >= INVALID_COST * 0.5))
+
+
+def _pick(candidates: list[float | F32], k: NDArray[np.int32], shape: tuple[int, int]) -> F32:
+    if all(isinstance(c, float) for c in candidates):
+        return np.asarray(np.asarray(candidates, np.float32)[k], np.float32)
+    out = np.empty(shape, np.float32)
+    for i, c in enumerate(candidates):
+        sel = k == i
+        out[sel] = c[sel] if isinstance(c, np.ndarray) else c
+    return out
+
+
+def coarse_scale(levels: float, size: tuple[int, int]) -> float:
+    """Scale of the integer sweep: full resolution up to MAX_LEVELS levels, halved until the range fits
+    (never below a quarter, nor below 32 px of image)."""
+    s = 1.0
+    while levels * s > MAX_LEVELS and s > 0.25 and min(size) * s >= 64:
+        s /= 2
+    return s
+
+
+def volume_disparity(
+    images: dict[str, F32],
+    ref: str,
+    rel: dict[str, tuple[float, float]],
+    box: tuple[int, int, int, int],
+    d_range: tuple[float, float],
+    p: VolumeParams,
+    stats: dict[str, Any],
+) -> tuple[Sweep, Views]:
+    """Integer then fractional sweep for the reference crop ``box``; returns the fractional result and the
+    full-resolution views (for the continuous refinement)."""
+    lo, hi = d_range
+    y0, y1, x0, x1 = box
+    t0 = time.perf_counter()
+    s = coarse_scale(hi - lo + 1, (y1 - y0, x1 - x0))
+    cv = Views(images, ref, rel, box, s)
+    first, last = math.floor(lo * s) - 1, math.ceil(hi * s) + 1
+    levels = [float(v) for v in np.arange(first, last + 1, 1.0)]
+    levels = levels[: max(1, 4 * max(cv.h, cv.w))]  # a range far beyond the image is capped
+    stats["levels"] = len(levels)
+    stats["coarse_scale"] = s
+    coarse = sweep(cv, list(levels), p, p.window, max(1, round(p.radius * s)))
+    stats["integer_sweep_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    full = cv if s == 1.0 else Views(images, ref, rel, box, 1.0)
+    h, w = full.shape
+    d0 = coarse.disparity / np.float32(s)
+    if s != 1.0:
+        d0 = np.asarray(cv2.resize(d0, (w, h), interpolation=cv2.INTER_NEAREST), np.float32)
+    d0 = np.clip(d0, lo, hi).astype(np.float32)
+    reach = max(1.0, 0.75 / s)  # how far the truth may lie from the coarse result, full-resolution px
+    n_side = math.ceil(reach / FRACTION)
+    cands: list[float | F32] = [(d0 + np.float32(k * FRACTION)).astype(np.float32) for k in range(-n_side, n_side + 1)]
+    fine = sweep(full, cands, p, p.window, p.radius)
+    stats["fractional_candidates"] = len(cands)
+    stats["fractional_sweep_s"] = time.perf_counter() - t0
+    bound = coarse.bound
+    if s != 1.0:
+        bound = np.asarray(cv2.resize(bound.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST)) > 0
+    fine.bound = np.asarray(bound) & ((fine.disparity <= lo + 0.5) | (fine.disparity >= hi - 0.5))
+    fine.mean_cost = np.asarray(
+        coarse.mean_cost if s == 1.0 else cv2.resize(coarse.mean_cost, (w, h), interpolation=cv2.INTER_LINEAR),
+        np.float32,
+    )
+    fine.disparity = np.clip(fine.disparity, lo - 1.0, hi + 1.0).astype(np.float32)
+    return fine, full
+
+
+def choose(views: Views, candidates: list[F32], p: VolumeParams) -> NDArray[np.intp]:
+    """Per pixel, the index of the candidate disparity map that the kept views agree with best (the same
+    aggregated cost as the sweep)."""
+    agg = Aggregator(views.guide, p.radius, p.eps)
+    costs = np.stack([agg(combine(views.view_costs(c, p.window), p.keep)) for c in candidates])
+    return np.asarray(np.argmin(costs, axis=0))
