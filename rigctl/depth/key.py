@@ -22,12 +22,35 @@ class Keyer:
     low: float = 0.25  # below this fraction of the screen's green excess: subject
     high: float = 0.55  # above: screen
     min_area: float = 0.0005  # subject blobs smaller than this share of the image are screen noise
+    # what makes green a screen and not foliage or a green prop in a scene without one: a saturated green
+    # (screens sit near 0.3 of full scale in g - max(r, b)), smooth (its fine detail, the median deviation
+    # from a 7x7 blur, is sensor noise, a few % of its level; leaves and textured props are far above:
+    # uneven light varies slowly and does not count), covering a share of the view and reaching its edge
+    min_excess: float = 0.12
+    max_texture: float = 0.05
+    min_screen_share: float = 0.05
 
     def screen_excess(self, rgb: F32) -> float:
-        """The screen's typical green excess: the 90th percentile of g - max(r, b) over clearly green pixels."""
+        """The screen's typical green excess: the 90th percentile of g - max(r, b) over clearly green pixels;
+        0 when no green screen is in view (then nothing is keyed: a scene without a screen needs no key)."""
         s = rgb[..., 1] - np.maximum(rgb[..., 0], rgb[..., 2])
         green = s[s > 0.05]
-        return float(np.percentile(green, 90)) if green.size > 0.01 * s.size else 0.0
+        if green.size <= 0.01 * s.size:
+            return 0.0
+        excess = float(np.percentile(green, 90))
+        if excess < self.min_excess:
+            return 0.0
+        screen = s > 0.5 * excess
+        _n, labels = cv2.connectedComponents(screen.astype(np.uint8), connectivity=8)
+        edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+        edge = edge[edge > 0]
+        at_edge = np.isin(labels, edge) if edge.size else np.zeros_like(screen)
+        if at_edge.mean() < self.min_screen_share:
+            return 0.0
+        detail = np.abs(s - cv2.GaussianBlur(s, (7, 7), 0))[at_edge]
+        if float(np.median(detail)) > self.max_texture * float(np.median(s[at_edge])):
+            return 0.0
+        return excess
 
     def matte(self, rgb: F32) -> F32:
         """Subject opacity in [0, 1]; all ones when there is no screen in view."""
