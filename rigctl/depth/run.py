@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from rigctl.depth.grid import Grid, SkippedFrameSet, TakeGrid, load_grid_folder
 from rigctl.depth.key import Keyer
+from rigctl.depth.measured_range import measured_range
 from rigctl.depth.metrics import score
 from rigctl.depth.multibaseline import PRESETS, DepthResult, cross_check, estimate
 from rigctl.errors import ParameterError
@@ -41,8 +42,9 @@ class DepthOptions:
 
 
 def planned_range(grid: Grid, opt: DepthOptions) -> tuple[tuple[float, float], str]:
-    """The disparity search range and where it came from: --near/--far (planner), the grid's own range, or
-    the whole plausible range (0 to a quarter of the image width) when nothing is known."""
+    """The disparity search range and where it came from: --near/--far (planner), the grid's own range, the
+    range the images' feature matches show, or the whole plausible range (0 to a quarter of the image width)
+    when nothing is known."""
     if opt.disparity_range is not None:
         return opt.disparity_range, "given disparity range"
     if opt.near_m is not None:
@@ -54,6 +56,9 @@ def planned_range(grid: Grid, opt: DepthOptions) -> tuple[tuple[float, float], s
         return (lo - opt.margin_px, hi + opt.margin_px), f"planned from near {opt.near_m} m, far {far} m"
     if grid.disparity_range is not None:
         return grid.disparity_range, "grid.yaml disparity_range_px"
+    measured = measured_range(grid)
+    if measured is not None:
+        return measured, "no plan: measured from feature matches between the cameras"
     return unplanned_range(grid), "no plan: the whole plausible range"
 
 

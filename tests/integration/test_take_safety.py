@@ -145,7 +145,9 @@ def test_stalled_writer_still_stops_in_bounded_time(tmp_path: Path) -> None:
     assert rec.wait(timeout_s=30)
     t0 = time.monotonic()
     man = rec.finish()
-    assert time.monotonic() - t0 < 5.0
+    # the writer stalls for 60 s; finishing gives up on it after stop_timeout_s (1 s). The bound is generous
+    # for loaded CI machines and still far below what waiting for the stalled writer would take
+    assert time.monotonic() - t0 < 30.0
     stalled = man["cameras"]["r0c2"]
     assert stalled["frames"] == 4
     assert len(stalled["not_written"]) >= 1
