@@ -109,8 +109,12 @@ def measure_write(
 ) -> WriteSpeed:
     """Sustained write speed of ``folder``'s device: ``samples`` timed runs of ``sample_bytes`` each, written
     with O_DIRECT from a page-aligned buffer (or, where the filesystem refuses O_DIRECT, written and flushed
-    with fdatasync). Sampling stops early after ``budget_s`` once :data:`MIN_SAMPLES` are in."""
+    with fdatasync). Sampling stops early after ``budget_s`` once :data:`MIN_SAMPLES` are in. A sample is at
+    most a quarter of the free space, and a destination that fills up while measuring ends the measurement
+    with what it has: free space is the space check's business, not the speed test's."""
     folder.mkdir(parents=True, exist_ok=True)
+    free = shutil.disk_usage(folder).free
+    sample_bytes = max(BLOCK_BYTES, min(sample_bytes, free // 4 // BLOCK_BYTES * BLOCK_BYTES))
     path = folder / f".rigctl-speedtest-{os.getpid()}"
     block = mmap.mmap(-1, BLOCK_BYTES)  # page-aligned, as O_DIRECT requires
     block.write(os.urandom(BLOCK_BYTES))
@@ -121,17 +125,24 @@ def measure_write(
         for _ in range(samples):
             t0 = clock()
             written = 0
-            while written < sample_bytes:
-                try:
-                    written += os.write(fd, block)
-                except OSError as exc:
-                    if not (direct and exc.errno == errno.EINVAL):
-                        raise
-                    os.close(fd)  # the filesystem opened O_DIRECT but refuses its writes: buffered instead
-                    fd, direct = os.open(path, os.O_WRONLY | os.O_TRUNC), False
-            if not direct:
-                os.fdatasync(fd)
+            try:
+                while written < sample_bytes:
+                    try:
+                        written += os.write(fd, block)
+                    except OSError as exc:
+                        if not (direct and exc.errno == errno.EINVAL):
+                            raise
+                        os.close(fd)  # the filesystem opened O_DIRECT but refuses its writes: buffered instead
+                        fd, direct = os.open(path, os.O_WRONLY | os.O_TRUNC), False
+                if not direct:
+                    os.fdatasync(fd)
+            except OSError as exc:
+                if exc.errno not in (errno.ENOSPC, errno.EDQUOT):
+                    raise
+                break
             out.append(written / max(clock() - t0, 1e-9))
+            os.ftruncate(fd, 0)  # each sample starts on an empty file: the test never holds more than one
+            os.lseek(fd, 0, os.SEEK_SET)
             if len(out) >= MIN_SAMPLES and clock() - start > budget_s:
                 break
     finally:
