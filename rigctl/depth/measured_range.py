@@ -37,7 +37,7 @@ def disparity_votes(grid: Grid, max_features: int = 4000) -> np.ndarray:
         return np.zeros(0)
     centre = np.mean([grid.offsets[n] for n in grid.names], axis=0)
     ref = min(grid.names, key=lambda n: float(np.hypot(*(np.asarray(grid.offsets[n]) - centre))))
-    sift = cv2.SIFT_create(nfeatures=max_features)
+    sift = cv2.SIFT.create(nfeatures=max_features)
     kp_ref, des_ref = sift.detectAndCompute(_gray(grid.images[ref]), None)
     if des_ref is None or len(kp_ref) < 2:
         return np.zeros(0)
