@@ -18,9 +18,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from rigctl.depth.estimate import estimate
 from rigctl.depth.grid import load_grid_folder
 from rigctl.depth.metrics import score
-from rigctl.depth.multibaseline import PRESETS, estimate
+from rigctl.depth.presets import PRESETS
 from rigctl.depth.scenes import SCENES, write_grid_folder
 
 

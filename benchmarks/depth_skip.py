@@ -14,8 +14,9 @@ import time
 import numpy as np
 
 from rigctl.benchdata import presenter
+from rigctl.depth.estimate import estimate
 from rigctl.depth.key import Keyer
-from rigctl.depth.multibaseline import PRESETS, estimate
+from rigctl.depth.presets import PRESETS
 from rigctl.depth.run import score, unplanned_range
 
 

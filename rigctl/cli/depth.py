@@ -10,7 +10,7 @@ from pathlib import Path
 from rigctl.cli.args import add_layout, distance, far_distance
 from rigctl.cli.progress import Progress
 from rigctl.cli.take import damaged_exit
-from rigctl.depth.multibaseline import PRESETS
+from rigctl.depth.presets import PRESETS
 from rigctl.depth.run import DepthOptions, run_depth
 from rigctl.take.export import parse_range
 

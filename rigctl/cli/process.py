@@ -8,7 +8,7 @@ from pathlib import Path
 
 from rigctl.cli.args import distance, far_distance
 from rigctl.cli.progress import Progress
-from rigctl.depth.multibaseline import PRESETS
+from rigctl.depth.presets import PRESETS
 from rigctl.take.export import parse_range
 
 

@@ -16,10 +16,11 @@ import cv2
 import numpy as np
 
 from rigctl.depth.baselines import BASELINES
+from rigctl.depth.estimate import estimate
 from rigctl.depth.grid import Grid, grid_from_arrays
 from rigctl.depth.key import Keyer
 from rigctl.depth.metrics import score
-from rigctl.depth.multibaseline import PRESETS, estimate
+from rigctl.depth.presets import PRESETS
 from rigctl.depth.scenes import SCENES
 
 # the Middlebury 2014 Motorcycle calibration (REFERENCE.md): quarter resolution of f, doffs as shipped

@@ -26,36 +26,16 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from rigctl.depth.cost import INVALID_COST, TRUNCATE, combine, grey, normalise
+from rigctl.depth.search import EstimateStats
+
 F32 = NDArray[np.float32]
 log = logging.getLogger(__name__)
 
-INVALID_COST = 1e3
-TRUNCATE = 1.5  # normalised-intensity difference above this is an occlusion or a mismatch, not more
 MAX_LEVELS = 96  # integer levels swept at full resolution; a wider range is swept at a coarser scale first
 FRACTION = 0.25  # step of the fractional sweep, px
 # matching cost: truncated intensity and gradient differences, weights and truncations of Hosni et al. (2013)
 ALPHA, TAU_I, TAU_G = 0.9, 7 / 255, 2 / 255
-
-
-def grey(rgb: F32) -> F32:
-    return np.asarray(cv2.cvtColor(np.ascontiguousarray(rgb, np.float32), cv2.COLOR_RGB2GRAY), dtype=np.float32)
-
-
-def normalise(g: F32, win: int = 7) -> tuple[F32, F32]:
-    """Locally normalised intensity, and the local standard deviation (texture)."""
-    mean = cv2.boxFilter(g, -1, (win, win), borderType=cv2.BORDER_REFLECT)
-    sq = cv2.boxFilter(g * g, -1, (win, win), borderType=cv2.BORDER_REFLECT)
-    std = np.sqrt(np.maximum(sq - mean * mean, 0.0))
-    return np.asarray((g - mean) / (std + 0.01), dtype=np.float32), np.asarray(std, dtype=np.float32)
-
-
-def combine(costs: F32, keep: int) -> F32:
-    """Per pixel the mean of the ``keep`` smallest view costs; views that cannot see the point do not count."""
-    part = costs if keep >= costs.shape[0] else np.partition(costs, keep - 1, axis=0)[:keep]
-    seen = part < INVALID_COST * 0.5
-    n = seen.sum(0)
-    total = np.where(seen, part, 0).sum(0)
-    return np.asarray(np.where(n > 0, total / np.maximum(n, 1), INVALID_COST), dtype=np.float32)
 
 
 class Views:
@@ -243,7 +223,7 @@ def volume_disparity(
     box: tuple[int, int, int, int],
     d_range: tuple[float, float],
     p: VolumeParams,
-    stats: dict[str, Any],
+    stats: EstimateStats,
 ) -> tuple[Sweep, Views]:
     """Integer then fractional sweep for the reference crop ``box``; returns the fractional result and the
     full-resolution views (for the continuous refinement)."""

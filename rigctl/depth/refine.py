@@ -16,7 +16,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.depth.costvolume import INVALID_COST, TAU_I, Aggregator, Views
+from rigctl.depth.cost import INVALID_COST
+from rigctl.depth.costvolume import TAU_I, Aggregator, Views
 
 F32 = NDArray[np.float32]
 log = logging.getLogger(__name__)

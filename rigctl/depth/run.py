@@ -16,11 +16,12 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from rigctl.depth.estimate import DepthResult, cross_check, estimate
 from rigctl.depth.grid import Grid, SkippedFrameSet, TakeGrid, load_grid_folder
 from rigctl.depth.key import Keyer
 from rigctl.depth.measured_range import measured_range
 from rigctl.depth.metrics import score
-from rigctl.depth.multibaseline import PRESETS, DepthResult, cross_check, estimate
+from rigctl.depth.presets import PRESETS
 from rigctl.errors import ParameterError
 from rigctl.exr import picture, picture_attributes, to_colour, write_exr
 from rigctl.layout import output_path

@@ -15,9 +15,11 @@ import cv2
 import numpy as np
 
 from rigctl.depth.costvolume import FRACTION, TRUNCATE, VolumeParams, choose, volume_disparity
-from rigctl.depth.multibaseline import PRESETS, _Crop, _pairs_engine, _Search
+from rigctl.depth.pair_fusion import pairs_engine
 from rigctl.depth.pairs import neighbour
+from rigctl.depth.presets import PRESETS
 from rigctl.depth.refine import clean, refine
+from rigctl.depth.search import BoxEstimate, SearchJob
 
 log = logging.getLogger(__name__)
 MIN_VIEWS = 3  # other views below which the pairs engine (semi-global) is the better start
@@ -27,7 +29,7 @@ MIN_VIEWS = 3  # other views below which the pairs engine (semi-global) is the b
 WIDE_PX = 48.0
 
 
-def volume_engine(job: _Search) -> _Crop:
+def volume_engine(job: SearchJob) -> BoxEstimate:
     p, stats = job.preset, job.stats
     rel = {
         n: (
@@ -44,7 +46,7 @@ def volume_engine(job: _Search) -> _Crop:
         stats["engine"] = "pairs: " + (f"only {len(job.moving)} other view(s)" if few else f"range beyond {WIDE_PX} px")
         pair_preset = PRESETS["pairs"]  # exactly the pairs preset's matching, window and views kept
         keep = max(1, math.ceil(pair_preset.keep * len(job.moving)))
-        crop = _pairs_engine(replace(job, preset=pair_preset, keep=keep))
+        crop = pairs_engine(replace(job, preset=pair_preset, keep=keep))
         crop.disparity = np.asarray(cv2.medianBlur(np.ascontiguousarray(crop.disparity), 5), np.float32)
         return crop
     stats["engine"] = "cost volume"
@@ -56,7 +58,7 @@ def volume_engine(job: _Search) -> _Crop:
     if p.with_pairs and neighbour_count(job) and min(job.grid.shape) >= 16:
         # the semi-global pairs hold large weakly textured areas and occlusion edges together; where the views
         # agree better with them, they win, and are refined in turn
-        pairs = _pairs_engine(job).disparity
+        pairs = pairs_engine(job).disparity
         have = np.isfinite(pairs)
         cand = np.where(have, pairs, d).astype(np.float32)
         k = choose(views, [d, cand], params)
@@ -74,8 +76,8 @@ def volume_engine(job: _Search) -> _Crop:
     distinct = np.clip((uniq - 1.0) / 0.5, 0, 1).astype(np.float32)
     cost = np.minimum(sw.cost, TRUNCATE).astype(np.float32)
     cost[sw.no_view] = sw.cost[sw.no_view]
-    return _Crop(d, cost, distinct, views.texture, views.bright, sw.bound, sw.no_view)
+    return BoxEstimate(d, cost, distinct, views.texture, views.bright, sw.bound, sw.no_view)
 
 
-def neighbour_count(job: _Search) -> int:
+def neighbour_count(job: SearchJob) -> int:
     return sum(neighbour(job.grid, job.ref, dx, dy) is not None for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)))

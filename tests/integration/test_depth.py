@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 from tests_support import run_rigctl
 
+from rigctl.depth.estimate import estimate
 from rigctl.depth.grid import grid_from_arrays
-from rigctl.depth.multibaseline import PRESETS, estimate
+from rigctl.depth.presets import PRESETS
 from rigctl.errors import ParameterError
 
 

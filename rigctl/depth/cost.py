@@ -1,0 +1,169 @@
+"""The plane sweep's matching cost, shared with the cost-volume engine: locally normalised intensity
+(invariant to the cameras' gain and offset differences), its absolute difference truncated at TRUNCATE, box
+aggregated per view, and per pixel the best views kept (a point hidden from some cameras is seen by others:
+occlusion-aware view selection), or the best side of the reference."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from rigctl.depth.grid import Grid
+
+F32 = NDArray[np.float32]
+INVALID_COST = 1e3  # a view that cannot see the point (outside its image)
+TRUNCATE = 1.5  # normalised-intensity difference above this is an occlusion or a mismatch, not more
+
+
+def grey(rgb: F32) -> F32:
+    return np.asarray(cv2.cvtColor(np.ascontiguousarray(rgb, np.float32), cv2.COLOR_RGB2GRAY), dtype=np.float32)
+
+
+def normalise(g: F32, win: int = 7) -> tuple[F32, F32]:
+    """Locally normalised intensity, and the local standard deviation (texture)."""
+    mean = cv2.boxFilter(g, -1, (win, win), borderType=cv2.BORDER_REFLECT)
+    sq = cv2.boxFilter(g * g, -1, (win, win), borderType=cv2.BORDER_REFLECT)
+    std = np.sqrt(np.maximum(sq - mean * mean, 0.0))
+    return np.asarray((g - mean) / (std + 0.01), dtype=np.float32), np.asarray(std, dtype=np.float32)
+
+
+class SweepLevel:
+    """Normalised images of the reference crop and of every view, at one scale."""
+
+    def __init__(self, grid: Grid, ref: str, views: list[str], scale: float, box: tuple[int, int, int, int]) -> None:
+        self.scale = scale
+        y0, y1, x0, x1 = (round(v * scale) for v in box)
+        self.box = (y0, y1, x0, x1)
+        self.size = (x1 - x0, y1 - y0)
+        self.norm: dict[str, F32] = {}
+        greys = {}
+        for n in [ref, *views]:
+            g = grey(grid.images[n])
+            if scale != 1.0:
+                g = np.asarray(cv2.resize(g, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA), np.float32)
+            greys[n] = g
+            self.norm[n], std = normalise(g)
+            if n == ref:
+                self.texture = std[y0:y1, x0:x1]
+                self.bright = g[y0:y1, x0:x1]
+        self.h, self.w = greys[ref].shape
+        self.ref = self.norm[ref][y0:y1, x0:x1]
+        ox, oy = grid.offsets[ref]
+        self.rel = {n: (grid.offsets[n][0] - ox, grid.offsets[n][1] - oy) for n in views}
+        self.views = views
+
+    def cost_const(self, d: float, win: int) -> F32:
+        """(views, h, w) aggregated cost at one disparity for every pixel."""
+        y0, y1, x0, x1 = self.box
+        out = np.empty((len(self.views), y1 - y0, x1 - x0), np.float32)
+        xs = np.arange(x0, x1, dtype=np.float32)
+        ys = np.arange(y0, y1, dtype=np.float32)
+        for i, n in enumerate(self.views):
+            rx, ry = self.rel[n]
+            M = np.array([[1, 0, x0 - d * rx], [0, 1, y0 - d * ry]], np.float32)
+            warped = cv2.warpAffine(
+                self.norm[n],
+                M,
+                self.size,
+                flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                borderMode=cv2.BORDER_REPLICATE,
+            )
+            ad = np.minimum(np.abs(warped - self.ref), TRUNCATE)
+            agg = cv2.boxFilter(ad, -1, (win, win), borderType=cv2.BORDER_REFLECT)
+            inside_x = (xs - d * rx >= 0) & (xs - d * rx <= self.w - 1)
+            inside_y = (ys - d * ry >= 0) & (ys - d * ry <= self.h - 1)
+            agg[~inside_y, :] = INVALID_COST
+            agg[:, ~inside_x] = INVALID_COST
+            out[i] = agg
+        return out
+
+    def cost_map(self, D: F32, win: int) -> F32:
+        """(views, h, w) aggregated cost at a per-pixel disparity map D (crop-sized)."""
+        y0, y1, x0, x1 = self.box
+        gy, gx = np.mgrid[y0:y1, x0:x1].astype(np.float32)
+        out = np.empty((len(self.views), y1 - y0, x1 - x0), np.float32)
+        for i, n in enumerate(self.views):
+            rx, ry = self.rel[n]
+            mx = gx - D * np.float32(rx)
+            my = gy - D * np.float32(ry)
+            warped = cv2.remap(self.norm[n], mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            ad = np.minimum(np.abs(warped - self.ref), TRUNCATE)
+            agg = cv2.boxFilter(ad, -1, (win, win), borderType=cv2.BORDER_REFLECT)
+            outside = (mx < 0) | (mx > self.w - 1) | (my < 0) | (my > self.h - 1)
+            agg[outside] = INVALID_COST
+            out[i] = agg
+        return out
+
+    def costs_where(self, candidates: list[F32], where: NDArray[np.bool_], win: int, keep: int) -> F32:
+        """(candidates, pixels) combined cost of each candidate disparity map at the pixels of ``where`` only:
+        each view is sampled at those pixels and their ``win`` neighbourhood, not over the whole crop."""
+        y0, _, x0, _ = self.box
+        need = np.asarray(cv2.dilate(where.astype(np.uint8), np.ones((win, win), np.uint8)), bool)
+        ys, xs = np.nonzero(need)
+        n = ys.size
+        width = 4096  # cv2.remap takes maps below 32767 in each dimension: lay the pixels out in rows
+        rows = -(-n // width) if n else 1
+        pad = rows * width - n
+        gx = np.pad((xs + x0).astype(np.float32), (0, pad)).reshape(rows, width)
+        gy = np.pad((ys + y0).astype(np.float32), (0, pad)).reshape(rows, width)
+        ref_vals = self.ref[ys, xs]
+        qy, qx = np.nonzero(where)
+        nv = len(self.views)
+        out = np.empty((len(candidates), qy.size), np.float32)
+        # views in groups of four channels: one scatter and one box filter aggregates four views at once
+        dense = [np.zeros((*where.shape, 4), np.float32) for _ in range(0, nv, 4)]
+        ad = np.zeros((n, 4 * len(dense)), np.float32)  # channels past the last view stay 0
+        per_view = np.empty((nv, qy.size), np.float32)
+        for ci, cand in enumerate(candidates):
+            d = np.pad(cand[ys, xs], (0, pad)).reshape(rows, width)
+            dq = cand[qy, qx]
+            for vi, name in enumerate(self.views):
+                rx, ry = self.rel[name]
+                mx, my = gx - d * np.float32(rx), gy - d * np.float32(ry)
+                warped = cv2.remap(self.norm[name], mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+                ad[:, vi] = warped.reshape(-1)[:n]
+            np.subtract(ad, ref_vals[:, None], out=ad)
+            np.abs(ad, out=ad)
+            np.minimum(ad, TRUNCATE, out=ad)
+            for gi, img in enumerate(dense):
+                img[ys, xs] = ad[:, 4 * gi : 4 * gi + 4]
+                agg = cv2.boxFilter(img, -1, (win, win), borderType=cv2.BORDER_REFLECT)[qy, qx]
+                take = min(4, nv - 4 * gi)
+                per_view[4 * gi : 4 * gi + take] = agg[:, :take].T
+            for vi, name in enumerate(self.views):
+                rx, ry = self.rel[name]
+                cx, cy = qx + x0 - dq * np.float32(rx), qy + y0 - dq * np.float32(ry)
+                per_view[vi][(cx < 0) | (cx > self.w - 1) | (cy < 0) | (cy > self.h - 1)] = INVALID_COST
+            out[ci] = combine(per_view, keep)
+        return out
+
+
+def side_groups(level: SweepLevel) -> list[list[int]]:
+    """Views on each side of the reference (left, right, above, below): a point hidden by a foreground edge
+    is hidden on one side only, so one of the sides sees it in every view."""
+    eps = 1e-6
+    sides = [
+        [i for i, n in enumerate(level.views) if level.rel[n][0] < -eps],
+        [i for i, n in enumerate(level.views) if level.rel[n][0] > eps],
+        [i for i, n in enumerate(level.views) if level.rel[n][1] < -eps],
+        [i for i, n in enumerate(level.views) if level.rel[n][1] > eps],
+    ]
+    return [g for g in sides if g]
+
+
+def combine(costs: F32, keep: int, groups: list[list[int]] | None = None) -> F32:
+    """Per pixel: the best side's mean cost (``groups``), or the mean of the ``keep`` smallest view costs
+    (occluded views drop out)."""
+    if groups:
+        out = costs[groups[0]].mean(0)
+        for g in groups[1:]:
+            np.minimum(out, costs[g].mean(0), out=out)
+        return np.asarray(out, dtype=np.float32)
+    part = costs if keep >= costs.shape[0] else np.partition(costs, keep - 1, axis=0)[:keep]
+    # views that cannot see the point (outside their image) do not count; a pixel only one view sees
+    # is matched with that view alone
+    seen = part < INVALID_COST * 0.5
+    n = seen.sum(0)
+    total = np.where(seen, part, 0).sum(0)
+    return np.asarray(np.where(n > 0, total / np.maximum(n, 1), INVALID_COST), dtype=np.float32)

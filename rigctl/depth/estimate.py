@@ -1,0 +1,152 @@
+"""Depth of one camera of a rectified grid from every other camera, each with its own baseline
+(multi-baseline matching): key the subject, search only its bounding box, run the preset's engine (the cost
+volume, the plane sweep or the fused pairs: ``presets.py``), then mark what the estimate cannot vouch for
+(no view, textureless or saturated, at the planned range's edge) and give a 0..1 confidence. ``cross_check``
+compares two cameras' results."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from rigctl.depth.cost import F32, TRUNCATE
+from rigctl.depth.grid import Grid
+from rigctl.depth.key import Keyer, subject_box
+from rigctl.depth.pair_fusion import pairs_engine
+from rigctl.depth.presets import Preset
+from rigctl.depth.search import EstimateStats, SearchJob
+from rigctl.depth.sweep import sweep_engine
+from rigctl.depth.volume_engine import volume_engine
+from rigctl.errors import ParameterError
+
+DEFAULT_KEYER = Keyer()
+
+
+@dataclass
+class DepthResult:
+    disparity: F32  # +inf where there is no estimate (keyed background, outside every view)
+    confidence: F32  # 0..1
+    unreliable: NDArray[np.bool_]  # textureless or saturated: an estimate, not to be trusted
+    bound_hit: NDArray[np.bool_]  # the best match lay at the edge of the planned range
+    matte: F32
+    filled: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 0), bool))
+    stats: EstimateStats = field(default_factory=lambda: EstimateStats())
+
+
+def choose_views(grid: Grid, ref: str, mode: str) -> list[str]:
+    ox, oy = grid.offsets[ref]
+    others = [n for n in grid.names if n != ref]
+    if mode == "all":
+        return others
+    # grid steps: the smallest offsets that are a real step, not a camera mounted a fraction of a mm off
+    steps = [abs(grid.offsets[n][0] - ox) for n in others if abs(grid.offsets[n][0] - ox) > 0.2]
+    sx = min(steps) if steps else 1.0
+    vsteps = [abs(grid.offsets[n][1] - oy) for n in others if abs(grid.offsets[n][1] - oy) > 0.2]
+    sy = min(vsteps) if vsteps else 1.0
+    out = []
+    for n in others:
+        dx, dy = (grid.offsets[n][0] - ox) / sx, (grid.offsets[n][1] - oy) / sy
+        if (mode == "horizontal" and abs(dy) < 0.25 and abs(abs(dx) - 1) < 0.25) or (
+            mode == "neighbours" and max(abs(dx), abs(dy)) < 1.25
+        ):
+            out.append(n)
+    return out or others
+
+
+def estimate(
+    grid: Grid,
+    ref: str,
+    d_range: tuple[float, float],
+    preset: Preset,
+    keyer: Keyer | None = DEFAULT_KEYER,
+    matte: F32 | None = None,
+) -> DepthResult:
+    """Disparity of camera ``ref``. ``keyer`` None: no keying (every pixel is searched)."""
+    t_start = time.perf_counter()
+    if ref not in grid.images:
+        raise ParameterError(f"camera {ref} is not in the grid (it has {', '.join(grid.names)})")
+    lo, hi = float(d_range[0]), float(d_range[1])
+    if not (math.isfinite(lo) and math.isfinite(hi)) or hi < lo:
+        raise ParameterError(f"disparity range must be finite with min <= max, got {d_range}")
+    h, w = grid.shape
+    stats = EstimateStats(camera=ref, preset=preset.name)
+    t0 = time.perf_counter()
+    if matte is None:
+        matte = keyer.matte(grid.images[ref]) if keyer is not None else np.ones((h, w), np.float32)
+    fg = matte > 0.0  # the soft edge too: compositing needs depth under a partly transparent edge
+    stats["key_s"] = time.perf_counter() - t0
+    stats["keyed_background_share"] = float(1.0 - fg.mean())
+    empty = DepthResult(
+        np.full((h, w), np.inf, np.float32),
+        np.zeros((h, w), np.float32),
+        np.zeros((h, w), bool),
+        np.zeros((h, w), bool),
+        matte,
+        np.zeros((h, w), bool),
+        stats,
+    )
+    views = choose_views(grid, ref, preset.views)
+    moving = [
+        n
+        for n in views
+        if max(abs(grid.offsets[n][0] - grid.offsets[ref][0]), abs(grid.offsets[n][1] - grid.offsets[ref][1])) > 1e-9
+    ]
+    stats["views"] = moving
+    if not fg.any() or not moving:
+        stats["note"] = "every pixel keyed as background" if not fg.any() else "no camera at a different position"
+        stats["seconds"] = time.perf_counter() - t_start
+        return empty
+    box = subject_box(fg, margin=preset.window)
+    assert box is not None
+    stats["searched_share"] = float((box[1] - box[0]) * (box[3] - box[2]) / (h * w))
+    keep = max(1, math.ceil(preset.keep * len(moving)))
+
+    y0, y1, x0, x1 = box
+    job = SearchJob(grid, ref, moving, box, (lo, hi), keep, preset, stats, fg[y0:y1, x0:x1])
+    if preset.engine == "volume":
+        crop = volume_engine(job)
+    else:
+        crop = pairs_engine(job) if preset.engine == "pairs" else sweep_engine(job)
+    disp = crop.disparity
+    if preset.median:
+        disp = np.asarray(cv2.medianBlur(np.ascontiguousarray(disp, dtype=np.float32), preset.median), np.float32)
+
+    out = np.full((h, w), np.inf, np.float32)
+    region = fg[y0:y1, x0:x1]
+    valid = region & ~crop.no_view & np.isfinite(disp)
+    out[y0:y1, x0:x1] = np.where(valid, disp, np.inf)
+    conf = np.zeros((h, w), np.float32)
+    c_local = np.clip(1.0 - crop.cost / TRUNCATE, 0, 1) * crop.distinct
+    unreliable_local = (crop.texture < 0.01) | (crop.bright > 0.98)
+    conf[y0:y1, x0:x1] = np.where(valid & ~unreliable_local, c_local, 0.0)
+    unreliable = np.zeros((h, w), bool)
+    unreliable[y0:y1, x0:x1] = valid & unreliable_local
+    bound_hit = np.zeros((h, w), bool)
+    # the match lies at the edge of the planned range: the truth may lie beyond it
+    at_edge = (disp >= hi - 0.5) | (disp <= lo + 0.5)
+    bound_hit[y0:y1, x0:x1] = valid & (crop.bound | at_edge)
+    stats["seconds"] = time.perf_counter() - t_start
+    stats["estimated_share_of_subject"] = float(valid.sum() / max(1, fg.sum()))
+    stats["bound_hit_pixels"] = int(bound_hit.sum())
+    stats["unreliable_pixels"] = int(unreliable.sum())
+    filled = np.zeros((h, w), bool)
+    if crop.filled is not None:
+        filled[y0:y1, x0:x1] = valid & crop.filled
+        stats["filled_from_background_pixels"] = int(filled.sum())
+    return DepthResult(out, conf, unreliable, bound_hit, matte, filled, stats)
+
+
+def cross_check(a: DepthResult, b: DepthResult, rel: tuple[float, float], tol: float = 1.0) -> NDArray[np.bool_]:
+    """Pixels of ``a`` whose disparity disagrees with ``b``'s at the same point (b at offset ``rel`` from a)."""
+    h, w = a.disparity.shape
+    gy, gx = np.mgrid[0:h, 0:w].astype(np.float32)
+    d = np.where(np.isfinite(a.disparity), a.disparity, 0).astype(np.float32)
+    mx, my = gx - d * np.float32(rel[0]), gy - d * np.float32(rel[1])
+    db = np.where(np.isfinite(b.disparity), b.disparity, -1e6).astype(np.float32)
+    seen = cv2.remap(db, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=-1e6)
+    return np.asarray(np.isfinite(a.disparity) & (seen > -1e5) & (np.abs(seen - a.disparity) > tol))

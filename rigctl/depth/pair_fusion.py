@@ -1,0 +1,93 @@
+"""The pair-fusion engine (preset ``pairs``, and the ``best`` preset's fallback and second candidate): OpenCV's
+semi-global matcher on each neighbouring pair (``pairs.py``), then every view decides where the pairs disagree
+(a silhouette, a point one pair cannot see, a thin strip one pair smooths away)."""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+from numpy.typing import NDArray
+
+from rigctl.depth.cost import F32, INVALID_COST, SweepLevel
+from rigctl.depth.pairs import nan_median, neighbour, pair_disparity
+from rigctl.depth.search import BoxEstimate, SearchJob
+from rigctl.depth.sweep import sweep_engine
+from rigctl.errors import ParameterError
+
+MIN_PAIR_SIZE = 16  # OpenCV's semi-global matcher needs room for its windows and paths
+CONFLICT_PX = 1.5  # pair estimates further apart than this: every view decides between them
+
+
+def pairs_engine(job: SearchJob) -> BoxEstimate:
+    """OpenCV's semi-global matcher on each neighbouring pair (left, right, above, below), then every view
+    decides: where the pairs agree their median stands; where they disagree (a silhouette, a point one pair
+    cannot see, a thin strip one pair smooths away) each pixel takes the pair estimate that the best
+    ``keep`` of all views agree with, in a ``window`` around it. Only those pixels cost more than the pairs."""
+    grid, ref, box, d_range, preset, stats = job.grid, job.ref, job.box, job.d_range, job.preset, job.stats
+    region = job.region
+    if min(grid.shape) < MIN_PAIR_SIZE:
+        stats["note"] = f"image smaller than {MIN_PAIR_SIZE} px: matched by the plane sweep instead of pairs"
+        return sweep_engine(job)
+    t0 = time.perf_counter()
+    maps = []
+    u8: dict[str, NDArray[np.uint8]] = {}
+    searched: list[int] = []
+    for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        other = neighbour(grid, ref, dx, dy)
+        if other is not None:
+            maps.append(pair_disparity(grid, ref, other, d_range, box=box, u8=u8, searched=searched))
+    if not maps:  # pairs need a camera on the same row or column; the plane sweep does not
+        raise ParameterError(
+            f"camera {ref} has no other camera on its row or column, which preset {preset.name} matches with; "
+            "use --preset balanced"
+        )
+    stack = np.stack(maps)
+    stack[~np.isfinite(stack)] = np.nan
+    have = np.isfinite(stack).any(0)
+    med, spread = nan_median(stack)
+    # a point no pair matched (hidden from each, or outside each pair's search) takes the background side
+    base = fill_from_background(np.where(have, med, np.inf).astype(np.float32), np.asarray(~have, bool))
+    base = np.where(np.isfinite(base), base, 0.5 * (d_range[0] + d_range[1])).astype(np.float32)
+    stats["pairs"] = len(maps)
+    stats["levels"] = max(searched, default=0)  # disparities the widest pair searched, in its own pixels
+    stats["pairs_s"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    fine = SweepLevel(grid, ref, job.moving, 1.0, box)
+    candidates = [base] + [np.where(np.isfinite(m), m, base).astype(np.float32) for m in stack]
+    conflict = ((np.nan_to_num(spread, nan=0.0) > CONFLICT_PX) | ~have) & region
+    costs = fine.costs_where(candidates, conflict, preset.window, job.keep)
+    k = np.argmin(costs, axis=0)
+    disp = base.copy()
+    disp[conflict] = np.take_along_axis(np.stack([c[conflict] for c in candidates]), k[None], 0)[0]
+    cost = np.zeros(disp.shape, np.float32)  # where the pairs agree, they are the evidence: cost 0
+    cost[conflict] = np.take_along_axis(costs, k[None], 0)[0]
+    stats["conflict_share"] = float(conflict.sum() / max(1, region.sum()))
+    stats["select_s"] = time.perf_counter() - t0
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        agree = (np.abs(stack - disp[None]) <= 1.0).sum(0) / np.float32(len(maps))
+    zeros = np.zeros(disp.shape, bool)
+    no_view = cost >= INVALID_COST * 0.5
+    return BoxEstimate(disp, cost, agree.astype(np.float32), fine.texture, fine.bright, zeros, no_view, ~have & region)
+
+
+def fill_from_background(disp: F32, holes: NDArray[np.bool_]) -> F32:
+    """Holes (inside the subject) take the farther (smaller) of the nearest valid disparities left and right
+    on their row: an occluded point belongs to the background side of the edge."""
+    out = disp.copy()
+    h, w = disp.shape
+    valid = np.isfinite(disp) & ~holes
+    idx = np.where(valid, np.arange(w)[None, :], -1)
+    left = np.maximum.accumulate(idx, axis=1)
+    idx_r = np.where(valid, np.arange(w)[None, :], w)
+    right = np.minimum.accumulate(idx_r[:, ::-1], axis=1)[:, ::-1]
+    rows = np.arange(h)[:, None]
+    lv = np.where(left >= 0, disp[rows, np.clip(left, 0, w - 1)], np.inf)
+    rv = np.where(right < w, disp[rows, np.clip(right, 0, w - 1)], np.inf)
+    fill = np.minimum(lv, rv)
+    out[holes] = fill[holes]
+    return out

@@ -1,0 +1,79 @@
+"""What every depth engine is handed (one camera's search) and what it hands back (its estimate inside the
+searched box), with the per-camera statistics that end up in ``report.json``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TypedDict
+
+import numpy as np
+from numpy.typing import NDArray
+
+from rigctl.depth.grid import Grid
+from rigctl.depth.presets import Preset
+
+F32 = NDArray[np.float32]
+
+
+class EstimateStats(TypedDict, total=False):
+    """One camera's estimate, as reported (times in seconds, shares 0..1). Engines fill what they measure."""
+
+    camera: str
+    preset: str
+    engine: str  # the best preset: which engine ran, and why
+    views: list[str]  # the other cameras matched with
+    note: str  # why there is no estimate, or a fallback taken
+    seconds: float
+    key_s: float
+    keyed_background_share: float
+    searched_share: float
+    estimated_share_of_subject: float
+    bound_hit_pixels: int
+    unreliable_pixels: int
+    filled_from_background_pixels: int
+    levels: int  # disparity levels searched
+    sgm: bool
+    coarse_s: float
+    refine_s: float
+    coarse_scale: float
+    integer_sweep_s: float
+    fractional_candidates: int
+    fractional_sweep_s: float
+    pairs: int
+    pairs_s: float
+    conflict_share: float
+    select_s: float
+    pairs_chosen_share: float
+    outliers_replaced: int
+    cross_check_with: str
+    cross_check_failed_pixels: int
+    cross_check_s: float
+
+
+@dataclass
+class BoxEstimate:
+    """What an engine found inside the searched box (all arrays box-sized)."""
+
+    disparity: F32
+    cost: F32  # the chosen match's aggregated cost (0 perfect, TRUNCATE no match)
+    distinct: F32  # 0..1: how clearly the match stands out (or how well the estimates agree)
+    texture: F32
+    bright: F32
+    bound: NDArray[np.bool_]  # the coarse search's best lay at the planned range's edge
+    no_view: NDArray[np.bool_]  # no other camera sees the point
+    filled: NDArray[np.bool_] | None = None  # no match found: filled from the background side
+
+
+@dataclass
+class SearchJob:
+    """One camera's search: the views it matches with, the box searched, the range, the preset."""
+
+    grid: Grid
+    ref: str
+    moving: list[str]
+    box: tuple[int, int, int, int]
+    d_range: tuple[float, float]
+    keep: int
+    preset: Preset
+    stats: EstimateStats
+    region: NDArray[np.bool_]  # box-sized: the pixels to estimate (the keyed subject)
