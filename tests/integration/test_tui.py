@@ -21,7 +21,9 @@ from rigctl.interfaces import SettingResult, SettingState
 from rigctl.preflight import WriteSpeed
 from rigctl.rig import load_rig, rig_from_dict
 from rigctl.take.reader import TakeReader
-from rigctl.tui.app import CameraTile, Confirm, HelpScreen, Notice, PlannerScreen, Refused, ShootApp
+from rigctl.tui.app import ShootApp
+from rigctl.tui.screens import Confirm, HelpScreen, Notice, PlannerScreen, Refused
+from rigctl.tui.tiles import CameraTile
 from rigctl.tui.session import Session, Snapshot, TileStatus
 
 # The shipped sim rig at half its size: these tests are about the shoot UI, and a quarter of the pixels keeps
@@ -157,6 +159,24 @@ def test_preflight_failure_blocks_recording_and_says_why(fast_out: Path) -> None
 
     run(app, script)
     assert not (tmp_path / "S01-01-T01").exists()
+
+
+def test_q_quits_from_a_refusal(fast_out: Path) -> None:
+    """#13: after a refused r, q left the UI open however often it was pressed. The refusal is a modal screen,
+    and Textual gives a modal screen's keys to that screen only: the app's q never ran. Now q on the refusal
+    quits (nothing is recording, so it does not ask)."""
+    app = live_app(fast_out, ["unlocked=[r0c1]"])
+
+    async def script(pilot: Any) -> None:
+        await armed(pilot)
+        await pilot.press("r")
+        await until(pilot, lambda: isinstance(app.screen, Refused), what="the refusal")
+        await pilot.press("q")
+        await until(pilot, lambda: not app.is_running, timeout=30, what="q to quit from the refusal")
+
+    run(app, script)
+    assert app.session is None  # closed: cameras and tally released
+    assert not (fast_out / "S01-01-T01").exists()
 
 
 def test_quitting_while_recording_asks_first(fast_out: Path) -> None:
