@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.calib.detect import Observations
-from rigctl.calib.solve import F64, Solution, _chordal_mean
+from rigctl.calib.solution import F64, Solution, chordal_mean
 from rigctl.calibration_model import ArrayCalibration, CameraModel, rotation_angle_deg
 from rigctl.rectgeom import common_plane
 
@@ -35,7 +35,7 @@ def to_rig(
     centres fit the nominal lattice best (translation only), or their centroid without a nominal lattice."""
     Rs = [sol.R(c) for c in range(len(names))]
     Cs = np.stack([-Rs[c].T @ sol.tvec[c] for c in range(len(names))])
-    Rm = _chordal_mean(Rs)  # camera-0 frame -> mean camera frame
+    Rm = chordal_mean(Rs)  # camera-0 frame -> mean camera frame
     if nominal is not None:
         nom = np.stack([nominal[n] for n in names])
         origin = Cs.mean(0) - Rm.T @ nom.mean(0)
@@ -132,7 +132,7 @@ def diagnose(
                 f"camera {n}: the fitted distortion folds over before the image corners: show the board in "
                 f"{n}'s corners (or fit fewer coefficients)"
             )
-        unc = sol.info.get("uncertainty")
+        unc = [u.as_dict() for u in sol.info.uncertainty]
         if unc:
             f = float(sol.K[c][0, 0])
             if unc[c]["fx"] / f > MAX_REL_FOCAL_SIGMA:
@@ -178,7 +178,7 @@ def compare_to_truth(est: ArrayCalibration, truth: ArrayCalibration) -> dict[str
     """Per camera after aligning the rig frames (rotation from the orientations, translation from the
     centres): centre error (mm), rotation error (degrees), worst ray direction error over the image
     (degrees, frames aligned on the rays), focal length error (px)."""
-    A = _chordal_mean([truth[n].R.T @ est[n].R for n in est.names])
+    A = chordal_mean([truth[n].R.T @ est[n].R for n in est.names])
     b = np.mean([truth[n].centre - A @ est[n].centre for n in est.names], axis=0)
     Ar, _ = align_rays(est, truth)
     out = {}

@@ -92,7 +92,7 @@ def write_plots(result: Result, stem: Path) -> list[Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from rigctl.calib.solve import reprojection
+    from rigctl.calib.solution import reprojection
 
     obs, fit, views = result.obs, result.fit, result.views
     names = views.names

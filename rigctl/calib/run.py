@@ -168,7 +168,7 @@ def _report(
     diagnosis: list[str],
     timings: dict[str, float],
 ) -> dict[str, Any]:
-    from rigctl.calib.solve import reprojection, rms
+    from rigctl.calib.solution import reprojection, rms
 
     names = views.names
     sol = fit.solution
@@ -189,7 +189,7 @@ def _report(
             "corner_cells": corner_cells,
             "distortion_monotonic": metrics.distortion_monotonic(sol.K[c], sol.dist[c], views.image_size),
             "focal_px": float(sol.K[c][0, 0]),
-            "uncertainty": sol.info.get("uncertainty", [{}] * len(names))[c],
+            "uncertainty": sol.info.uncertainty[c].as_dict() if sol.info.uncertainty else {},
         }
         if nominal is not None:
             entry["position_vs_nominal_mm"] = ((calib[n].centre - nominal[n]) * 1e3).tolist()
@@ -220,6 +220,6 @@ def _report(
         "cross_validation_px": cross,
         "truth": truth is not None,
         "diagnosis": diagnosis,
-        "history": fit.history,
+        "history": [step.as_dict() for step in fit.history],
         "timings_s": timings,
     }

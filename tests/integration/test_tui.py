@@ -23,8 +23,8 @@ from rigctl.rig import load_rig, rig_from_dict
 from rigctl.take.reader import TakeReader
 from rigctl.tui.app import ShootApp
 from rigctl.tui.screens import Confirm, HelpScreen, Notice, PlannerScreen, Refused
-from rigctl.tui.tiles import CameraTile
 from rigctl.tui.session import Session, Snapshot, TileStatus
+from rigctl.tui.tiles import CameraTile
 
 # The shipped sim rig at half its size: these tests are about the shoot UI, and a quarter of the pixels keeps
 # a shared CI machine's capture threads from starving (the recorder's throughput is tested elsewhere)
