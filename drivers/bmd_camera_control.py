@@ -6,6 +6,7 @@ capability) and it matches what was sent; a blind bridge leaves every setting *u
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections.abc import Callable
@@ -16,6 +17,8 @@ from rigctl.drivers.sdi_bridge import SdiBridge
 from rigctl.camera_control import REFERENCE_SOURCES
 from rigctl.errors import DeviceError
 from rigctl.interfaces import SettingResult, SettingState
+
+log = logging.getLogger(__name__)
 
 
 def _to_av(f_number: float) -> float:
@@ -77,6 +80,7 @@ class BmdBridgeControl:
         try:
             self.bridge.send_control([m for _, _, m in planned])
         except DeviceError as exc:
+            log.warning("camera settings not sent: %s", exc)
             return [SettingResult(c, k, values[k], SettingState.FAILED, detail=str(exc)) for c, k, _ in planned]
         if not self.can_confirm:
             blind = SettingState.UNCONFIRMED

@@ -11,13 +11,9 @@ from rigctl.drivers.protocols import bmd_control, bmd_tally
 from rigctl.drivers.protocols import sdi_bridge as proto
 from rigctl.drivers.serial_link import open_link
 
-from rigctl.errors import DeviceError, ProtocolError
+from rigctl.errors import BridgeNak, DeviceError, ProtocolError
 
 SERIAL = {"baudrate": 115200, "bytesize": 8, "parity": "N", "stopbits": 1}
-
-
-class BridgeNak(DeviceError):
-    """The bridge answered, and refused."""
 
 
 class SdiBridge:

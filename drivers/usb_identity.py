@@ -3,6 +3,7 @@ identities in a rig file, so a rig resolves to the same physical devices after e
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Any
 
@@ -11,6 +12,8 @@ import usb.util
 
 from rigctl.errors import DeviceError
 from rigctl.rig import UsbIdentity
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -30,7 +33,8 @@ class UsbDevice:
 def _string(dev: Any, attr: str) -> str | None:
     try:
         value = getattr(dev, attr)
-    except (ValueError, NotImplementedError, usb.core.USBError):
+    except (ValueError, NotImplementedError, usb.core.USBError) as exc:
+        log.debug("USB %s: %s unreadable: %s", getattr(dev, "address", "?"), attr, exc)
         return None  # no permission to open the device, or no string descriptors
     return str(value) if value else None
 

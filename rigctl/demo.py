@@ -6,7 +6,6 @@ report. Every step runs the same code as its own command."""
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import time
 from collections.abc import Callable
@@ -55,7 +54,6 @@ def prepare_folder(out: Path, fresh: bool) -> None:
 
 
 def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh: bool = False) -> Path:
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from rigctl.benchdata import presenter
     from rigctl.calib.report import format_table as calib_table
     from rigctl.calib.report import write_plots

@@ -70,6 +70,22 @@ class TakeError(RigctlError):
     exit_code = EXIT_BAD_INPUT
 
 
+class DiskFullError(TakeError):
+    """A destination ran out of space; the take ends cleanly and stays readable. Exit status 4: the
+    destination (a device) cannot do what the take needs, the input was fine."""
+
+    exit_code = EXIT_DEVICE
+
+
+class PreflightError(RigctlError):
+    """Preflight found a reason not to record; ``--force`` records anyway where that is safe to try."""
+
+    def __init__(self, message: str, problems: list[str] | None = None, forcible: bool = False) -> None:
+        super().__init__(message)
+        self.problems = problems or [message]
+        self.forcible = forcible  # every reason is one a user may choose to record through
+
+
 class DamagedDataError(TakeError):
     """A frame a take claims fails its checksum, is cut short or missing: never passed on silently.
 
@@ -77,6 +93,10 @@ class DamagedDataError(TakeError):
     """
 
     exit_code = EXIT_DAMAGED
+
+
+class BridgeNak(DeviceError):
+    """An SDI camera-control bridge answered, and refused."""
 
 
 class ProtocolError(RigctlError):

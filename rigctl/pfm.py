@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.errors import TakeError
+from rigctl.errors import ParameterError, TakeError
 
 
 def write_pfm(path: Path, image: NDArray[np.floating]) -> None:
@@ -19,7 +19,7 @@ def write_pfm(path: Path, image: NDArray[np.floating]) -> None:
     elif img.ndim == 3 and img.shape[2] == 3:
         header = b"PF"
     else:
-        raise ValueError(f"PFM holds 1 or 3 channels, got shape {img.shape}")
+        raise ParameterError(f"{path}: PFM holds 1 or 3 channels, got shape {img.shape}")
     h, w = img.shape[:2]
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "wb") as f:

@@ -32,8 +32,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from rigctl.errors import RigctlError
-
 log = logging.getLogger(__name__)
 
 GO, WARN, REFUSE = "go", "warn", "refuse"
@@ -45,15 +43,6 @@ MIN_SAMPLES = 3
 LOW_PERCENTILE = 20.0
 FAR_BELOW = 0.5  # below half the need with nothing to absorb the rest: refuse
 LOW_TIME_S = 600.0  # less room than this on an open-ended take: a warning
-
-
-class PreflightError(RigctlError):
-    """Preflight found a reason not to record; ``--force`` records anyway where that is safe to try."""
-
-    def __init__(self, message: str, problems: list[str] | None = None, forcible: bool = False) -> None:
-        super().__init__(message)
-        self.problems = problems or [message]
-        self.forcible = forcible  # every reason is one a user may choose to record through
 
 
 @dataclass(frozen=True)

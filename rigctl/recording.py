@@ -15,8 +15,8 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from rigctl.errors import ParameterError
-from rigctl.preflight import PreflightError, PreflightReport, WriteSpeed, check_destinations
+from rigctl.errors import ParameterError, PreflightError
+from rigctl.preflight import PreflightReport, WriteSpeed, check_destinations
 from rigctl.recorder import Recorder, TakePlan
 from rigctl.registry import DeviceSet, open_cameras
 from rigctl.rig import Rig

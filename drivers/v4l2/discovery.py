@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import glob
+import logging
 import os
 from dataclasses import dataclass, field
 
 from rigctl.drivers.v4l2.device import V4L2Device
 
 from rigctl.errors import DeviceError
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -44,6 +47,7 @@ def list_v4l2() -> list[V4L2Info]:
             dev.open()
         except DeviceError as exc:
             if "not a streaming video capture device" in str(exc):
+                log.debug("%s: skipped: %s", path, exc)
                 continue
             info.error = str(exc)
             found.append(info)

@@ -99,7 +99,7 @@ def calibrate(
         raise CalibrationError("; ".join(fatal))
     t0 = time.perf_counter()
     try:
-        fit = solve(points, obs, sizes, names, opt.model, opt.reject_factor, log=say)
+        fit = solve(points, obs, sizes, names, opt.model, opt.reject_factor, say=say)
     except CalibrationError as exc:
         hints = "; ".join(early)
         raise CalibrationError(f"{exc}" + (f" ({hints})" if hints else "")) from None

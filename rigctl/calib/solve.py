@@ -97,12 +97,12 @@ def solve(
     factor: float = 2.5,
     max_rounds: int = 10,
     min_corners: int = 6,
-    log: Callable[[str], None] | None = None,
+    say: Callable[[str], None] | None = None,
 ) -> Fit:
     """Initial solution, bundle adjustment and rejection of outlier views; raises CalibrationError naming
     the camera when the take cannot constrain a solution at all."""
     free_dist, flags = MODELS[model]
-    say = log or (lambda _msg: None)
+    report = say or log.info  # each step, as the caller shows progress (or to this module's log)
     usable = obs.views() >= min_corners
     for c, n in enumerate(names):
         if not usable[c].any():
@@ -117,13 +117,13 @@ def solve(
         problem = cv_message(exc)
     if problem is None:
         history.append(FitStep("calibrateMultiviewExtended", rms_px=init.rms, seconds=init.info.seconds))
-        say(f"initial solution (calibrateMultiviewExtended): RMS {init.rms:.4f} px")
+        report(f"initial solution (calibrateMultiviewExtended): RMS {init.rms:.4f} px")
     else:
         t0 = time.perf_counter()
         init = own_init(points, obs, sizes, flags, names, min_corners)
         history.append(FitStep("calibrateMultiviewExtended could not run", error=problem))
         history.append(FitStep("per-camera initial solution", seconds=time.perf_counter() - t0))
-        say(f"calibrateMultiviewExtended could not run ({problem}); per-camera initial solution instead")
+        report(f"calibrateMultiviewExtended could not run ({problem}); per-camera initial solution instead")
     sol = init
     active = usable.copy()
     corner_ok = np.ones(len(obs.cam), bool)  # single corners far off (a mis-refined corner), dropped
@@ -152,7 +152,7 @@ def solve(
                 rejected_corners=int(bad_corners.sum()),
             )
         )
-        say(
+        report(
             f"bundle adjustment {rnd + 1}: RMS {sol.rms:.4f} px"
             + (f", rejecting {len(rejected)} views" if rejected else "")
             + (f", {int(bad_corners.sum())} single corners" if bad_corners.any() else "")
@@ -176,7 +176,7 @@ def solve(
             history.append(
                 FitStep("re-admission", readmitted=int(back.sum()), rms_px=sol.rms, seconds=sol.info.seconds)
             )
-            say(f"re-admitted {int(back.sum())} views that fit the final solution: RMS {sol.rms:.4f} px")
+            report(f"re-admitted {int(back.sum())} views that fit the final solution: RMS {sol.rms:.4f} px")
     if not np.all(np.isfinite(sol.rvec)) or not np.isfinite(sol.rms):
         raise CalibrationError(
             "the calibration did not converge to finite values (see the diagnosis for what to shoot)"

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -43,7 +42,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(ns: argparse.Namespace) -> int:
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # threaded BLAS is far slower for these small solves
     from rigctl.calib.detect import Chessboard, Target, load_target
     from rigctl.calib.export import write_colmap, write_opencv_yaml
     from rigctl.calib.report import format_table, write_plots

@@ -10,12 +10,13 @@ from numpy.typing import NDArray
 
 from rigctl.depth.grid import Grid
 from rigctl.depth.pairs import F32, make_sgbm, nan_median, neighbour, pair_disparity, to_u8
+from rigctl.errors import ParameterError
 
 
 def sgbm_pair(grid: Grid, ref: str, d_range: tuple[float, float]) -> F32:
     other = neighbour(grid, ref, 1, 0) or neighbour(grid, ref, -1, 0)
     if other is None:
-        raise ValueError(f"camera {ref} has no horizontal neighbour")
+        raise ParameterError(f"camera {ref} has no horizontal neighbour")
     return pair_disparity(grid, ref, other, d_range)
 
 
@@ -24,7 +25,7 @@ def sgbm_wls(grid: Grid, ref: str, d_range: tuple[float, float], block: int = 5)
     flip = right is None
     other = right or neighbour(grid, ref, -1, 0)
     if other is None:
-        raise ValueError(f"camera {ref} has no horizontal neighbour")
+        raise ParameterError(f"camera {ref} has no horizontal neighbour")
     scale = abs(grid.offsets[other][0] - grid.offsets[ref][0])
     a, b = to_u8(grid.images[ref]), to_u8(grid.images[other])
     if flip:

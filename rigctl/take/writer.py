@@ -15,18 +15,11 @@ import time
 import zlib
 from pathlib import Path
 
-from rigctl.errors import EXIT_DEVICE, TakeError
+from rigctl.errors import DiskFullError, TakeError
 from rigctl.interfaces import Frame, FrameFlags
 from rigctl.take import index
 
 _TC_FLAGS = int(FrameFlags.TIMECODE | FrameFlags.DROP_FRAME)
-
-
-class DiskFullError(TakeError):
-    """A destination ran out of space; the take ends cleanly and stays readable. Exit status 4: the
-    destination (a device) cannot do what the take needs, the input was fine."""
-
-    exit_code = EXIT_DEVICE
 
 
 def _write_all(fd: int, data: memoryview, path: Path) -> None:

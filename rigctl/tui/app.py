@@ -4,6 +4,8 @@ never holds up capture (a stalled screen only shows older numbers)."""
 
 from __future__ import annotations
 
+import collections
+import logging
 import sys
 import threading
 import time
@@ -17,8 +19,8 @@ from textual.containers import Grid
 from textual.message import Message
 from textual.widgets import Footer, Static
 
-from rigctl.errors import RigctlError
-from rigctl.preflight import PreflightError
+from rigctl.errors import PreflightError, RigctlError
+from rigctl.tui.logs import LogRecordPosted, RoutedLogging
 from rigctl.tui.screens import FORCE_RISK, Ask, Confirm, HelpScreen, Notice, PlannerScreen, Refused
 from rigctl.tui.session import Session, Snapshot
 from rigctl.tui.tiles import CameraTile, GlobalBar
@@ -62,6 +64,9 @@ class ShootApp(App[None]):
         self._pending = threading.Event()
         self._stop = threading.Event()
         self.snapshots_shown = 0
+        self.log_lines: collections.deque[str] = collections.deque(maxlen=200)  # what the log handler posted
+        self._routed: RoutedLogging | None = None
+        self._switch_interval = sys.getswitchinterval()
 
     def compose(self) -> ComposeResult:
         yield GlobalBar(id="bar")
@@ -71,7 +76,9 @@ class ShootApp(App[None]):
     def on_mount(self) -> None:
         # capture threads must get the interpreter within a fraction of a frame period even while the screen
         # redraws (Python's default hand-over is every 5 ms, and only when the holder allows it)
+        self._switch_interval = sys.getswitchinterval()
         sys.setswitchinterval(0.0005)
+        self._routed = RoutedLogging.install(self.post_message)
         if self.snapshot_source is not None:  # a fixed picture (snapshot tests of the layout)
             self._latest = self.snapshot_source()
             self._show()
@@ -225,6 +232,15 @@ class ShootApp(App[None]):
 
     def on_unmount(self) -> None:
         self._close_session()
+        if self._routed is not None:  # the process gets back the logging and the switch interval it had
+            self._routed.restore()
+            self._routed = None
+        sys.setswitchinterval(self._switch_interval)
+
+    def on_log_record_posted(self, record: LogRecordPosted) -> None:
+        self.log_lines.append(record.text)
+        if record.level >= logging.WARNING:
+            self.notify(record.text, severity="error" if record.level >= logging.ERROR else "warning", timeout=10)
 
     def action_help(self) -> None:
         self.push_screen(HelpScreen())

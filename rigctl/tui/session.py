@@ -18,10 +18,10 @@ from typing import Any
 import numpy as np
 
 from rigctl.camera_control import check_settings
-from rigctl.errors import RigctlError
+from rigctl.errors import PreflightError, RigctlError
 from rigctl.interfaces import SettingResult, SettingState, TallyState
 from rigctl.plan_report import plan_rig
-from rigctl.preflight import LOW_TIME_S, PreflightError, PreflightReport, WriteSpeed, measure_write
+from rigctl.preflight import LOW_TIME_S, PreflightReport, WriteSpeed, measure_write
 from rigctl.recorder import Recorder, TakePlan
 from rigctl.recording import enforce, preflight_take
 from rigctl.registry import DeviceSet, open_cameras, open_control, open_tally

@@ -245,6 +245,47 @@ def test_keys_for_devices_the_rig_lacks_are_not_offered(tmp_path: Path) -> None:
     run(app, script)
 
 
+def test_log_records_from_threads_go_into_the_ui_and_everything_is_put_back() -> None:
+    """A warning logged (or warned) by a capture thread while the UI runs is shown in the UI and never reaches
+    the terminal handler the CLI installed; the UI leaves the process's logging, warnings capture and thread
+    switch interval as it found them."""
+    import io
+    import logging
+    import sys
+    import threading
+    import warnings
+
+    terminal = io.StringIO()
+    cli_handler = logging.StreamHandler(terminal)  # the CLI's basicConfig handler holds the real stderr like this
+    root = logging.getLogger()
+    root.addHandler(cli_handler)
+    before_handlers, before_switch = list(root.handlers), sys.getswitchinterval()
+    app = fixed_app()
+
+    def capture_thread() -> None:
+        logging.getLogger("rigctl.recorder").warning("r1c2: writer queue %d %% full", 90)
+        warnings.warn("a library complains", RuntimeWarning, stacklevel=1)
+
+    async def script(pilot: Any) -> None:
+        await pilot.pause(0.1)
+        assert sys.getswitchinterval() == 0.0005
+        t = threading.Thread(target=capture_thread)
+        t.start()
+        t.join()
+        await until(pilot, lambda: len(app.log_lines) >= 2, timeout=10, what="the records in the UI")
+
+    try:
+        run(app, script)
+        assert any("r1c2: writer queue 90 % full" in line for line in app.log_lines), list(app.log_lines)
+        assert any("a library complains" in line for line in app.log_lines)
+        assert terminal.getvalue() == ""  # nothing was written over the screen
+        assert root.handlers == before_handlers and sys.getswitchinterval() == before_switch
+        logging.getLogger("rigctl.recorder").warning("after the UI")
+        assert "after the UI" in terminal.getvalue()  # the terminal handler is back
+    finally:
+        root.removeHandler(cli_handler)
+
+
 # ---- snapshots of the screens, with fixed data --------------------------------------------------------------
 def fixed_snapshot() -> Snapshot:
     ramp = np.tile(np.linspace(16, 235, 48, dtype=np.uint8), (27, 1))
