@@ -9,7 +9,6 @@ from pathlib import Path
 from rigctl.errors import ParameterError
 
 _SAFE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
-_AUTO = re.compile(r"^(?P<scene>[A-Za-z0-9]+)_(?P<shot>[A-Za-z0-9]+)_T(?P<take>\d{3,})$")
 
 
 def check_take_name(name: str) -> str:
@@ -24,15 +23,27 @@ def check_take_name(name: str) -> str:
     return name
 
 
-def next_take_name(destinations: list[Path], scene: str, shot: str) -> str:
-    """``SCENE_SHOT_T001`` with the take number one above the highest on any destination."""
-    check_take_name(f"{scene}_{shot}")
+def take_name(scene: str, shot: str, number: int) -> str:
+    """The shoot UI's take name: ``SCENE-SHOT-Tnn`` (two digits at least)."""
+    return f"{scene}-{shot}-T{number:02d}"
+
+
+def next_take_number(destinations: list[Path], scene: str, shot: str) -> int:
+    """One above the highest take number of ``scene`` and ``shot`` on any destination (1 when there is none),
+    so a restarted shoot goes on numbering instead of meeting the takes already on disk."""
+    check_take_name(take_name(scene, shot, 1))
+    pattern = re.compile(rf"^{re.escape(scene)}-{re.escape(shot)}-T(?P<take>\d{{2,}})$")
     highest = 0
     for dest in destinations:
         if not dest.is_dir():
             continue
         for entry in dest.iterdir():
-            m = _AUTO.match(entry.name)
-            if m and m.group("scene") == scene and m.group("shot") == shot:
+            m = pattern.match(entry.name)
+            if m:
                 highest = max(highest, int(m.group("take")))
-    return f"{scene}_{shot}_T{highest + 1:03d}"
+    return highest + 1
+
+
+def next_take_name(destinations: list[Path], scene: str, shot: str) -> str:
+    """``SCENE-SHOT-Tnn`` with the take number one above the highest on any destination."""
+    return take_name(scene, shot, next_take_number(destinations, scene, shot))

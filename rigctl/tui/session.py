@@ -27,6 +27,7 @@ from rigctl.recording import enforce, preflight_take
 from rigctl.registry import DeviceSet, open_cameras, open_control, open_tally
 from rigctl.rig import Rig
 from rigctl.take.manifest import read_manifest, write_manifest
+from rigctl.take.names import next_take_number, take_name
 from rigctl.tally import TallyService
 from rigctl.timecode import start_timecode
 
@@ -94,7 +95,7 @@ class Session:
         self.out = Path(out)
         self.scene = scene
         self.shot = shot
-        self.take_number = 1
+        self.take_number = next_take_number([self.out], scene, shot)  # on from the takes already there
         self.devices: DeviceSet = open_cameras(rig, sim or [])
         self.names = sorted(self.devices.cameras, key=rig.camera_names.index)
         self.period_s = 1.0 / rig.fps
@@ -126,7 +127,7 @@ class Session:
     # ---- the take ------------------------------------------------------------------------------------
     @property
     def take_name(self) -> str:
-        return f"{self.scene}-{self.shot}-T{self.take_number:02d}"
+        return take_name(self.scene, self.shot, self.take_number)
 
     def arm(self) -> None:
         """Open the cameras and keep frames flowing (discarded) so tiles are live before anyone records. The

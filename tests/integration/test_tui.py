@@ -446,6 +446,34 @@ def test_quit_while_a_take_is_stopping_finishes_it_once(fast_out: Path) -> None:
     assert take.status in ("ended", "complete") and len(take.complete_sets()) >= 15
 
 
+def test_a_restarted_session_numbers_takes_after_those_on_disk(fast_out: Path) -> None:
+    """A take recorded by one session is on disk; a new session on the same folder (the UI restarted) starts
+    at T02 and records there, not at T01 (which exists: preflight would refuse it forever)."""
+    (fast_out / "S01-02-T07").mkdir(parents=True)  # another shot's take does not count
+    (fast_out / "S01-01-notes").mkdir()
+    first = Session(RIG, fast_out, SIM)
+    try:
+        assert first.take_name == "S01-01-T01"
+        first.arm()
+        first.start()
+        time.sleep(0.5)
+        first.stop()
+    finally:
+        first.close()
+    assert TakeReader(fast_out / "S01-01-T01").status in ("ended", "complete")
+    again = Session(RIG, fast_out, SIM)
+    try:
+        assert again.take_number == 2 and again.take_name == "S01-01-T02"
+        again.arm()
+        assert again.preflight() == []  # T01 exists, and is not where this take goes
+        again.start()
+        time.sleep(0.5)
+        again.stop()
+    finally:
+        again.close()
+    assert TakeReader(fast_out / "S01-01-T02").status in ("ended", "complete")
+
+
 def test_the_disk_is_measured_before_the_cameras_stream_not_at_every_take(
     fast_out: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -1,0 +1,28 @@
+"""Take numbers of the shoot UI go on from the takes on disk, per scene and shot, over every destination."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from rigctl.errors import ParameterError
+from rigctl.take.names import next_take_name, next_take_number
+
+
+def test_numbers_go_on_from_the_highest_take_of_that_scene_and_shot(tmp_path: Path) -> None:
+    a, b = tmp_path / "a", tmp_path / "b"
+    for folder in (a / "S01-01-T01", a / "S01-01-T09", b / "S01-01-T03", a / "S01-02-T30", a / "S02-01-T40"):
+        folder.mkdir(parents=True)
+    (a / "S01-01-T99.txt").write_text("not a take")  # a name that only starts like a take
+    (a / "S01-01-Tx").mkdir()
+    assert next_take_number([a, b], "S01", "01") == 10
+    assert next_take_name([a, b], "S01", "01") == "S01-01-T10"  # past two digits when the shoot gets there
+    assert next_take_name([b], "S01", "01") == "S01-01-T04"
+    assert next_take_name([a], "S01", "02") == "S01-02-T31"
+    assert next_take_name([tmp_path / "missing"], "S03", "01") == "S03-01-T01"
+
+
+def test_a_scene_that_would_escape_the_destination_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(ParameterError, match="escape"):
+        next_take_number([tmp_path], "../x", "01")
