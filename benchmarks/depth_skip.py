@@ -13,11 +13,11 @@ import time
 
 import numpy as np
 
-from rigctl.benchdata import presenter
 from rigctl.depth.estimate import estimate
 from rigctl.depth.key import Keyer
 from rigctl.depth.presets import PRESETS
 from rigctl.depth.run import score, unplanned_range
+from rigctl.simulated_presenter import presenter
 
 
 def main() -> None:

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import argparse
 
-from rigctl.benchdata import presenter_render
 from rigctl.cli.render import size
 from rigctl.render.bench import bench_render, format_bench
+from rigctl.simulated_presenter import presenter_render
 
 
 def main() -> None:

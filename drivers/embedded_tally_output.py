@@ -14,10 +14,10 @@ class EmbeddedTallyOutput:
         self.camera_ids = camera_ids
         self.cameras = max(camera_ids.values())
 
-    def packet(self, state: TallyState) -> bmd_tally.TallyState:
+    def packet(self, state: TallyState) -> bmd_tally.EmbeddedTally:
         program = frozenset(self.camera_ids[n] for n in state.program if n in self.camera_ids)
         preview = frozenset(self.camera_ids[n] for n in state.preview if n in self.camera_ids)
-        return bmd_tally.TallyState(self.cameras, program, preview)
+        return bmd_tally.EmbeddedTally(self.cameras, program, preview)
 
     def send(self, state: TallyState) -> None:
         self.bridge.send_tally(self.packet(state))

@@ -39,7 +39,7 @@ class SdiBridge:
         except Exception as exc:  # pyserial raises its own and OS errors
             raise DeviceError(f"{self.url}: bridge line lost: {exc}") from None
 
-    def _read_reply(self, seq: int, deadline: float) -> proto.Frame | None:
+    def _read_reply(self, seq: int, deadline: float) -> proto.BridgeFrame | None:
         while time.monotonic() < deadline:
             try:
                 data = self.link.read(256)
@@ -51,13 +51,13 @@ class SdiBridge:
                 # a late reply to an earlier, retried request: ignore it
         return None
 
-    def request(self, ftype: int, payload: bytes = b"") -> proto.Frame:
+    def request(self, ftype: int, payload: bytes = b"") -> proto.BridgeFrame:
         """Send one frame and return the bridge's reply to it; retried with the same sequence number (the
         bridge applies a repeated number once). Raises DeviceError on silence, BridgeNak on refusal."""
         with self._lock:
             seq = self._seq
             self._seq = (self._seq + 1) % 256
-            data = proto.encode(proto.Frame(ftype, seq, payload))
+            data = proto.encode(proto.BridgeFrame(ftype, seq, payload))
             for attempt in range(self.tries):
                 if attempt:
                     self.retries += 1
@@ -112,7 +112,7 @@ class SdiBridge:
                 sent += 1
         return sent
 
-    def send_tally(self, state: bmd_tally.TallyState) -> None:
+    def send_tally(self, state: bmd_tally.EmbeddedTally) -> None:
         if not self.hello.embedded_tally:
             raise DeviceError(f"{self.url}: this bridge does not insert embedded tally ({self.hello.firmware})")
         self.request(proto.TALLY, bmd_tally.encode(state))

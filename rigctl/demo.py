@@ -54,7 +54,6 @@ def prepare_folder(out: Path, fresh: bool) -> None:
 
 
 def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh: bool = False) -> Path:
-    from rigctl.benchdata import presenter
     from rigctl.calib.report import format_table as calib_table
     from rigctl.calib.report import write_plots
     from rigctl.calib.run import calibrate
@@ -67,6 +66,7 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
     from rigctl.registry import simulated_burnin_box
     from rigctl.render.demo import novel_views_section
     from rigctl.rig import load_rig
+    from rigctl.simulated_presenter import presenter
 
     prepare_folder(out, fresh)
     takes = out / "takes"

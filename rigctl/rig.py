@@ -52,7 +52,7 @@ class Lens(_Section):
     focal_length_mm: PositiveFloat
 
 
-class Grid(_Section):
+class GridLayout(_Section):
     """A planar rectangular grid, row 0 at the top, column 0 at the left, seen from behind the rig."""
 
     rows: Annotated[int, Field(ge=1, le=64)]
@@ -70,7 +70,7 @@ class UsbIdentity(_Section):
     bus_path: str | None = None
 
 
-class CameraEntry(_Section):
+class CameraAssignment(_Section):
     name: str
     device: str = Field(min_length=1)
     usb: UsbIdentity | None = None
@@ -124,8 +124,8 @@ class RigModel(_Section):
     sensor: Sensor
     format: OutputFormat
     lens: Lens
-    grid: Grid
-    cameras: list[CameraEntry] = Field(min_length=1)
+    grid: GridLayout
+    cameras: list[CameraAssignment] = Field(min_length=1)
     plan: PlanDefaults | None = None
     tally: Tally | None = None
     camera_control: CameraControl | None = None
@@ -134,7 +134,7 @@ class RigModel(_Section):
 
 
 @dataclass(frozen=True)
-class Camera:
+class RigCamera:
     """One camera of the rig with its grid position and nominal position in rig coordinates (metres).
 
     Rig coordinates: origin at the grid centre, x to the right, y down, z towards the scene.
@@ -201,7 +201,7 @@ class Rig:
         return self.model.grid.spacing_x_m, self.model.grid.spacing_y_m
 
     @property
-    def cameras(self) -> list[Camera]:
+    def cameras(self) -> list[RigCamera]:
         g = self.model.grid
         out = []
         for cam in self.model.cameras:
@@ -209,7 +209,7 @@ class Rig:
             assert m is not None
             row, col = int(m.group(1)), int(m.group(2))
             out.append(
-                Camera(
+                RigCamera(
                     name=cam.name,
                     row=row,
                     col=col,
@@ -221,7 +221,7 @@ class Rig:
             )
         return sorted(out, key=lambda c: (c.row, c.col))
 
-    def camera(self, name: str) -> Camera:
+    def camera(self, name: str) -> RigCamera:
         for cam in self.cameras:
             if cam.name == name:
                 return cam

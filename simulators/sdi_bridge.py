@@ -39,7 +39,7 @@ class SimSdiBridge(PtyDevice):
         self.ignoring: set[str] = set()  # cameras that do not apply what they are told
         # what the bridge saw
         self.packets: list[list[bmd_control.Message]] = []
-        self.tally: bmd_tally.TallyState | None = None
+        self.tally: bmd_tally.EmbeddedTally | None = None
         self.state: dict[str, dict[tuple[int, int], tuple[float, ...] | str]] = (
             array.control_state if array is not None else {name: {} for name in camera_ids}
         )
@@ -63,9 +63,9 @@ class SimSdiBridge(PtyDevice):
 
     # ---- the protocol -----------------------------------------------------------------------------------
     def _reply(self, ftype: int, seq: int, payload: bytes = b"") -> bytes:
-        return proto.encode(proto.Frame(ftype, seq, payload))
+        return proto.encode(proto.BridgeFrame(ftype, seq, payload))
 
-    def _handle(self, frame: proto.Frame) -> bytes | None:
+    def _handle(self, frame: proto.BridgeFrame) -> bytes | None:
         if frame.type >= proto.ACK:
             return None  # replies are not for the bridge
         if frame.type == proto.HELLO:
@@ -76,7 +76,7 @@ class SimSdiBridge(PtyDevice):
         self._last = (frame.sequence, frame.type, reply)
         return reply
 
-    def _answer(self, frame: proto.Frame) -> bytes:
+    def _answer(self, frame: proto.BridgeFrame) -> bytes:
         seq = frame.sequence
         if frame.type == proto.HELLO:
             caps = (proto.CAP_READBACK if self.readback else 0) | (

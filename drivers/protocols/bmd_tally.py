@@ -14,7 +14,7 @@ from rigctl.errors import ProtocolError
 
 
 @dataclass(frozen=True)
-class TallyState:
+class EmbeddedTally:
     cameras: int
     program: frozenset[int] = field(default_factory=frozenset)
     preview: frozenset[int] = field(default_factory=frozenset)
@@ -22,7 +22,7 @@ class TallyState:
     monitor_preview: bool = False
 
 
-def encode(state: TallyState) -> bytes:
+def encode(state: EmbeddedTally) -> bytes:
     if not 1 <= state.cameras <= 254:
         raise ProtocolError(f"embedded tally covers 1..254 cameras, got {state.cameras}")
     out = bytearray(1 + (state.cameras + 1) // 2)
@@ -36,7 +36,7 @@ def encode(state: TallyState) -> bytes:
     return bytes(out)
 
 
-def decode(data: bytes, cameras: int | None = None) -> TallyState:
+def decode(data: bytes, cameras: int | None = None) -> EmbeddedTally:
     if not data:
         raise ProtocolError("embedded tally packet is empty")
     version = data[0] >> 4
@@ -52,4 +52,4 @@ def decode(data: bytes, cameras: int | None = None) -> TallyState:
             program.add(cam)
         if nibble & 2:
             preview.add(cam)
-    return TallyState(n, frozenset(program), frozenset(preview), bool(data[0] & 1), bool(data[0] & 2))
+    return EmbeddedTally(n, frozenset(program), frozenset(preview), bool(data[0] & 1), bool(data[0] & 2))

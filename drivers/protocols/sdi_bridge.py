@@ -69,7 +69,7 @@ NAK_TEXT = {
 
 
 @dataclass(frozen=True)
-class Frame:
+class BridgeFrame:
     type: int
     sequence: int
     payload: bytes = b""
@@ -81,7 +81,7 @@ def crc16(data: bytes) -> int:
     return binascii.crc_hqx(data, 0xFFFF)
 
 
-def encode(frame: Frame) -> bytes:
+def encode(frame: BridgeFrame) -> bytes:
     if frame.type not in TYPES:
         raise ProtocolError(f"bridge frame type 0x{frame.type:02x} unknown")
     if not 0 <= frame.sequence <= 255:
@@ -92,7 +92,7 @@ def encode(frame: Frame) -> bytes:
     return SYNC + body + struct.pack("<H", crc16(body))
 
 
-def decode(data: bytes) -> Frame:
+def decode(data: bytes) -> BridgeFrame:
     """Exactly one frame; raises ProtocolError naming the byte offset of the first problem."""
     if len(data) < OVERHEAD:
         raise ProtocolError(f"bridge frame of {len(data)} bytes is shorter than {OVERHEAD}")
@@ -108,7 +108,7 @@ def decode(data: bytes) -> Frame:
         raise ProtocolError(f"byte 2: bridge protocol version {version} unknown (this speaks {VERSION})")
     if ftype not in TYPES:
         raise ProtocolError(f"byte 3: bridge frame type 0x{ftype:02x} unknown")
-    return Frame(ftype, seq, bytes(data[HEADER : HEADER + n]), version)
+    return BridgeFrame(ftype, seq, bytes(data[HEADER : HEADER + n]), version)
 
 
 class FrameDecoder:
@@ -128,9 +128,9 @@ class FrameDecoder:
         self.errors.append(text)
         self.error_count += 1
 
-    def feed(self, data: bytes) -> list[Frame]:
+    def feed(self, data: bytes) -> list[BridgeFrame]:
         self._buf += data
-        out: list[Frame] = []
+        out: list[BridgeFrame] = []
         while True:
             start = self._buf.find(SYNC)
             if start < 0:

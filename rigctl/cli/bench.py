@@ -35,9 +35,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_depth_bench(ns: argparse.Namespace) -> int:
-    from rigctl.benchdata import presenter
     from rigctl.depth.bench import format_table, motorcycle, plot, run_bench, stratified
     from rigctl.errors import ParameterError
+    from rigctl.simulated_presenter import presenter
 
     if ns.size:
         return run_size_bench(ns)
@@ -62,8 +62,8 @@ def run_size_bench(ns: argparse.Namespace) -> int:
     """One frame set at the given size in a fresh process: seconds and peak resident memory."""
     import functools
 
-    from rigctl.benchdata import presenter
     from rigctl.farm.membench import measure_size, parse_size
+    from rigctl.simulated_presenter import presenter
 
     w, h = parse_size(ns.size)
     cams = tuple(ns.cameras) if ns.cameras else None

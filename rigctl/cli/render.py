@@ -136,8 +136,8 @@ def run(ns: argparse.Namespace) -> int:
 
 
 def run_bench(ns: argparse.Namespace) -> int:
-    from rigctl.benchdata import presenter_render
     from rigctl.render.bench import bench_render, format_bench
+    from rigctl.simulated_presenter import presenter_render
 
     if ns.repeats < 1:
         raise ParameterError(f"--repeats must be at least 1, got {ns.repeats}")

@@ -234,9 +234,9 @@ def test_demo_runs_end_to_end_and_its_report_opens_with_figures(tmp_path: Path) 
 
 def test_best_beats_the_best_opencv_baseline_on_the_realistic_presenter_by_30_percent() -> None:
     """The accuracy half of the bar (the time half is measured by ``rigctl bench depth``, not in a test)."""
-    from rigctl.benchdata import presenter
     from rigctl.depth.baselines import BASELINES
     from rigctl.depth.bench import comparisons, run_bench
+    from rigctl.simulated_presenter import presenter
 
     result = run_bench([presenter(ideal=False)], methods=["best", *BASELINES])
     (cmp,) = comparisons(result)

@@ -199,7 +199,7 @@ def test_bmd_control_limits() -> None:
 
 # ---- Blackmagic embedded tally --------------------------------------------------------------------
 def test_embedded_tally_vector() -> None:
-    state = bmd_tally.TallyState(9, frozenset({3}), frozenset({4}))
+    state = bmd_tally.EmbeddedTally(9, frozenset({3}), frozenset({4}))
     assert bmd_tally.encode(state) == hx("00 00 21 00 00 00")
     assert bmd_tally.decode(hx("00 00 21 00 00 00"), cameras=9) == state
 
@@ -213,7 +213,7 @@ def test_embedded_tally_vector() -> None:
 )
 def test_embedded_tally_round_trip(args) -> None:  # type: ignore[no-untyped-def]
     n, program, preview, mp, mv = args
-    state = bmd_tally.TallyState(n, frozenset(program), frozenset(preview), mp, mv)
+    state = bmd_tally.EmbeddedTally(n, frozenset(program), frozenset(preview), mp, mv)
     assert bmd_tally.decode(bmd_tally.encode(state), cameras=n) == state
 
 
@@ -225,15 +225,15 @@ def test_embedded_tally_garbage_only_protocol_errors(data: bytes) -> None:
 
 # ---- rigctl SDI bridge framing (docs/sdi-bridge-protocol.md) ---------------------------------------------
 BRIDGE_VECTORS = [
-    (sb.Frame(sb.HELLO, 0), "B5 62 01 01 00 00 44 C5"),
+    (sb.BridgeFrame(sb.HELLO, 0), "B5 62 01 01 00 00 44 C5"),
     (
-        sb.Frame(sb.CONTROL, 7, hx("04 08 00 00 01 05 03 00 10 27 00 00")),
+        sb.BridgeFrame(sb.CONTROL, 7, hx("04 08 00 00 01 05 03 00 10 27 00 00")),
         "B5 62 01 02 07 0C 04 08 00 00 01 05 03 00 10 27 00 00 39 B6",
     ),
-    (sb.Frame(sb.ACK, 7), "B5 62 01 80 07 00 B9 50"),
-    (sb.Frame(sb.NAK, 8, bytes([1, 0])), "B5 62 01 81 08 02 01 00 A3 1B"),
-    (sb.Frame(sb.QUERY, 9, sb.encode_query(4, 1, 5)), "B5 62 01 04 09 03 04 01 05 FA C3"),
-    (sb.Frame(sb.HELLO_REPLY, 0, sb.encode_hello(sb.Hello(1, 3, "fw"))), "B5 62 01 82 00 04 01 03 66 77 E9 B4"),
+    (sb.BridgeFrame(sb.ACK, 7), "B5 62 01 80 07 00 B9 50"),
+    (sb.BridgeFrame(sb.NAK, 8, bytes([1, 0])), "B5 62 01 81 08 02 01 00 A3 1B"),
+    (sb.BridgeFrame(sb.QUERY, 9, sb.encode_query(4, 1, 5)), "B5 62 01 04 09 03 04 01 05 FA C3"),
+    (sb.BridgeFrame(sb.HELLO_REPLY, 0, sb.encode_hello(sb.Hello(1, 3, "fw"))), "B5 62 01 82 00 04 01 03 66 77 E9 B4"),
 ]
 
 
@@ -242,7 +242,7 @@ def test_bridge_crc_check_value() -> None:
 
 
 @pytest.mark.parametrize(("frame", "wire"), BRIDGE_VECTORS)
-def test_bridge_vectors(frame: sb.Frame, wire: str) -> None:
+def test_bridge_vectors(frame: sb.BridgeFrame, wire: str) -> None:
     assert sb.encode(frame) == hx(wire)
     assert sb.decode(hx(wire)) == frame
 
@@ -254,19 +254,19 @@ def test_bridge_documented_vectors_match_the_doc() -> None:
 
 
 bridge_frames = st.builds(
-    sb.Frame, st.sampled_from(sorted(sb.TYPES)), st.integers(0, 255), st.binary(max_size=sb.MAX_PAYLOAD)
+    sb.BridgeFrame, st.sampled_from(sorted(sb.TYPES)), st.integers(0, 255), st.binary(max_size=sb.MAX_PAYLOAD)
 )
 
 
 @given(bridge_frames)
-def test_bridge_round_trip(frame: sb.Frame) -> None:
+def test_bridge_round_trip(frame: sb.BridgeFrame) -> None:
     assert sb.decode(sb.encode(frame)) == frame
 
 
 @given(st.binary(max_size=300), st.lists(bridge_frames, min_size=1, max_size=3), st.integers(1, 40))
-def test_bridge_stream_recovers_after_garbage(garbage: bytes, frames: list[sb.Frame], chunk: int) -> None:
+def test_bridge_stream_recovers_after_garbage(garbage: bytes, frames: list[sb.BridgeFrame], chunk: int) -> None:
     dec = sb.FrameDecoder()
-    got: list[sb.Frame] = []
+    got: list[sb.BridgeFrame] = []
     stream = garbage + b"".join(sb.encode(f) for f in frames)
     for i in range(0, len(stream), chunk):
         got += dec.feed(stream[i : i + chunk])
@@ -275,11 +275,11 @@ def test_bridge_stream_recovers_after_garbage(garbage: bytes, frames: list[sb.Fr
 
 
 @given(bridge_frames, st.integers(0, 10_000), st.integers(1, 255))
-def test_bridge_corrupted_frame_is_dropped_and_next_is_found(frame: sb.Frame, where: int, flip: int) -> None:
+def test_bridge_corrupted_frame_is_dropped_and_next_is_found(frame: sb.BridgeFrame, where: int, flip: int) -> None:
     wire = bytearray(sb.encode(frame))
     wire[where % len(wire)] ^= flip
     dec = sb.FrameDecoder()
-    following = sb.Frame(sb.ACK, 42)
+    following = sb.BridgeFrame(sb.ACK, 42)
     got = dec.feed(bytes(wire) + sb.encode(following))
     assert got[-1] == following
     assert frame not in got[:-1] or bytes(wire) == sb.encode(frame)
@@ -293,12 +293,12 @@ def test_bridge_garbage_only_protocol_errors(data: bytes) -> None:
 
 
 def test_bridge_refuses_bad_frames() -> None:
-    good = sb.encode(sb.Frame(sb.HELLO, 1))
+    good = sb.encode(sb.BridgeFrame(sb.HELLO, 1))
     with pytest.raises(ProtocolError, match="checksum"):
         sb.decode(good[:-1] + bytes([good[-1] ^ 1]))
     with pytest.raises(ProtocolError, match="sync"):
         sb.decode(b"\x00" + good[1:])
     with pytest.raises(ProtocolError, match="exceeds 255"):
-        sb.encode(sb.Frame(sb.CONTROL, 0, bytes(256)))
+        sb.encode(sb.BridgeFrame(sb.CONTROL, 0, bytes(256)))
     with pytest.raises(ProtocolError, match="type 0x55 unknown"):
-        sb.encode(sb.Frame(0x55, 0))
+        sb.encode(sb.BridgeFrame(0x55, 0))

@@ -1,5 +1,6 @@
-"""Benchmark data that comes from the simulator (kept out of ``rigctl.depth``, which never reaches devices
-or simulators itself: it receives the simulated array through the registry)."""
+"""The simulated presenter as benchmark input: one frame as a depth dataset (``rigctl bench depth``, the demo)
+and as render input with the simulator's own novel view (``rigctl bench render``). It lives outside
+``rigctl.depth`` and ``rigctl.render``, which never reach the simulators: it gets the array from the registry."""
 
 from __future__ import annotations
 
