@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 import cv2
 import numpy as np
@@ -24,6 +24,26 @@ from rigctl.yamlfile import check_spec, line_of, load_yaml_with_lines
 
 CALIBRATION_SPEC = 1
 F64 = NDArray[np.float64]
+
+
+class CameraModelEntry(TypedDict):
+    """One camera in ``calibration.yaml``."""
+
+    K: list[list[float]]
+    dist: list[float]
+    R: list[list[float]]
+    t: list[float]
+    image_size: list[int]
+
+
+class CalibrationFile(TypedDict):
+    """``calibration.yaml`` as written."""
+
+    spec: int
+    rig: str
+    reference_camera: str
+    cameras: dict[str, CameraModelEntry]
+    meta: NotRequired[dict[str, object]]
 
 
 @dataclass(frozen=True)
@@ -57,7 +77,7 @@ class CameraModel:
         )
         return np.asarray(pts.reshape(-1, 2), dtype=np.float64)
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> CameraModelEntry:
         return {
             "K": self.K.tolist(),
             "dist": self.dist.ravel().tolist(),
@@ -74,7 +94,7 @@ class ArrayCalibration:
     rig: str
     cameras: dict[str, CameraModel]
     reference: str
-    meta: dict[str, Any] = field(default_factory=dict)
+    meta: dict[str, object] = field(default_factory=dict)  # free-form notes kept with the file (its source)
 
     def __getitem__(self, name: str) -> CameraModel:
         return self.cameras[name]
@@ -83,8 +103,8 @@ class ArrayCalibration:
     def names(self) -> list[str]:
         return sorted(self.cameras, key=lambda n: self.cameras[n].grid_position)
 
-    def as_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
+    def as_dict(self) -> CalibrationFile:
+        out: CalibrationFile = {
             "spec": CALIBRATION_SPEC,
             "rig": self.rig,
             "reference_camera": self.reference,

@@ -151,8 +151,8 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
     timings["total"] = time.perf_counter() - t_all
 
     rep = result.report
-    res = rep["rectification_residuals"] or {}
-    truth_rows = [c.get("truth", {}) for c in rep["cameras"].values()]
+    res = rep.rectification_residuals
+    truth_rows = [c.truth or {} for c in rep.cameras.values()]
     lines = [
         "# rigctl demo: the simulated 3x3 rig, end to end",
         "",
@@ -162,7 +162,7 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
         "",
         "## Figures",
         "",
-        f"- Calibration: RMS {rep['rms_px']:.4f} px over {len(rep['cameras'])} cameras; "
+        f"- Calibration: RMS {rep.rms_px:.4f} px over {len(rep.cameras)} cameras; "
         + (
             f"worst camera against the truth: centre {max(t['centre_mm'] for t in truth_rows):.3f} mm, "
             f"rotation {max(t['rotation_deg'] for t in truth_rows):.4f} deg."
@@ -170,15 +170,19 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
             else ""
         ),
     ]
-    for key, label in (
-        ("vertical_between_horizontal_neighbours", "vertical disparity between horizontal neighbours"),
-        ("horizontal_between_vertical_neighbours", "horizontal disparity between vertical neighbours"),
-    ):
-        if key in res:
-            lines.append(
-                f"- Rectification, held-out corners, {label}: RMS {res[key]['net']['rms']:.3f} px net of camera "
-                f"placement ({res[key]['raw']['rms']:.3f} px raw)."
-            )
+    pooled_rows = (
+        [
+            (res.vertical_between_horizontal_neighbours, "vertical disparity between horizontal neighbours"),
+            (res.horizontal_between_vertical_neighbours, "horizontal disparity between vertical neighbours"),
+        ]
+        if res
+        else []
+    )
+    for pooled, label in pooled_rows:
+        lines.append(
+            f"- Rectification, held-out corners, {label}: RMS {pooled.net.rms:.3f} px net of camera "
+            f"placement ({pooled.raw.rms:.3f} px raw)."
+        )
     fr_truth = [st.get("against_truth") for st in frame["cameras"].values() if st.get("against_truth")]
     if fr_truth:
         lines.append(

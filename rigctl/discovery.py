@@ -5,11 +5,75 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 from rigctl.address import camera_address, line_address
 from rigctl.errors import DeviceError
-from rigctl.rig import Rig
+from rigctl.rig import Rig, UsbIdentity
+
+
+class V4L2Node(TypedDict):
+    path: str
+    driver: str
+    card: str
+    bus: str
+    formats: list[str]
+    signal: str
+    aliases: list[str]  # /dev/v4l/by-path and by-id links to it
+    error: str  # "" when the node answered
+
+
+class SerialPort(TypedDict):
+    device: str
+    description: str
+    usb: str | None  # vendor:product when it is a USB adapter
+    serial: str | None
+    location: str | None
+
+
+class UsbEntry(TypedDict, total=False):
+    """An attached USB device, or the one error that stopped the listing."""
+
+    describe: str
+    vendor_id: int
+    product_id: int
+    serial: str | None
+    bus_path: str
+    manufacturer: str | None
+    product: str | None
+    error: str
+
+
+class CameraState(TypedDict):
+    name: str
+    device: str
+    state: str  # "found", "MISSING" or "simulated"
+    resolved: NotRequired[str]  # the device node the address resolves to
+
+
+class LineState(TypedDict):
+    role: str  # "tally" or "bridge"
+    address: str
+    state: str  # "found", "MISSING", "network" or "simulated"
+
+
+class IdentityState(TypedDict):
+    role: str
+    state: str  # "found" or "PROBLEM"
+    device: NotRequired[str]
+    error: NotRequired[str]
+
+
+class AttachedReport(TypedDict):
+    """The ``rigctl devices`` report (``--json`` prints it as it is)."""
+
+    v4l2: list[V4L2Node]
+    serial: list[SerialPort]
+    usb: list[UsbEntry]
+    cameras: list[CameraState]
+    lines: list[LineState]
+    usb_identities: list[IdentityState]
+    missing: list[str]
 
 
 def usb_backend() -> Any:
@@ -23,10 +87,10 @@ def usb_backend() -> Any:
     return load_sim_usb(Path(path))
 
 
-def _serial_ports() -> list[dict[str, Any]]:
+def _serial_ports() -> list[SerialPort]:
     from serial.tools import list_ports
 
-    out = []
+    out: list[SerialPort] = []
     for port in list_ports.comports():
         out.append(
             {
@@ -40,9 +104,9 @@ def _serial_ports() -> list[dict[str, Any]]:
     return out
 
 
-def rig_usb_identities(rig: Rig) -> dict[str, Any]:
+def rig_usb_identities(rig: Rig) -> dict[str, UsbIdentity]:
     """Every USB identity the rig file names, keyed by what it identifies (camera r0c0, tally, bridge)."""
-    out: dict[str, Any] = {f"camera {c.name}": c.usb for c in rig.model.cameras if c.usb is not None}
+    out: dict[str, UsbIdentity] = {f"camera {c.name}": c.usb for c in rig.model.cameras if c.usb is not None}
     if rig.model.tally is not None and rig.model.tally.usb is not None:
         out["tally"] = rig.model.tally.usb
     if rig.model.camera_control is not None and rig.model.camera_control.usb is not None:
@@ -59,28 +123,40 @@ def _line_state(text: str, role: str) -> str:
     return "found" if address.exists() else "MISSING"
 
 
-def describe_attached(rig: Rig) -> dict[str, Any]:
+def describe_attached(rig: Rig) -> AttachedReport:
     """Attached devices of every kind the rig uses, and each of the rig's devices: found, missing or simulated."""
     addresses = {c.name: camera_address(c.device, c.name) for c in rig.cameras}
-    v4l2: list[dict[str, Any]] = []
+    v4l2: list[V4L2Node] = []
     if any(a.scheme == "v4l2" for a in addresses.values()) or any(p.startswith("video") for p in os.listdir("/dev")):
         from rigctl.drivers.v4l2.discovery import list_v4l2
 
-        v4l2 = [d.as_json() for d in list_v4l2()]
+        v4l2 = [
+            V4L2Node(
+                path=d.path,
+                driver=d.driver,
+                card=d.card,
+                bus=d.bus,
+                formats=d.formats,
+                signal=d.signal,
+                aliases=d.aliases,
+                error=d.error,
+            )
+            for d in list_v4l2()
+        ]
     known = {d["path"] for d in v4l2}
-    cams, missing = [], []
+    cams: list[CameraState] = []
+    missing: list[str] = []
     for cam in rig.cameras:
-        entry: dict[str, Any] = {"name": cam.name, "device": cam.device}
         if addresses[cam.name].scheme == "sim":
-            entry["state"] = "simulated"
+            entry = CameraState(name=cam.name, device=cam.device, state="simulated")
         else:
             resolved = os.path.realpath(addresses[cam.name].target)
-            entry["resolved"] = resolved
-            entry["state"] = "found" if resolved in known else "MISSING"
+            state = "found" if resolved in known else "MISSING"
+            entry = CameraState(name=cam.name, device=cam.device, resolved=resolved, state=state)
             if resolved not in known:
                 missing.append(f"{cam.name} ({cam.device})")
         cams.append(entry)
-    lines = []
+    lines: list[LineState] = []
     for role, address in (
         ("tally", rig.model.tally.port if rig.model.tally else None),
         ("bridge", rig.model.camera_control.bridge if rig.model.camera_control else None),
@@ -91,14 +167,25 @@ def describe_attached(rig: Rig) -> dict[str, Any]:
         lines.append({"role": role, "address": address, "state": state})
         if state == "MISSING":
             missing.append(f"{role} line ({address})")
-    usb: list[dict[str, Any]] = []
-    identities: list[dict[str, Any]] = []
+    usb: list[UsbEntry] = []
+    identities: list[IdentityState] = []
     wanted = rig_usb_identities(rig)
     try:
         from rigctl.drivers.usb_identity import list_usb, resolve
 
         attached = list_usb(usb_backend())
-        usb = [{"describe": d.describe(), **d.__dict__} for d in attached]
+        usb = [
+            UsbEntry(
+                describe=d.describe(),
+                vendor_id=d.vendor_id,
+                product_id=d.product_id,
+                serial=d.serial,
+                bus_path=d.bus_path,
+                manufacturer=d.manufacturer,
+                product=d.product,
+            )
+            for d in attached
+        ]
         for role, ident in wanted.items():
             try:
                 dev = resolve({role: ident}, attached)[role]

@@ -105,7 +105,7 @@ class Plan:
 
     def as_json(self) -> dict[str, Any]:
         far_inf = math.isinf(self.far_m)
-        out: dict[str, Any] = {
+        out: dict[str, object] = {
             "rig": self.rig,
             "image_px": [self.width_px, self.height_px],
             "c0_px": self.c0_px,
@@ -135,7 +135,7 @@ class Plan:
         if self.subject_fits:
             out["subject_fits"] = self.subject_fits
         lost: list[str] = []
-        clean: dict[str, Any] = _finite_or_none(out, "", lost)
+        clean: dict[str, object] = _finite_or_none(out, "", lost)
         if lost:
             clean["not_representable"] = lost
         return clean

@@ -31,7 +31,7 @@ class DeviceSet:
 
     cameras: dict[str, Camera]
     truth: TruthProvider | None = None
-    settings: dict[str, Any] = field(default_factory=dict)  # recorded in the take's manifest
+    settings: dict[str, object] = field(default_factory=dict)  # the simulator's, recorded in the take's manifest
     description: str = ""
     simulation: Any = None
 

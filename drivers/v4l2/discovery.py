@@ -25,9 +25,6 @@ class V4L2Info:
     aliases: list[str] = field(default_factory=list)  # /dev/v4l/by-path and by-id links to it
     error: str = ""
 
-    def as_json(self) -> dict[str, object]:
-        return dict(self.__dict__)
-
 
 def _aliases() -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}

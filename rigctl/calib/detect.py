@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 import cv2
 import numpy as np
@@ -154,6 +154,11 @@ def detect(views: Views, target: Target, progress: Callable[[int, int], None] | 
     )
 
 
-def detections_summary(obs: Observations, names: list[str]) -> dict[str, Any]:
+class CameraDetections(TypedDict):
+    views: int  # frames with any corner of the board
+    corners: int
+
+
+def detections_summary(obs: Observations, names: list[str]) -> dict[str, CameraDetections]:
     v = obs.views()
     return {n: {"views": int((v[i] > 0).sum()), "corners": int(v[i].sum())} for i, n in enumerate(names)}

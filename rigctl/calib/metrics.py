@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.calib.detect import Observations
+from rigctl.calib.report_model import DisparityRatio, ErrorStats, PairResidual, RawNet, RectificationResiduals
 from rigctl.calib.solution import F64, Solution, chordal_mean
 from rigctl.calibration_model import ArrayCalibration, CameraModel, rotation_angle_deg
 from rigctl.rectgeom import common_plane
@@ -29,7 +30,7 @@ def to_rig(
     sizes: list[tuple[int, int]],
     rig: str,
     nominal: dict[str, F64] | None = None,
-    meta: dict[str, Any] | None = None,
+    meta: dict[str, object] | None = None,
 ) -> ArrayCalibration:
     """The solution in a rig frame: axes = the cameras' mean orientation (chordal mean); origin such that the
     centres fit the nominal lattice best (translation only), or their centroid without a nominal lattice."""
@@ -215,21 +216,16 @@ def cross_validate(a: ArrayCalibration, b: ArrayCalibration, depth: tuple[float,
     return out
 
 
-def _stats(d: F64) -> dict[str, float]:
+def _stats(d: F64) -> ErrorStats:
     if not len(d):
-        return {"rms": float("nan"), "p95": float("nan"), "max": float("nan"), "n": 0}
+        return ErrorStats(float("nan"), float("nan"), float("nan"), 0)
     a = np.abs(d)
-    return {
-        "rms": float(np.sqrt(np.mean(d**2))),
-        "p95": float(np.percentile(a, 95)),
-        "max": float(a.max()),
-        "n": len(d),
-    }
+    return ErrorStats(float(np.sqrt(np.mean(d**2))), float(np.percentile(a, 95)), float(a.max()), len(d))
 
 
 def rectification_residuals(
     calib: ArrayCalibration, obs: Observations, names: list[str], frames: list[int]
-) -> dict[str, Any]:
+) -> RectificationResiduals:
     """On the corners of ``frames`` (held out of the fit): after common-plane rectification, the vertical
     disparity between horizontal neighbours and the horizontal disparity between vertical neighbours, per
     pair and overall, and the ratio of horizontal to vertical disparity against dx / dy.
@@ -257,7 +253,7 @@ def rectification_residuals(
                     criteria=crit,
                 ).reshape(-1, 2)
                 rect[n, f] = dict(zip(obs.pt[m].tolist(), p, strict=True))
-    pairs: dict[str, Any] = {}
+    pairs: dict[str, PairResidual] = {}
     pooled: dict[str, list[F64]] = {"h_raw": [], "h_net": [], "v_raw": [], "v_net": []}
     for a in names:
         for b in names:
@@ -287,25 +283,17 @@ def rectification_residuals(
             key = "h" if horizontal else "v"
             pooled[f"{key}_raw"].append(r)
             pooled[f"{key}_net"].append(nt)
-            pairs[f"{a}-{b}"] = {
-                "direction": "horizontal" if horizontal else "vertical",
-                "raw": _stats(r),
-                "net": _stats(nt),
-            }
-    out: dict[str, Any] = {
-        "frames": len(frames),
-        "vertical_between_horizontal_neighbours": {
-            "raw": _stats(np.concatenate(pooled["h_raw"]) if pooled["h_raw"] else np.zeros(0)),
-            "net": _stats(np.concatenate(pooled["h_net"]) if pooled["h_net"] else np.zeros(0)),
-        },
-        "horizontal_between_vertical_neighbours": {
-            "raw": _stats(np.concatenate(pooled["v_raw"]) if pooled["v_raw"] else np.zeros(0)),
-            "net": _stats(np.concatenate(pooled["v_net"]) if pooled["v_net"] else np.zeros(0)),
-        },
-        "pairs": pairs,
-    }
-    out["disparity_ratio"] = _disparity_ratio(rect, names, pos, frames, grid)
-    return out
+            pairs[f"{a}-{b}"] = PairResidual("horizontal" if horizontal else "vertical", _stats(r), _stats(nt))
+
+    def pooled_stats(key: str) -> RawNet:
+        raw, net = pooled[f"{key}_raw"], pooled[f"{key}_net"]
+        return RawNet(
+            _stats(np.concatenate(raw) if raw else np.zeros(0)), _stats(np.concatenate(net) if net else np.zeros(0))
+        )
+
+    return RectificationResiduals(
+        len(frames), pooled_stats("h"), pooled_stats("v"), pairs, _disparity_ratio(rect, names, pos, frames, grid)
+    )
 
 
 def _disparity_ratio(
@@ -314,7 +302,7 @@ def _disparity_ratio(
     pos: dict[str, tuple[int, int]],
     frames: list[int],
     grid: Any,
-) -> dict[str, float] | None:
+) -> DisparityRatio | None:
     """Horizontal disparity to the right neighbour over vertical disparity to the neighbour below, for the
     same corner, against dx / dy of the fitted grid (1.0 = the grid's geometry holds)."""
     ratios = []
@@ -335,8 +323,4 @@ def _disparity_ratio(
     if not ratios:
         return None
     expected = grid.spacing_x_m / grid.spacing_y_m
-    return {
-        "median": float(np.median(ratios)),
-        "expected_dx_over_dy": expected,
-        "relative": float(np.median(ratios) / expected),
-    }
+    return DisparityRatio(float(np.median(ratios)), expected, float(np.median(ratios) / expected))

@@ -16,8 +16,8 @@ def _f(v: Any, fmt: str = ".3f") -> str:
 
 def format_table(result: Result) -> str:
     rep = result.report
-    lines = [f"calibrated {len(rep['cameras'])} cameras from {rep['source']} ({rep['target']})"]
-    has_nominal = any("position_vs_nominal_mm" in c for c in rep["cameras"].values())
+    lines = [f"calibrated {len(rep.cameras)} cameras from {rep.source} ({rep.target})"]
+    has_nominal = any(c.position_vs_nominal_mm is not None for c in rep.cameras.values())
     head = [
         "camera",
         "RMS px",
@@ -27,59 +27,60 @@ def format_table(result: Result) -> str:
         "rot deg",
         "coverage",
     ]
-    if rep["cross_validation_px"]:
+    if rep.cross_validation_px:
         head.append("x-val px")
-    if rep["truth"]:
+    if rep.truth:
         head += ["truth: centre mm", "rot deg", "ray deg"]
     rows = [head]
-    for n, c in rep["cameras"].items():
-        pos = c.get("position_vs_nominal_mm")
+    for n, c in rep.cameras.items():
+        pos = c.position_vs_nominal_mm
         where = (
-            f"{np.linalg.norm(pos):.2f}" if pos is not None else " ".join(f"{v:.3g}" for v in c["position_vs_centroid"])
+            f"{np.linalg.norm(pos):.2f}"
+            if pos is not None
+            else " ".join(f"{v:.3g}" for v in (c.position_vs_centroid or []))
         )
-        label = n + (f" ({c['input_name']})" if c.get("input_name") else "")
+        label = n + (f" ({c.input_name})" if c.input_name else "")
         row = [
             label,
-            _f(c["rms_px"], ".4f"),
-            str(c["frames_used"]),
-            ",".join(c["frames_rejected"]) or "-",
+            _f(c.rms_px, ".4f"),
+            str(c.frames_used),
+            ",".join(c.frames_rejected) or "-",
             where,
-            _f(c["rotation_vs_common_deg"], ".3f"),
-            f"{c['coverage']:.0%}",
+            _f(c.rotation_vs_common_deg, ".3f"),
+            f"{c.coverage:.0%}",
         ]
-        if rep["cross_validation_px"]:
-            row.append(_f(c.get("cross_validation_px")))
-        if rep["truth"]:
-            t = c["truth"]
-            row += [_f(t["centre_mm"]), _f(t["rotation_deg"], ".4f"), _f(t["ray_deg"], ".4f")]
+        if rep.cross_validation_px:
+            row.append(_f(c.cross_validation_px))
+        if rep.truth:
+            t = c.truth or {}
+            row += [_f(t.get("centre_mm")), _f(t.get("rotation_deg"), ".4f"), _f(t.get("ray_deg"), ".4f")]
         rows.append(row)
     widths = [max(len(r[i]) for r in rows) for i in range(len(head))]
     lines += ["  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)).rstrip() for r in rows]
-    lines.append(f"overall RMS {rep['rms_px']:.4f} px")
-    if rep["rejected_corners"]:
-        lines.append(f"single corners rejected as mis-detected: {rep['rejected_corners']}")
-    if rep["rejected_views"]:
-        lines.append("rejected views (camera frame): " + ", ".join(f"{c} {f}" for c, f in rep["rejected_views"]))
-    res = rep["rectification_residuals"]
+    lines.append(f"overall RMS {rep.rms_px:.4f} px")
+    if rep.rejected_corners:
+        lines.append(f"single corners rejected as mis-detected: {rep.rejected_corners}")
+    if rep.rejected_views:
+        lines.append("rejected views (camera frame): " + ", ".join(f"{c} {f}" for c, f in rep.rejected_views))
+    res = rep.rectification_residuals
     if res:
-        lines.append(f"rectification residuals on {res['frames']} held-out frames (px; raw / net of camera placement):")
-        for key, label in (
-            ("vertical_between_horizontal_neighbours", "vertical disparity, horizontal neighbours"),
-            ("horizontal_between_vertical_neighbours", "horizontal disparity, vertical neighbours"),
+        lines.append(f"rectification residuals on {res.frames} held-out frames (px; raw / net of camera placement):")
+        for pooled, label in (
+            (res.vertical_between_horizontal_neighbours, "vertical disparity, horizontal neighbours"),
+            (res.horizontal_between_vertical_neighbours, "horizontal disparity, vertical neighbours"),
         ):
-            raw, net = res[key]["raw"], res[key]["net"]
-            if raw["n"]:
+            raw, net = pooled.raw, pooled.net
+            if raw.n:
                 lines.append(
-                    f"  {label}: RMS {raw['rms']:.3f} / {net['rms']:.3f}, p95 {raw['p95']:.3f} / {net['p95']:.3f}, "
-                    f"max {raw['max']:.3f} / {net['max']:.3f} ({raw['n']} corners)"
+                    f"  {label}: RMS {raw.rms:.3f} / {net.rms:.3f}, p95 {raw.p95:.3f} / {net.p95:.3f}, "
+                    f"max {raw.max:.3f} / {net.max:.3f} ({raw.n} corners)"
                 )
-        ratio = res.get("disparity_ratio")
+        ratio = res.disparity_ratio
         if ratio:
             lines.append(
-                f"  horizontal / vertical disparity {ratio['median']:.4f} "
-                f"against dx/dy {ratio['expected_dx_over_dy']:.4f}"
+                f"  horizontal / vertical disparity {ratio.median:.4f} against dx/dy {ratio.expected_dx_over_dy:.4f}"
             )
-    t = rep["timings_s"]
+    t = rep.timings_s
     lines.append("time: " + ", ".join(f"{k.removesuffix('_s').replace('_', ' ')} {v:.1f} s" for k, v in t.items()))
     return "\n".join(lines)
 
@@ -110,7 +111,7 @@ def write_plots(result: Result, stem: Path) -> list[Path]:
         ax.scatter(obs.uv[m & ~used, 0], obs.uv[m & ~used, 1], s=3, c="tab:red")
         ax.set_xlim(0, w)
         ax.set_ylim(h, 0)
-        ax.set_title(f"{n}: {result.report['cameras'][n]['coverage']:.0%} of cells", fontsize=8)
+        ax.set_title(f"{n}: {result.report.cameras[n].coverage:.0%} of cells", fontsize=8)
         ax.set_xticks([])
         ax.set_yticks([])
     fig.suptitle("detected corners (blue used, red rejected)", fontsize=9)
@@ -121,7 +122,8 @@ def write_plots(result: Result, stem: Path) -> list[Path]:
     out.append(path)
 
     res = reprojection(fit.solution, result.points, obs)
-    panels = 2 if result.report["rectification_residuals"] else 1
+    residuals = result.report.rectification_residuals
+    panels = 2 if residuals else 1
     fig, axes = plt.subplots(1, panels, figsize=(5 * panels, 4), squeeze=False)
     ax = axes[0][0]
     ax.scatter(res[used, 0], res[used, 1], s=1, alpha=0.4)
@@ -130,12 +132,12 @@ def write_plots(result: Result, stem: Path) -> list[Path]:
     ax.set_ylim(-lim, lim)
     ax.set_aspect("equal")
     ax.set_title(f"reprojection residuals (px), RMS {fit.solution.rms:.3f}", fontsize=9)
-    if panels == 2:
+    if residuals:
         ax = axes[0][1]
-        pairs = result.report["rectification_residuals"]["pairs"]
+        pairs = residuals.pairs
         labels = list(pairs)
-        raw = [pairs[p]["raw"]["rms"] for p in labels]
-        net = [pairs[p]["net"]["rms"] for p in labels]
+        raw = [pairs[p].raw.rms for p in labels]
+        net = [pairs[p].net.rms for p in labels]
         x = np.arange(len(labels))
         ax.bar(x - 0.2, raw, 0.4, label="raw")
         ax.bar(x + 0.2, net, 0.4, label="net of camera placement")

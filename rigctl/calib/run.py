@@ -16,6 +16,8 @@ from rigctl.board import BoardSpec
 from rigctl.calib import metrics
 from rigctl.calib.detect import Observations, Target, describe_target, detect, target_points
 from rigctl.calib.inputs import Views, load_views
+from rigctl.calib.report_model import CalibrationReport, CameraReport, RectificationResiduals
+from rigctl.calib.solution import F64
 from rigctl.calib.solve import Fit, solve
 from rigctl.calibration_model import ArrayCalibration, load_calibration, rotation_angle_deg
 from rigctl.errors import CalibrationError, RigctlError
@@ -34,7 +36,7 @@ class Options:
 @dataclass
 class Result:
     calibration: ArrayCalibration
-    report: dict[str, Any]
+    report: CalibrationReport
     diagnosis: list[str]
     views: Views
     obs: Observations
@@ -44,7 +46,7 @@ class Result:
     timings: dict[str, float] = field(default_factory=dict)
 
 
-def _nominal(views: Views) -> tuple[dict[str, Any] | None, str]:
+def _nominal(views: Views) -> tuple[dict[str, F64] | None, str]:
     """Nominal camera centres (rig coordinates, metres) from the take's rig snapshot, when there is one."""
     if not views.rig:
         return None, ""
@@ -113,7 +115,7 @@ def calibrate(
     frames_used = [int(f) for f in np.flatnonzero(fit.active.any(0))]
     frames_good = [int(f) for f in np.flatnonzero((fit.active | ~fit.usable).all(0) & fit.active.any(0))]
     heldout_cal = None
-    residuals: dict[str, Any] | None = None
+    residuals: RectificationResiduals | None = None
     t0 = time.perf_counter()
     if len(names) > 1 and len(frames_used) >= 3 * opt.holdout_every:
         test = frames_good[opt.holdout_every - 1 :: opt.holdout_every]
@@ -122,7 +124,7 @@ def calibrate(
             hfit = _fit(points, obs, sizes, names, train, opt)
             heldout_cal = metrics.to_rig(hfit.solution, names, sizes, calib.rig, nominal)
             residuals = metrics.rectification_residuals(heldout_cal, _good_corners(obs, fit), names, test)
-            residuals["held_out_frames"] = [views.frames[f] for f in test]
+            residuals.held_out_frames = [views.frames[f] for f in test]
         except CalibrationError as exc:
             diagnosis.append(f"held-out check could not run: {exc}")
     timings["heldout_s"] = time.perf_counter() - t0
@@ -161,13 +163,13 @@ def _report(
     obs: Observations,
     fit: Fit,
     calib: ArrayCalibration,
-    nominal: dict[str, Any] | None,
-    residuals: dict[str, Any] | None,
+    nominal: dict[str, F64] | None,
+    residuals: RectificationResiduals | None,
     cross: dict[str, float] | None,
     truth: dict[str, dict[str, float]] | None,
     diagnosis: list[str],
     timings: dict[str, float],
-) -> dict[str, Any]:
+) -> CalibrationReport:
     from rigctl.calib.solution import reprojection, rms
 
     names = views.names
@@ -175,51 +177,45 @@ def _report(
     res = reprojection(sol, target_points(target), obs)
     used = fit.active[obs.cam, obs.frame] & fit.corner_ok
     centroid = np.mean([calib[n].centre for n in names], axis=0)
-    cams: dict[str, Any] = {}
+    cams: dict[str, CameraReport] = {}
     for c, n in enumerate(names):
         m = (obs.cam == c) & used
         rejected = [views.frames[f] for f in np.flatnonzero(fit.usable[c] & ~fit.active[c])]
         cov, corner_cells = metrics.coverage(obs, c, views.image_size, fit.active)
-        entry: dict[str, Any] = {
-            "rms_px": rms(res[m]),
-            "frames_used": int(fit.active[c].sum()),
-            "frames_rejected": rejected,
-            "rotation_vs_common_deg": rotation_angle_deg(calib[n].R),
-            "coverage": cov,
-            "corner_cells": corner_cells,
-            "distortion_monotonic": metrics.distortion_monotonic(sol.K[c], sol.dist[c], views.image_size),
-            "focal_px": float(sol.K[c][0, 0]),
-            "uncertainty": sol.info.uncertainty[c].as_dict() if sol.info.uncertainty else {},
-        }
-        if nominal is not None:
-            entry["position_vs_nominal_mm"] = ((calib[n].centre - nominal[n]) * 1e3).tolist()
-        else:
-            entry["position_vs_centroid"] = (calib[n].centre - centroid).tolist()
-        if cross is not None:
-            entry["cross_validation_px"] = cross[n]
-        if truth is not None:
-            entry["truth"] = truth[n]
-        if views.source_names.get(n):
-            entry["input_name"] = views.source_names[n]
-        cams[n] = entry
+        cams[n] = CameraReport(
+            rms_px=rms(res[m]),
+            frames_used=int(fit.active[c].sum()),
+            frames_rejected=rejected,
+            rotation_vs_common_deg=rotation_angle_deg(calib[n].R),
+            coverage=cov,
+            corner_cells=corner_cells,
+            distortion_monotonic=metrics.distortion_monotonic(sol.K[c], sol.dist[c], views.image_size),
+            focal_px=float(sol.K[c][0, 0]),
+            uncertainty=sol.info.uncertainty[c].as_dict() if sol.info.uncertainty else {},
+            position_vs_nominal_mm=((calib[n].centre - nominal[n]) * 1e3).tolist() if nominal is not None else None,
+            position_vs_centroid=(calib[n].centre - centroid).tolist() if nominal is None else None,
+            cross_validation_px=cross[n] if cross is not None else None,
+            truth=truth[n] if truth is not None else None,
+            input_name=views.source_names.get(n) or None,
+        )
     rejected_frames = sorted(
         {views.frames[f] for f in np.flatnonzero((fit.usable & ~fit.active).any(0))}, key=lambda s: (len(s), s)
     )
-    return {
-        "source": str(views.source),
-        "target": describe_target(target),
-        "cameras": cams,
-        "rms_px": sol.rms,
-        "frames": len(views.frames),
-        "frames_with_rejected_views": rejected_frames,
-        "rejected_corners": int((fit.active[obs.cam, obs.frame] & ~fit.corner_ok).sum()),
-        "rejected_views": [
-            [names[c], views.frames[f]] for c, f in zip(*np.nonzero(fit.usable & ~fit.active), strict=True)
+    return CalibrationReport(
+        source=str(views.source),
+        target=describe_target(target),
+        cameras=cams,
+        rms_px=sol.rms,
+        frames=len(views.frames),
+        frames_with_rejected_views=rejected_frames,
+        rejected_corners=int((fit.active[obs.cam, obs.frame] & ~fit.corner_ok).sum()),
+        rejected_views=[
+            (names[c], views.frames[f]) for c, f in zip(*np.nonzero(fit.usable & ~fit.active), strict=True)
         ],
-        "rectification_residuals": residuals,
-        "cross_validation_px": cross,
-        "truth": truth is not None,
-        "diagnosis": diagnosis,
-        "history": [step.as_dict() for step in fit.history],
-        "timings_s": timings,
-    }
+        rectification_residuals=residuals,
+        cross_validation_px=cross,
+        truth=truth is not None,
+        diagnosis=diagnosis,
+        history=fit.history,
+        timings_s=timings,
+    )

@@ -76,7 +76,7 @@ def run(ns: argparse.Namespace) -> int:
     report = result.report
     problems = result.diagnosis
     if ns.json:
-        print(json.dumps(report, default=float))
+        print(json.dumps(report.as_dict(), default=float))
     else:
         print(format_table(result))
     for line in problems:

@@ -4,6 +4,7 @@ calibration, which must end with a diagnosis naming the camera and what to shoot
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -112,7 +113,7 @@ def raw_residuals_of_the_truth(take: Path, frames: list[str]) -> dict[str, dict[
     truth = load_calibration(take / "truth" / "calibration.yaml")
     res = metrics.rectification_residuals(truth, obs, views.names, list(range(len(views.frames))))
     keys = ("vertical_between_horizontal_neighbours", "horizontal_between_vertical_neighbours")
-    return {k: res[k]["raw"] for k in keys}
+    return {k: dataclasses.asdict(getattr(res, k).raw) for k in keys}
 
 
 def test_simulated_array_against_the_truth(charuco_take: Path, tmp_path: Path) -> None:
