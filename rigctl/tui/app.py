@@ -25,6 +25,8 @@ from rigctl.tui.screens import FORCE_RISK, Ask, Confirm, HelpScreen, Notice, Pla
 from rigctl.tui.session import Session, Snapshot
 from rigctl.tui.tiles import CameraTile, GlobalBar
 
+log = logging.getLogger(__name__)
+
 
 class SnapshotReady(Message):
     """A new snapshot is waiting (coalesced: one message however many snapshots were taken)."""
@@ -94,6 +96,7 @@ class ShootApp(App[None]):
             self.rig = self.session.rig
             self.session.arm()
         except RigctlError as exc:
+            log.info("opening the session: %s", exc)  # on screen already: in the bar, not as a notification
             if self.session is not None:
                 self.session.message = f"cannot stream: {exc}"
             else:
@@ -167,6 +170,7 @@ class ShootApp(App[None]):
         try:
             session.start(force=force)
         except PreflightError as exc:
+            log.info("recording refused: %s", exc)
             self.call_from_thread(self.push_screen, Refused(exc.problems, exc.forcible), self._after_refusal)
         except RigctlError as exc:
             self.call_from_thread(self.push_screen, Notice("Recording refused", [str(exc)]))
