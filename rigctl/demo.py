@@ -229,7 +229,7 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
         "|---|---|",
         *(f"| {k} | {v:.1f} |" for k, v in timings.items()),
         "",
-        f"Rectified {rect['frames']} frames at f = {rect['focal_px']:.1f} px. Takes: `takes/`; calibration: "
+        f"Rectified {rect.frames} frames at f = {rect.focal_px:.1f} px. Takes: `takes/`; calibration: "
         "`calibration.yaml`; depth: `depth/` (EXR, PFM, PNG, report.json).",
     ]
     report = out / "report.md"

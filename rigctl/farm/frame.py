@@ -69,9 +69,9 @@ class RectifyingGrid:
         self.reader = TakeReader(take)
         self.rect = rectifier_for_take(self.reader, calibration)
         rec = self.rect.record()
-        self.focal_px = float(rec["focal_px"])
-        self.spacing = float(rec["spacing_x_m"])
-        positions = {n: np.asarray(p, float) for n, p in rec["positions_m"].items()}
+        self.focal_px = rec.focal_px
+        self.spacing = rec.spacing_x_m
+        positions = {n: np.asarray(p, float) for n, p in rec.positions_m.items()}
         origin = np.mean([positions[n] for n in self.reader.names], axis=0)
         self.offsets = {
             n: (float((positions[n] - origin)[0] / self.spacing), float((positions[n] - origin)[1] / self.spacing))
@@ -84,18 +84,13 @@ class RectifyingGrid:
         return [s.number for s in self.reader.complete_sets()]
 
     def grid(self, number: int) -> Grid:
-        from rigctl.pixfmt import to_rgb
         from rigctl.rectify import frame_bgr
 
         sets = {s.number: s for s in self.reader.complete_sets()}
         if number not in sets:
             raise ParameterError(f"{self.folder}: frame set {number} is not complete or does not exist")
-        images = {}
-        for n in self.names:
-            bgr = self.rect.frame(n, frame_bgr(self.reader, n, sets[number].members[n]))
-            h, w = bgr.shape[:2]
-            images[n] = to_rgb(np.ascontiguousarray(bgr).reshape(-1), "BGR3", w, h)
-        meta = {"take": str(self.folder), "frame": number}
+        images = {n: self.rect.frame(n, frame_bgr(self.reader, n, sets[number].members[n])) for n in self.names}
+        meta: dict[str, str | int] = {"take": str(self.folder), "frame": number}
         return Grid(list(self.names), images, dict(self.offsets), self.focal_px, self.spacing, meta=meta)
 
 
