@@ -2,10 +2,11 @@
 rectify``'s output, or an ``ideal=true`` simulated take, rectified as recorded), or a grid folder
 (``r{row}c{col}.png`` + ``grid.yaml``).
 
-A grid holds each picture as it came: 8-bit BGR from a take or an 8-bit PNG, float RGB from a 16-bit PNG or
-an array. What an engine reads is derived on first use and kept: ``grid.images[name]`` (float RGB in [0, 1])
-and :meth:`Grid.bgr8` (8-bit BGR, what the semi-global matcher reads), so the 8-bit pictures of a take reach
-the matcher without a float round trip."""
+A grid holds each picture as it came: a take's frame bytes in their captured format, 8-bit BGR from an 8-bit
+PNG, float RGB from a 16-bit PNG or an array. What an engine reads is derived on first use and kept:
+``grid.images[name]`` (float RGB in [0, 1]: the cost volume, the keyer, the EXR picture) and
+:meth:`Grid.bgr8` (8-bit BGR: the semi-global matcher), each straight from what was given, so a take's frames
+reach the matcher without a float round trip and the float picture is not quantised on the way."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.errors import ParameterError, RigFileError, TakeError
-from rigctl.pixfmt import bgr8_to_rgb, to_u8
+from rigctl.pixfmt import bgr8_to_rgb, to_bgr8, to_rgb, to_u8
 from rigctl.rig import CAMERA_NAME
 from rigctl.take.reader import TakeReader
 from rigctl.yamlfile import load_yaml
@@ -31,26 +32,48 @@ U8 = NDArray[np.uint8]
 
 class FrameImages(Mapping[str, F32]):
     """The pictures of a grid by camera: float RGB in [0, 1] when read as a mapping, 8-bit BGR through
-    :meth:`bgr8`; each is made from the picture as given on first use and kept."""
+    :meth:`bgr8`. Each is made on first use and kept, from the picture as given (8-bit BGR or float RGB) or
+    straight from a take's captured bytes (:meth:`captured`), so neither goes through the other."""
 
     def __init__(self, images: Mapping[str, NDArray[Any]]) -> None:
         self._names = list(images)
         self._u8: dict[str, U8] = {n: v for n, v in images.items() if v.dtype == np.uint8}
         self._float: dict[str, F32] = {n: v for n, v in images.items() if v.dtype != np.uint8}
+        self._captured: dict[str, U8] = {}
+        self._format = ("", 0, 0)
+
+    @classmethod
+    def captured(cls, frames: Mapping[str, U8], pixel_format: str, width: int, height: int) -> FrameImages:
+        """Pictures still in a take's captured pixel format (frame bytes as read)."""
+        out = cls({})
+        out._names = list(frames)
+        out._captured = dict(frames)
+        out._format = (pixel_format, width, height)
+        return out
 
     def __getitem__(self, name: str) -> F32:
         rgb = self._float.get(name)
         if rgb is None:
-            rgb = self._float[name] = bgr8_to_rgb(self._u8[name])
+            if name in self._captured:
+                rgb = to_rgb(self._captured[name], *self._format)
+            else:
+                rgb = bgr8_to_rgb(self._u8[name])
+            self._float[name] = rgb
         return rgb
 
     def bgr8(self, name: str) -> U8:
         bgr = self._u8.get(name)
         if bgr is None:
-            bgr = self._u8[name] = np.ascontiguousarray(to_u8(self._float[name]))
+            if name in self._captured:
+                bgr = to_bgr8(self._captured[name], *self._format)
+            else:
+                bgr = np.ascontiguousarray(to_u8(self._float[name]))
+            self._u8[name] = bgr
         return bgr
 
     def shape(self) -> tuple[int, int]:
+        if self._captured:
+            return self._format[2], self._format[1]
         first = self._names[0]
         img = self._u8[first] if first in self._u8 else self._float[first]
         return int(img.shape[0]), int(img.shape[1])
@@ -231,12 +254,14 @@ class TakeGrid:
         if number not in sets:
             raise ParameterError(f"{self.folder}: frame set {number} is not complete or does not exist")
         s = sets[number]
-        images: dict[str, NDArray[Any]] = {}
+        frames: dict[str, U8] = {}
         for n in self.names:
-            bgr = self.reader.image_or_none(n, s.members[n], "bgr8")
-            if bgr is None:
+            data = self.reader.frame_or_none(n, s.members[n])
+            if data is None:
                 raise SkippedFrameSet(number)  # a damaged frame, skipped: listed in reader.damaged
-            images[n] = bgr
+            frames[n] = data
+        r = self.reader
+        images = FrameImages.captured(frames, r.pixel_format, r.width, r.height)
         truth = None
         tdir = self.folder / "truth" / "disparity" / f"{number:06d}"
         if tdir.is_dir():

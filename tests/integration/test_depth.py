@@ -122,7 +122,7 @@ def test_motorcycle_two_view_no_worse_than_sgbm_3way_on_bad_2() -> None:
     from rigctl.depth.bench import motorcycle, run_bench
 
     result = run_bench([motorcycle()], methods=["balanced", "opencv-sgbm-3way"])
-    rows = {r["method"]: r for r in result["rows"]}
+    rows = {r.method: r.scores for r in result.rows}
     assert rows["balanced"]["bad_2.0"] <= rows["opencv-sgbm-3way"]["bad_2.0"], rows
 
 
@@ -239,10 +239,10 @@ def test_best_beats_the_best_opencv_baseline_on_the_realistic_presenter_by_30_pe
 
     result = run_bench([presenter(ideal=False)], methods=["best", *BASELINES])
     (cmp,) = comparisons(result)
-    rows = {r["method"]: r for r in result["rows"]}
-    assert cmp["baseline"] == min(BASELINES, key=lambda m: rows[m]["bad_1.0"])
-    assert cmp["bad1_improvement"] >= 0.30, rows
-    assert rows["best"]["bad_2.0"] < rows[cmp["baseline"]]["bad_2.0"], rows
+    rows = {r.method: r.scores for r in result.rows}
+    assert cmp.baseline == min(BASELINES, key=lambda m: rows[m]["bad_1.0"])
+    assert cmp.bad1_improvement >= 0.30, rows
+    assert rows["best"]["bad_2.0"] < rows[cmp.baseline]["bad_2.0"], rows
 
 
 def occlusion_grid(d_back: float = 5.0, d_front: float = 15.0, h: int = 120, w: int = 160):  # type: ignore[no-untyped-def]
