@@ -86,7 +86,8 @@ class Recorder:
         self._lock = threading.Lock()
         self._finished = threading.Event()
         self._finish_lock = threading.Lock()
-        self._final: Manifest | None = None
+        self._final: Manifest | None = None  # None: no take was started
+        self._finish_done = False
         self.sync_interval_s = 1.0
         self.preview_every_ns = 0  # > 0: keep a small luma thumbnail per camera this often (the shoot UI)
 
@@ -371,8 +372,9 @@ class Recorder:
         any thread: a second caller waits for the first and gets the same manifest (the shoot UI's stop and
         its quit can meet here)."""
         with self._finish_lock:
-            if self._final is None:
+            if not self._finish_done:
                 self._final = self._finish()
+                self._finish_done = True
             return self._final
 
     def _finish(self) -> Manifest | None:
@@ -411,7 +413,12 @@ class Recorder:
             self.end_reason = "stopped" if self._stop.is_set() else "frames reached"
         if stalled and self.error is None:
             self.end_reason = "stopped with a stalled writer"
-        return self._finalise(stalled)
+        # frame sets, then the manifest, sidecars and ground truth (rigctl.take.build.finalise)
+        status = "complete" if self.error is None and not stalled and self.end_reason == "frames reached" else "ended"
+        end = End(reason=self.end_reason, message=str(self.error) if self.error else "")
+        index_paths = {n: w.index_path for n, w in self._writers.items()}
+        disk_full = isinstance(self.error, DiskFullError)
+        return finalise(self._state(), index_paths, status, end, self.devices.truth, disk_full)
 
     def _state(self) -> TakeState:
         return TakeState(
@@ -430,17 +437,4 @@ class Recorder:
             self.started_utc,
             self.t0_ns,
             self.t1_ns,
-        )
-
-    def _finalise(self, stalled: list[str]) -> Manifest:
-        """Frame sets, then the manifest, sidecars and ground truth (:func:`rigctl.take.build.finalise`)."""
-        status = "complete" if self.error is None and not stalled and self.end_reason == "frames reached" else "ended"
-        end = End(reason=self.end_reason, message=str(self.error) if self.error else "")
-        return finalise(
-            self._state(),
-            {n: w.index_path for n, w in self._writers.items()},
-            status,
-            end,
-            self.devices.truth,
-            isinstance(self.error, DiskFullError),
         )
