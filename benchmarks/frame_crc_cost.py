@@ -20,7 +20,7 @@ import numpy as np
 
 from rigctl.interfaces import Frame, FrameFlags
 from rigctl.pixfmt import to_rgb
-from rigctl.take.manifest import TAKE_SPEC, write_manifest
+from rigctl.take.manifest import TAKE_SPEC, Manifest, write_manifest
 from rigctl.take.reader import TakeReader
 from rigctl.take.writer import CameraWriter
 
@@ -35,13 +35,23 @@ def make_take(folder: Path, frames: int, width: int, height: int) -> None:
     writer.close()
     write_manifest(
         folder,
-        {
-            "spec": TAKE_SPEC,
-            "take": "bench",
-            "status": "complete",
-            "format": {"width": width, "height": height, "pixel_format": "UYVY", "fps": 25.0, "bytes_per_frame": size},
-            "cameras": {"r0c0": {"essence": "cameras/r0c0.essence", "index": "cameras/r0c0.index", "frames": frames}},
-        },
+        Manifest.model_validate(
+            {
+                "spec": TAKE_SPEC,
+                "take": "bench",
+                "status": "complete",
+                "format": {
+                    "width": width,
+                    "height": height,
+                    "pixel_format": "UYVY",
+                    "fps": 25.0,
+                    "bytes_per_frame": size,
+                },
+                "cameras": {
+                    "r0c0": {"essence": "cameras/r0c0.essence", "index": "cameras/r0c0.index", "frames": frames}
+                },
+            }
+        ),
     )
 
 

@@ -90,10 +90,9 @@ def record_at(
     man = rec.finish()
     wall = n / fps  # the take's own duration: the rate offered, written without a drop when ok
     cpu = time.process_time() - cpu0
-    written = sum(c["frames"] for c in man["cameras"].values())
-    dropped = sum(
-        len(c["writer_drops"]) + len(c["source_drops"]) + len(c["not_written"]) for c in man["cameras"].values()
-    )
+    assert man is not None
+    written = sum(c.frames for c in man.cameras.values())
+    dropped = sum(len(c.writer_drops) + len(c.source_drops) + len(c.not_written) for c in man.cameras.values())
     nbytes = written * W * H * 2
     shutil.rmtree(folder / plan.name, ignore_errors=True)
     return dropped == 0 and written == 9 * n, nbytes, wall, cpu / max(written, 1)

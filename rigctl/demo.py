@@ -135,7 +135,7 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
         )
     finally:
         bar.close()
-    frame = next(iter(depth["frames"].values()))
+    frame = next(iter(depth.frames.values()))
     montage = _montage(out / "depth" / "000000", rig.camera_names, out / "depth-previews.png")
     timings["depth"] = time.perf_counter() - t0
 
@@ -183,7 +183,7 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
             f"- Rectification, held-out corners, {label}: RMS {pooled.net.rms:.3f} px net of camera "
             f"placement ({pooled.raw.rms:.3f} px raw)."
         )
-    fr_truth = [st.get("against_truth") for st in frame["cameras"].values() if st.get("against_truth")]
+    fr_truth = [t for st in frame.cameras.values() if isinstance(t := st.get("against_truth"), dict)]
     if fr_truth:
         lines.append(
             "- Depth on the demo's own rectified take (its truth is in the true calibration's geometry): mean bad "
@@ -191,14 +191,14 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
             f"bad 2.0 {np.mean([t['bad_2.0'] for t in fr_truth]):.2f} %."
         )
     lines.append(
-        f"- Keyed background left out: {frame['keyed_background_share']:.0%} of pixels; disparity levels left out "
-        f"by the planned range: {frame['levels_skipped_by_plan']:.0f}; planner bound hit on "
-        f"{frame['bound_hit_pixels']} px."
+        f"- Keyed background left out: {frame.keyed_background_share:.0%} of pixels; disparity levels left out "
+        f"by the planned range: {frame.levels_skipped_by_plan:.0f}; planner bound hit on "
+        f"{frame.bound_hit_pixels} px."
     )
     for c in comparisons(bench):
         lines.append(
-            f"- {c['dataset']}: preset {c['preset']} against {c['baseline']}: bad 1.0 "
-            f"{better(c['bad1_improvement'])}, {c['time_ratio']:.2f}x the time."
+            f"- {c.dataset}: preset {c.preset} against {c.baseline}: bad 1.0 "
+            f"{better(c.bad1_improvement)}, {c.time_ratio:.2f}x the time."
         )
     lines += [
         "",
@@ -231,7 +231,7 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
         "|---|---|",
         *(f"| {k} | {v:.1f} |" for k, v in timings.items()),
         "",
-        f"Rectified {rect['frames']} frames at f = {rect['focal_px']:.1f} px. Takes: `takes/`; calibration: "
+        f"Rectified {rect.frames} frames at f = {rect.focal_px:.1f} px. Takes: `takes/`; calibration: "
         "`calibration.yaml`; depth: `depth/` (EXR, PFM, PNG, report.json).",
     ]
     report = out / "report.md"

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import logging
+from collections.abc import Mapping
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
@@ -118,15 +119,16 @@ def write_exr(
 MAX_EXPANSION = 4096
 
 
-def _check_window(path: Path, header: dict[str, Any]) -> None:
+def _check_window(path: Path, header: Mapping[str, object]) -> None:
     window = header.get("dataWindow")
-    channels = header.get("channels") or ()
+    channels = header.get("channels")
+    count = len(channels) if isinstance(channels, list | tuple | dict) else 0
     try:
         (x0, y0), (x1, y1) = np.asarray(window, dtype=np.int64).reshape(2, 2)
     except (TypeError, ValueError):
         raise TakeError(f"{path}: not a readable EXR file: no dataWindow") from None
     pixels = max(0, int(x1) - int(x0) + 1) * max(0, int(y1) - int(y0) + 1)
-    need = pixels * max(1, len(channels)) * 4
+    need = pixels * max(1, count) * 4
     size = path.stat().st_size
     if need > MAX_EXPANSION * size + (1 << 20):
         raise TakeError(

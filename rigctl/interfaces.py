@@ -14,9 +14,12 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 from rigctl.timecode import Timecode
+
+if TYPE_CHECKING:
+    from rigctl.take.manifest import Rectification
 
 
 class FrameFlags(enum.IntFlag):
@@ -182,3 +185,7 @@ class TruthProvider(Protocol):
 
     def write_truth(self, folder: Path, frame_sets: list[tuple[int, dict[str, int]]]) -> None:
         """Write ``truth/`` for frame sets given as (number, {camera: sequence number})."""
+
+    def rectification(self) -> Rectification | None:
+        """The rectified geometry the frames already are in (an ideal simulation: its true calibration's
+        common plane), for the take's manifest; None when the frames need ``rigctl rectify``."""

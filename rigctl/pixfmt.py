@@ -1,7 +1,13 @@
 """Pixel formats: packed 4:2:2 (UYVY, YUYV) to and from RGB, BT.709 limited range as on HD/UHD SDI.
 
 The simulator encodes with these functions and ``take export`` decodes with them, so colours round-trip
-with the same matrix (OpenCV's own UYVY conversion uses BT.601, which would shift every colour).
+with the same matrix (OpenCV's own UYVY conversion, ``COLOR_YUV2BGR_UYVY``, uses BT.601, which would shift
+every colour).
+
+The frame path to 8 bits is direct: :func:`to_bgr8` turns packed 4:2:2 into BGR bytes in one
+``cv2.transform`` pass (the BT.709 matrix with the limited-range scale folded in, six outputs per pixel
+pair), the same numbers as :func:`uyvy_to_rgb` then :func:`to_u8` without the float image between them.
+:func:`to_u8` is the project's one float-to-8-bit conversion: round half to even, saturated.
 """
 
 from __future__ import annotations
@@ -24,6 +30,29 @@ _RGB_TO_YCBCR = np.array(
     dtype=np.float64,
 )
 _YCBCR_TO_RGB = np.linalg.inv(_RGB_TO_YCBCR)
+
+
+def _packed_to_bgr_matrix(order: str) -> NDArray[np.float64]:
+    """6 x 5: one packed pixel pair (4 code values and 1) to B, G, R of its two pixels, in 8-bit units."""
+    bgr = _YCBCR_TO_RGB[::-1] * 255.0  # rows B, G, R; columns Y', Cb', Cr'
+    y, cb, cr = bgr[:, 0] / 219.0, bgr[:, 1] / 224.0, bgr[:, 2] / 224.0
+    offset = -(16.0 * y + 128.0 * cb + 128.0 * cr)
+    zero = np.zeros(3)
+    first: tuple[NDArray[np.floating], ...]
+    second: tuple[NDArray[np.floating], ...]
+    if order == "UYVY":  # U Y0 V Y1
+        first, second = (cb, y, cr, zero), (cb, zero, cr, y)
+    elif order == "YUYV":  # Y0 U Y1 V
+        first, second = (y, cb, zero, cr), (zero, cb, y, cr)
+    else:
+        raise ParameterError(f"unknown packed 4:2:2 order {order!r}")
+    return np.vstack([np.column_stack([*first, offset]), np.column_stack([*second, offset])])
+
+
+_TO_BGR8 = {order: _packed_to_bgr_matrix(order) for order in ("UYVY", "YUYV")}
+# full-range 8-bit grey from BT.709 luma: limited-range Y through a table; BGR through the luma weights
+_Y_TO_GRAY8 = np.clip(np.rint((np.arange(256) - 16.0) * 255.0 / 219.0), 0, 255).astype(np.uint8)
+_BGR_TO_GRAY = np.array([[_KB, _KG, _KR]])
 
 
 def rgb_to_uyvy(rgb: NDArray[np.floating], order: str = "UYVY") -> NDArray[np.uint8]:
@@ -79,7 +108,7 @@ def to_rgb(data: NDArray[np.uint8], pixel_format: str, width: int, height: int) 
     if pixel_format in ("UYVY", "YUYV"):
         return uyvy_to_rgb(data.reshape(height, width * 2), pixel_format)
     if pixel_format == "BGR3":
-        return data.reshape(height, width, 3)[..., ::-1].astype(np.float32) / 255.0
+        return bgr8_to_rgb(data.reshape(height, width, 3))
     if pixel_format == "GREY":
         g = data.reshape(height, width).astype(np.float32) / 255.0
         return np.repeat(g[..., None], 3, axis=2)
@@ -91,10 +120,47 @@ def from_rgb(rgb: NDArray[np.floating], pixel_format: str) -> NDArray[np.uint8]:
     if pixel_format in ("UYVY", "YUYV"):
         return rgb_to_uyvy(rgb, pixel_format)
     h, w, _ = rgb.shape
-    u8 = np.clip(np.rint(np.asarray(rgb) * 255.0), 0, 255).astype(np.uint8)
     if pixel_format == "BGR3":
-        return np.ascontiguousarray(u8[..., ::-1]).reshape(h, w * 3)
+        return to_u8(rgb).reshape(h, w * 3)
     if pixel_format == "GREY":
-        g = np.rint(np.asarray(rgb, dtype=np.float32) @ np.array([_KR, _KG, _KB], dtype=np.float32) * 255.0)
-        return np.clip(g, 0, 255).astype(np.uint8)
+        return to_u8(np.asarray(rgb, dtype=np.float32) @ np.array([_KR, _KG, _KB], dtype=np.float32))
     raise ParameterError(f"unsupported pixel format {pixel_format!r}")
+
+
+def to_u8(rgb: NDArray[np.floating]) -> NDArray[np.uint8]:
+    """RGB in [0, 1] (H x W x 3) to 8-bit BGR, or grey (H x W) to 8-bit grey: x 255, rounded half to even,
+    saturated. The one float-to-8-bit step of the project."""
+    x = np.asarray(rgb)
+    flipped = x[..., ::-1] if x.ndim == 3 else x
+    scaled = np.multiply(flipped, 255.0, dtype=np.float32)
+    np.rint(scaled, out=scaled)
+    np.clip(scaled, 0.0, 255.0, out=scaled)
+    return scaled.astype(np.uint8)
+
+
+def to_bgr8(data: NDArray[np.uint8], pixel_format: str, width: int, height: int) -> NDArray[np.uint8]:
+    """Any supported captured format to 8-bit BGR (H x W x 3) directly: BT.709 limited range for 4:2:2."""
+    if pixel_format in _TO_BGR8:
+        pairs = data.reshape(height, width // 2, 4)
+        return np.asarray(cv2.transform(pairs, _TO_BGR8[pixel_format]), np.uint8).reshape(height, width, 3)
+    if pixel_format == "BGR3":
+        return data.reshape(height, width, 3)
+    if pixel_format == "GREY":
+        return np.asarray(cv2.cvtColor(data.reshape(height, width), cv2.COLOR_GRAY2BGR), np.uint8)
+    raise ParameterError(f"unsupported pixel format {pixel_format!r}")
+
+
+def to_gray8(data: NDArray[np.uint8], pixel_format: str, width: int, height: int) -> NDArray[np.uint8]:
+    """Any supported captured format to 8-bit full-range BT.709 luma (H x W)."""
+    if pixel_format in _TO_BGR8:
+        return np.asarray(cv2.LUT(luma(data.reshape(height, width * 2), pixel_format), _Y_TO_GRAY8), np.uint8)
+    if pixel_format == "BGR3":
+        return np.asarray(cv2.transform(data.reshape(height, width, 3), _BGR_TO_GRAY), np.uint8).reshape(height, width)
+    if pixel_format == "GREY":
+        return data.reshape(height, width)
+    raise ParameterError(f"unsupported pixel format {pixel_format!r}")
+
+
+def bgr8_to_rgb(bgr: NDArray[np.uint8]) -> NDArray[np.float32]:
+    """8-bit BGR to RGB float32 in [0, 1] (the exact inverse of :func:`to_u8` on 8-bit values)."""
+    return bgr[..., ::-1].astype(np.float32) / np.float32(255.0)

@@ -12,71 +12,29 @@ from __future__ import annotations
 
 import datetime as dt
 import logging
-import os
 import queue
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
-from rigctl import __version__
 from rigctl.errors import DeviceError, RigctlError, TakeError
 from rigctl.interfaces import Camera, CaptureFormat, Frame, FrameFlags
 from rigctl.registry import DeviceSet
 from rigctl.rig import Rig
-from rigctl.take import framesets, sidecars
 from rigctl.take.accounting import CameraStats
-from rigctl.take.index import read_index
-from rigctl.take.manifest import TAKE_SPEC, write_manifest
+from rigctl.take.build import TakeState, finalise, take_manifest, thumbnail
+from rigctl.take.manifest import End, Manifest, write_manifest
+from rigctl.take.plan import FramePool, TakePlan
 from rigctl.take.reserve import create_reserve, release_reserve
 from rigctl.take.trend import QueueTrend
 from rigctl.take.writer import CameraWriter, DiskFullError
-from rigctl.timecode import start_timecode
 
 log = logging.getLogger(__name__)
 
 RESERVE_BYTES = 1 << 20  # kept free on every destination so the manifest can be written when it fills
-
-
-class _Pool:
-    """Preallocated frame buffers of one camera; taking one never blocks."""
-
-    def __init__(self, count: int, size: int) -> None:
-        self.buffers = [bytearray(size) for _ in range(count)]
-        self.views = [memoryview(b) for b in self.buffers]
-        self.free: queue.SimpleQueue[int] = queue.SimpleQueue()
-        for i in range(count):
-            self.free.put(i)
-        self.scratch = memoryview(bytearray(size))
-
-    def take(self) -> int | None:
-        try:
-            return self.free.get_nowait()
-        except queue.Empty:
-            return None
-
-    def give(self, i: int) -> None:
-        self.free.put(i)
-
-
-@dataclass
-class TakePlan:
-    """Where a take goes: its name, the primary folder (manifest) and per camera the folder of its files."""
-
-    name: str
-    folder: Path
-    camera_folders: dict[str, Path]
-
-    @classmethod
-    def spread(cls, name: str, destinations: list[Path], cameras: list[str]) -> TakePlan:
-        """Cameras dealt round-robin over the destinations; the manifest lives on the first."""
-        folders = {cam: destinations[i % len(destinations)] / name / "cameras" for i, cam in enumerate(cameras)}
-        return cls(name, destinations[0] / name, folders)
 
 
 class Recorder:
@@ -119,7 +77,7 @@ class Recorder:
         self._armed = False
         self._threads: list[threading.Thread] = []
         self._queues: dict[str, queue.Queue[tuple[Frame, int] | None]] = {}
-        self._pools: dict[str, _Pool] = {}
+        self._pools: dict[str, FramePool] = {}
         self._writers: dict[str, CameraWriter] = {}
         self._writer_busy: dict[str, Frame | None] = {}
         self._writer_threads: dict[str, threading.Thread] = {}
@@ -128,18 +86,10 @@ class Recorder:
         self._lock = threading.Lock()
         self._finished = threading.Event()
         self._finish_lock = threading.Lock()
-        self._final: dict[str, Any] | None = None
+        self._final: Manifest | None = None  # None: no take was started
+        self._finish_done = False
         self.sync_interval_s = 1.0
         self.preview_every_ns = 0  # > 0: keep a small luma thumbnail per camera this often (the shoot UI)
-
-    def _thumbnail(self, frame: Frame, width: int = 48) -> NDArray[np.uint8] | None:
-        fmt = self.format
-        if fmt.pixel_format not in ("UYVY", "YUYV") or len(frame.data) < fmt.bytes_per_frame:
-            return None
-        step = max(1, fmt.width // width)
-        packed = np.frombuffer(frame.data, np.uint8, count=fmt.bytes_per_frame).reshape(fmt.height, fmt.width * 2)
-        start = 1 if fmt.pixel_format == "UYVY" else 0
-        return np.ascontiguousarray(packed[:: 2 * step, start :: 2 * step])
 
     @staticmethod
     def capture_format(rig: Rig) -> CaptureFormat:
@@ -177,7 +127,7 @@ class Recorder:
                 f"camera {first} delivers {different[first].describe()}, the rig asks for {self.format.describe()}"
             )
         for name in self.names:
-            self._pools[name] = _Pool(self.buffers, self.format.bytes_per_frame)
+            self._pools[name] = FramePool(self.buffers, self.format.bytes_per_frame)
             self._queues[name] = queue.Queue(maxsize=self.buffers)
         for name in self.names:
             self.cameras[name].start()
@@ -203,7 +153,7 @@ class Recorder:
         self.t0_ns = grid - self.period_ns // 2
         self.t1_ns = self.t0_ns + frames * self.period_ns if frames else None
         self.started_utc = dt.datetime.now(dt.UTC).isoformat(timespec="milliseconds")
-        write_manifest(self.plan.folder, self._manifest("recording"))
+        write_manifest(self.plan.folder, take_manifest(self._state(), "recording"))
 
     def _grid_phase(self) -> int:
         """The rig's frame phase (capture time modulo the period), from the latest frames seen."""
@@ -340,7 +290,9 @@ class Recorder:
             self._account_gap(st, frame)
             st.last_capture_ns, st.last_host_ns, st.last_sequence = frame.capture_ns, frame.host_ns, frame.sequence
             if self.preview_every_ns and frame.host_ns - st.preview_ns >= self.preview_every_ns:
-                st.thumbnail = self._thumbnail(frame)  # a few hundred bytes, copied before the buffer is reused
+                st.thumbnail = thumbnail(
+                    frame.data, self.format
+                )  # a few hundred bytes, copied before the buffer is reused
                 st.preview_ns = frame.host_ns
             if where != 0:
                 if slot is not None:
@@ -414,16 +366,18 @@ class Recorder:
                 pool.give(slot)
 
     # ---- ending -----------------------------------------------------------------------------------
-    def finish(self) -> dict[str, Any]:
+    def finish(self) -> Manifest | None:
         """Stop capture, drain writers (bounded in time), assemble frame sets, write sidecars, truth and
-        the final manifest. Returns the manifest. Safe to call again, from any thread: a second caller waits
-        for the first and gets the same manifest (the shoot UI's stop and its quit can meet here)."""
+        the final manifest. Returns the manifest (None when no take was started). Safe to call again, from
+        any thread: a second caller waits for the first and gets the same manifest (the shoot UI's stop and
+        its quit can meet here)."""
         with self._finish_lock:
-            if self._final is None:
+            if not self._finish_done:
                 self._final = self._finish()
+                self._finish_done = True
             return self._final
 
-    def _finish(self) -> dict[str, Any]:
+    def _finish(self) -> Manifest | None:
         self._capturing.clear()
         for t in self._threads:
             t.join(timeout=2.0)
@@ -434,7 +388,7 @@ class Recorder:
                 log.warning("stopping %s: %s", cam.name, exc)
         if not self._writers:  # never started a take
             self.devices.close()
-            return {}
+            return None
         for name in self.names:
             self._queues[name].put(None)
         deadline = time.monotonic() + self.stop_timeout_s
@@ -444,159 +398,43 @@ class Recorder:
             if t.is_alive():
                 stalled.append(name)
         for name in stalled:
-            st = self.stats[name]
-            q = self._queues[name]
-            while True:
-                try:
-                    item = q.get_nowait()
-                except queue.Empty:
-                    break
-                if item is not None:
-                    st.not_written.append(item[0].sequence)
             busy = self._writer_busy.get(name)
-            if busy is not None:
-                st.not_written.append(busy.sequence)
-            self.notes.append(
-                f"writer of {name} stalled at stop: {len(st.not_written)} frame(s) not written "
-                f"(sequences {st.not_written[:10]}{' ...' if len(st.not_written) > 10 else ''})"
-            )
+            self.notes.append(self.stats[name].stalled(self._queues[name], None if busy is None else busy.sequence))
         self._finished.set()
         if self._syncer is not None:  # a flush in progress must end before its files are closed
             self._syncer.join(timeout=max(1.0, deadline - time.monotonic()))
         for name, writer in self._writers.items():
             if name not in stalled:
                 writer.close()
-        self.devices_close()
+        self.devices.close()
         for dest, fd in self._reserves.items():
             release_reserve(dest, fd)
         if not self.end_reason:
             self.end_reason = "stopped" if self._stop.is_set() else "frames reached"
         if stalled and self.error is None:
             self.end_reason = "stopped with a stalled writer"
-        return self._finalise(stalled)
-
-    def devices_close(self) -> None:
-        self.devices.close()
-
-    def _frame_sets(self) -> list[framesets.FrameSet]:
-        stamps = {n: np.array([c for _, c in self.stats[n].written], dtype=np.int64) for n in self.names}
-        timecodes = None
-        if all(self.stats[n].first_timecode is not None for n in self.names):
-            # the same rule as the take's reader: by timecode, read back from the indexes just written
-            try:
-                indexes = {n: read_index(self._writers[n].index_path)[0] for n in self.names}
-                if all(len(indexes[n]) == len(stamps[n]) for n in self.names):
-                    timecodes = framesets.timecode_counts(indexes, self.format.fps)
-            except RigctlError as exc:
-                log.warning("frame sets by time, not timecode: %s", exc)
-        return framesets.assemble(stamps, self.period_ns, self.t0_ns, timecodes)
-
-    def _finalise(self, stalled: list[str]) -> dict[str, Any]:
-        """The manifest goes first (the reserve was just freed for it), then what can be rebuilt or
-        lost without losing the take: sidecars and ground truth."""
-        sets = self._frame_sets()
-        folder = self.plan.folder
+        # frame sets, then the manifest, sidecars and ground truth (rigctl.take.build.finalise)
         status = "complete" if self.error is None and not stalled and self.end_reason == "frames reached" else "ended"
-        write_manifest(folder, self._manifest(status, sets))
-        extras_failed = False
-        try:
-            start = start_timecode(self.started_utc, self.format.fps)
-            sidecars.write_sets_csv(folder / "sets.csv", sets, self.names, self.stats, start)
-            devices = {n: self.rig.camera(n).device for n in self.names}
-            sidecars.write_log_csv(folder / "log.csv", self.names, devices, self.stats)
-            sidecars.write_ale(
-                folder / f"{self.plan.name}.ale", self.plan.name, self.started_utc, self.format, self.names, self.stats
-            )
-        except OSError as exc:
-            self.notes.append(f"sidecar logs not written: {exc.strerror}")
-            extras_failed = True
-        if self.devices.truth is not None:
-            if isinstance(self.error, DiskFullError):
-                self.notes.append("ground truth not written: the destination is full")
-                extras_failed = True
-            else:
-                # a slot every camera missed has nothing to have truth for
-                members = [
-                    (s.number, {c: self.stats[c].written[i][0] for c, i in s.members.items()})
-                    for s in sets
-                    if s.members
-                ]
-                try:
-                    self.devices.truth.write_truth(folder / "truth", members)
-                except OSError as exc:
-                    self.notes.append(f"ground truth not written: {exc.strerror}")
-                    extras_failed = True
-        manifest = self._manifest(status, sets)
-        if extras_failed:
-            try:
-                write_manifest(folder, manifest)
-            except OSError:
-                log.warning("%s: notes could not be added to the manifest", folder)
-        return manifest
+        end = End(reason=self.end_reason, message=str(self.error) if self.error else "")
+        index_paths = {n: w.index_path for n, w in self._writers.items()}
+        disk_full = isinstance(self.error, DiskFullError)
+        return finalise(self._state(), index_paths, status, end, self.devices.truth, disk_full)
 
-    def _manifest(self, status: str, sets: list[framesets.FrameSet] | None = None) -> dict[str, Any]:
-        cams: dict[str, Any] = {}
-        for name in self.names:
-            st = self.stats[name]
-            cam_folder = self.plan.camera_folders[name]
-            rel = os.path.relpath(cam_folder, self.plan.folder)
-            base = rel if not rel.startswith("..") else str(cam_folder)
-            entry: dict[str, Any] = {
-                "essence": f"{base}/{name}.essence",
-                "index": f"{base}/{name}.index",
-                "frames": st.frames_written,
-                "first_sequence": st.written[0][0] if st.written else None,
-                "last_sequence": st.written[-1][0] if st.written else None,
-                "source_drops": sorted(st.source_drops),
-                "error_frames": st.error_frames,
-                "writer_drops": st.writer_drops,
-                "not_written": st.not_written,
-            }
-            if st.ended:
-                entry["ended_early"] = st.ended
-            if st.format_changes:
-                entry["format_changed_at"] = st.format_changes
-            cams[name] = entry
-        fmt = self.format
-        data: dict[str, Any] = {
-            "spec": TAKE_SPEC,
-            "take": self.plan.name,
-            "status": status,
-            "started_utc": self.started_utc,
-            "software": {"name": "rigctl", "version": __version__},
-            "rig": self.rig.to_dict(),
-            "format": {
-                "width": fmt.width,
-                "height": fmt.height,
-                "pixel_format": fmt.pixel_format,
-                "fps": fmt.fps,
-                "bytes_per_frame": fmt.bytes_per_frame,
-            },
-            "timing": {
-                "clock": "CLOCK_MONOTONIC",
-                "t0_ns": self.t0_ns,
-                "t1_ns": self.t1_ns,
-                "frame_period_ns": self.period_ns,
-                "start_timecode": str(start_timecode(self.started_utc, fmt.fps)),
-            },
-            "checksum": "crc32" if self.checksum else "none",
-            "devices": {"description": self.devices.description, "settings": self.devices.settings},
-            "cameras": cams,
-            "notes": self.notes,
-        }
-        if sets is not None:
-            complete = [s for s in sets if s.complete(self.names)]
-            incomplete = [
-                {"number": s.number, "missing": [c for c in self.names if c not in s.members]}
-                for s in sets
-                if not s.complete(self.names)
-            ]
-            data["frame_sets"] = {
-                "count": len(sets),
-                "complete": len(complete),
-                "incomplete": incomplete,
-                "skew": framesets.skew_stats(sets),
-                "file": "sets.csv",
-            }
-            data["end"] = {"reason": self.end_reason, "message": str(self.error) if self.error else ""}
-        return data
+    def _state(self) -> TakeState:
+        return TakeState(
+            self.plan.name,
+            self.plan.folder,
+            self.plan.camera_folders,
+            self.names,
+            self.rig,
+            self.format,
+            self.period_ns,
+            self.checksum,
+            self.devices.description,
+            self.devices.settings,
+            self.stats,
+            self.notes,
+            self.started_utc,
+            self.t0_ns,
+            self.t1_ns,
+        )

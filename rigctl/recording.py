@@ -20,6 +20,7 @@ from rigctl.preflight import PreflightReport, WriteSpeed, check_destinations
 from rigctl.recorder import Recorder, TakePlan
 from rigctl.registry import DeviceSet, open_cameras
 from rigctl.rig import Rig
+from rigctl.take.manifest import Manifest
 from rigctl.take.names import check_take_name
 
 log = logging.getLogger(__name__)
@@ -86,7 +87,7 @@ class DropWatch:
 @dataclass
 class TakeResult:
     folder: Path
-    manifest: dict[str, Any]
+    manifest: Manifest | None  # None: the take never started
     recorder: Recorder
     preflight: PreflightReport
     drop_watch: DropWatch = field(default_factory=DropWatch)

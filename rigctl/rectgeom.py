@@ -11,6 +11,8 @@ and the simulator computes its ground-truth disparity in it from the true calibr
 
 from __future__ import annotations
 
+import hashlib
+import json
 from dataclasses import dataclass
 
 import cv2
@@ -18,6 +20,7 @@ import numpy as np
 
 from rigctl.calibration_model import F64, ArrayCalibration, CameraModel
 from rigctl.errors import CalibrationError
+from rigctl.take.manifest import Rectification
 
 _BORDER_SAMPLES = 64
 
@@ -200,3 +203,29 @@ def _shared_matrix(calib: ArrayCalibration, R: F64) -> tuple[F64, tuple[int, int
     cy = (h - 1) / 2 - s * (top + bottom) / 2
     K = np.array([[f * s, 0, cx], [0, f * s, cy], [0, 0, 1]], dtype=np.float64)
     return K, (w, h)
+
+
+def calibration_hash(calib: ArrayCalibration) -> str:
+    """SHA-256 of the calibration's numbers (not its file's formatting)."""
+    data = {n: calib[n].as_dict() for n in calib.names}
+    return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
+
+
+def rectification_record(
+    calib: ArrayCalibration, grid: RectifiedGrid | None = None, calibration: str | None = None
+) -> Rectification:
+    """The manifest's rectification section for frames in ``calib``'s common plane (``grid``, when it is
+    built already): what depth reads (positions, focal length, spacing)."""
+    g = grid if grid is not None else common_plane(calib)
+    return Rectification(
+        calibration_sha256=calibration_hash(calib),
+        R=g.R.tolist(),
+        K=g.K.tolist(),
+        image_size=list(g.image_size),
+        spacing_x_m=g.spacing_x_m,
+        spacing_y_m=g.spacing_y_m,
+        focal_px=g.focal_px,
+        lattice_residual_mm=g.lattice_residual_m * 1e3,
+        positions_m={n: g.position_m(n).tolist() for n in calib.names},
+        calibration=calibration,
+    )

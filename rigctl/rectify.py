@@ -6,14 +6,12 @@ The geometry is :func:`rigctl.rectgeom.common_plane`, the same definition the si
 
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 import shutil
 import time
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import cv2
 import numpy as np
@@ -21,20 +19,15 @@ from numpy.typing import NDArray
 
 from rigctl.calibration_model import ArrayCalibration, load_calibration
 from rigctl.errors import CalibrationError, TakeError
-from rigctl.interfaces import Frame, FrameFlags
-from rigctl.pixfmt import from_rgb, to_rgb
-from rigctl.rectgeom import RectifiedGrid, common_plane
-from rigctl.take.manifest import TAKE_SPEC, write_manifest
+from rigctl.rectgeom import RectifiedGrid, calibration_hash, common_plane, rectification_record
+from rigctl.take.manifest import TAKE_SPEC, DamagedFrame, Rectification, write_manifest
 from rigctl.take.reader import TakeReader
-from rigctl.take.writer import CameraWriter
+from rigctl.take.writer import TakeWriter
 
 RECTIFIED_FORMAT = "BGR3"  # 8-bit colour: no second chroma subsampling after resampling
 
 
-def calibration_hash(calib: ArrayCalibration) -> str:
-    """SHA-256 of the calibration's numbers (not its file's formatting)."""
-    data = {n: calib[n].as_dict() for n in calib.names}
-    return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
+__all__ = ["Rectifier", "RectifyReport", "calibration_hash", "rectify_take"]
 
 
 def cache_dir() -> Path:
@@ -76,9 +69,10 @@ class Rectifier:
         try:
             cache.mkdir(parents=True, exist_ok=True)
             tmp = cache / f"{self.hash}.{os.getpid()}.tmp.npz"
-            arrays: dict[str, Any] = {f"{n}_xy": m[0] for n, m in maps.items()}
+            arrays: dict[str, NDArray[np.int16] | NDArray[np.uint16]] = {f"{n}_xy": m[0] for n, m in maps.items()}
             arrays.update({f"{n}_frac": m[1] for n, m in maps.items()})
-            np.savez(tmp, **arrays)
+            save: Callable[..., None] = np.savez  # keyword arrays: numpy's stub types them as its options
+            save(tmp, **arrays)
             tmp.replace(path)
         except OSError:
             pass  # no cache (read-only home): tables are rebuilt next time
@@ -91,20 +85,9 @@ class Rectifier:
     def frame_set(self, images: dict[str, NDArray[np.uint8]]) -> dict[str, NDArray[np.uint8]]:
         return {name: self.frame(name, img) for name, img in images.items()}
 
-    def record(self) -> dict[str, Any]:
-        """What a rectified take records about its rectification."""
-        g = self.grid
-        return {
-            "calibration_sha256": self.hash,
-            "R": g.R.tolist(),
-            "K": g.K.tolist(),
-            "image_size": list(g.image_size),
-            "spacing_x_m": g.spacing_x_m,
-            "spacing_y_m": g.spacing_y_m,
-            "focal_px": g.focal_px,
-            "lattice_residual_mm": g.lattice_residual_m * 1e3,
-            "positions_m": {n: g.position_m(n).tolist() for n in self.calibration.names},
-        }
+    def record(self) -> Rectification:
+        """What a rectified take records about its rectification (its manifest's rectification section)."""
+        return rectification_record(self.calibration, self.grid)
 
 
 MAX_ZOOM = 2.0  # common focal length over the cameras' mean: beyond, they share under a quarter of their views
@@ -151,21 +134,8 @@ def check_rectification(rect: Rectifier, path: Path) -> None:
 
 
 def frame_bgr(reader: TakeReader, name: str, i: int) -> NDArray[np.uint8]:
-    """Frame ``i`` as BGR (a damaged frame raises, naming file and byte)."""
-    return _to_bgr(reader, reader.frame_bytes(name, i))
-
-
-def frame_bgr_or_none(reader: TakeReader, name: str, i: int) -> NDArray[np.uint8] | None:
-    """Frame ``i`` as BGR; None when it is damaged and the reader skips damaged frames."""
-    data = reader.frame_or_none(name, i)
-    return None if data is None else _to_bgr(reader, data)
-
-
-def _to_bgr(reader: TakeReader, data: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    if reader.pixel_format == "BGR3":
-        return data.reshape(reader.height, reader.width, 3)
-    rgb = to_rgb(data, reader.pixel_format, reader.width, reader.height)
-    return np.ascontiguousarray(from_rgb(rgb, "BGR3").reshape(reader.height, reader.width, 3))
+    """Frame ``i`` as 8-bit BGR, converted straight from the captured bytes (a damaged frame raises)."""
+    return np.asarray(reader.image(name, i, "bgr8"), np.uint8)
 
 
 def rectifier_for_take(reader: TakeReader, calibration: Path) -> Rectifier:
@@ -186,14 +156,43 @@ def rectifier_for_take(reader: TakeReader, calibration: Path) -> Rectifier:
     return rect
 
 
+@dataclass
+class RectifyReport:
+    """What ``rigctl rectify`` did, with the time of each stage (``--json`` prints it)."""
+
+    take: str
+    frames: int
+    image_size: tuple[int, int]
+    focal_px: float
+    tables_s: float
+    tables_cached: bool
+    remap_s: float
+    total_s: float
+    damaged_skipped: list[DamagedFrame] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "take": self.take,
+            "frames": self.frames,
+            "image_size": list(self.image_size),
+            "focal_px": self.focal_px,
+            "tables_s": self.tables_s,
+            "tables_cached": self.tables_cached,
+            "remap_s": self.remap_s,
+            "total_s": self.total_s,
+            "damaged_skipped": [d.model_dump(exclude_none=True) for d in self.damaged_skipped],
+        }
+
+
 def rectify_take(
     source: Path,
     calibration: Path,
     out: Path,
     progress: Callable[[int, int], None] | None = None,
     skip_damaged: bool = False,
-) -> dict[str, Any]:
-    """Rectify every frame of every camera of ``source`` into the new take ``out``.
+) -> RectifyReport:
+    """Rectify every frame of every camera of ``source`` into the new take ``out``: each frame read as 8-bit
+    BGR, remapped, and appended with its source frame's record (sequence, times, frame set, timecode).
 
     A damaged source frame stops it (naming file and byte; the CLI removes the partial new take), unless
     ``skip_damaged``: then the frame is left out and listed in the new take's ``damaged_skipped``."""
@@ -207,76 +206,60 @@ def rectify_take(
     w, h = rect.grid.image_size
     total = sum(len(reader.index[n]) for n in reader.names)
     done = 0
-    cameras: dict[str, Any] = {}
     t_remap = 0.0
     t_start = time.perf_counter()
-    for name in reader.names:
-        writer = CameraWriter(name, out, reader.fps, sync_interval_s=0)
-        idx = reader.index[name]
-        try:
-            for i in range(len(idx)):
-                rec = idx[i]
-                img = frame_bgr_or_none(reader, name, i)
+    remapped = np.empty((h, w, 3), np.uint8)  # one output buffer, reused for every frame
+    with reader, TakeWriter(out, reader.fps) as writer:
+        for name in reader.names:
+            writer.open(name)  # a camera whose every frame is damaged still has its (empty) files
+            for i in range(len(reader.index[name])):
+                img = reader.image_or_none(name, i, "bgr8")
                 if img is None:
                     continue  # damaged and skipped: listed in reader.damaged, never given a fresh checksum
                 t0 = time.perf_counter()
-                res = rect.frame(name, img)
+                remapped = rect.frame(name, np.asarray(img, np.uint8), remapped)
                 t_remap += time.perf_counter() - t0
-                frame = Frame(
-                    name,
-                    int(rec["sequence"]),
-                    int(rec["capture_ns"]),
-                    int(rec["host_ns"]),
-                    FrameFlags(int(rec["flags"])),
-                    memoryview(np.ascontiguousarray(res).reshape(-1).data),
-                    reader.timecode(name, i),  # processed frames keep their source's timecode
-                )
-                writer.write(frame, int(rec["set"]))
+                writer.append(name, remapped, reader.record(name, i))  # keeps the source's timecode
                 done += 1
                 if progress:
                     progress(done, total)
-        finally:
-            writer.close()
-        entry = dict(reader.raw["cameras"][name])
-        entry.update(essence=writer.essence_path.name, index=writer.index_path.name, frames=writer.frames)
-        cameras[name] = entry
-    manifest = dict(reader.raw)
-    manifest.update(
-        spec=TAKE_SPEC,
-        take=out.name,
-        status="complete",
-        format={
-            **reader.raw["format"],
-            "width": w,
-            "height": h,
-            "pixel_format": RECTIFIED_FORMAT,
-            "bytes_per_frame": w * h * 3,
-        },
-        cameras=cameras,
-        rectification={
-            "source_take": str(source.resolve()),
-            "calibration": str(calibration.resolve()),
-            **rect.record(),
-        },
+    src = reader.manifest
+    cameras = {}
+    for name in reader.names:
+        files = {"essence": f"{name}.essence", "index": f"{name}.index", "frames": writer.writers[name].frames}
+        cameras[name] = src.cameras[name].model_copy(update=files)
+    record = rect.record().model_copy(
+        update={"source_take": str(source.resolve()), "calibration": str(calibration.resolve())}
     )
-    if reader.damaged:
-        manifest["damaged_skipped"] = reader.damaged
     truth = source / "truth"
     if truth.is_dir():
         shutil.copytree(truth, out / "truth")
-        manifest["rectification"]["truth_note"] = (
+        record.truth_note = (
             "truth/ is copied from the source take; its disparity is exact in the geometry of the true calibration"
         )
+    fmt = src.format.model_copy(
+        update={"width": w, "height": h, "pixel_format": RECTIFIED_FORMAT, "bytes_per_frame": w * h * 3}
+    )
+    manifest = src.model_copy(
+        update={
+            "spec": TAKE_SPEC,
+            "take": out.name,
+            "status": "complete",
+            "format": fmt,
+            "cameras": cameras,
+            "rectification": record,
+            "damaged_skipped": list(reader.damaged) or src.damaged_skipped,
+        }
+    )
     write_manifest(out, manifest)
-    elapsed = time.perf_counter() - t_start
-    return {
-        "take": str(out),
-        "frames": done,
-        "image_size": [w, h],
-        "focal_px": rect.grid.focal_px,
-        "tables_s": t_tables,
-        "tables_cached": rect.cache_hit,
-        "remap_s": t_remap,
-        "total_s": elapsed,
-        "damaged_skipped": reader.damaged,
-    }
+    return RectifyReport(
+        str(out),
+        done,
+        (w, h),
+        rect.grid.focal_px,
+        t_tables,
+        rect.cache_hit,
+        t_remap,
+        time.perf_counter() - t_start,
+        list(reader.damaged),
+    )

@@ -12,7 +12,9 @@ from rigctl.simulators.settings import parse_sim_args
 from rigctl.address import Address
 from rigctl.errors import DeviceError
 from rigctl.interfaces import Camera
+from rigctl.rectgeom import rectification_record
 from rigctl.rig import Rig
+from rigctl.take.manifest import Rectification
 
 
 class SimTruth:
@@ -25,6 +27,12 @@ class SimTruth:
     def write_truth(self, folder: Path, frame_sets: list[tuple[int, dict[str, int]]]) -> None:
         delivered = {name: cam.delivered for name, cam in self.cameras.items()}
         self.array.write_truth_for(folder, frame_sets, delivered)
+
+    def rectification(self) -> Rectification | None:
+        """An ideal array's frames are in its true calibration's common plane already."""
+        if not self.array.settings.ideal:
+            return None
+        return rectification_record(self.array.calibration, calibration="true (simulated, ideal)")
 
 
 def simulated_cameras(

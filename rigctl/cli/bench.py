@@ -51,7 +51,7 @@ def run_depth_bench(ns: argparse.Namespace) -> int:
         bar.close()
     plot(result, ns.plot)
     if ns.json:
-        print(json.dumps(result, default=float))
+        print(json.dumps(result.to_json(), default=float))
     else:
         print(format_table(result))
         print(f"plot: {ns.plot}")

@@ -70,25 +70,26 @@ def run(ns: argparse.Namespace) -> int:
         )
     finally:
         bar.close()
+    data = report.to_json()
     if ns.check:
         from rigctl.cli.render import leave_one_out_report
 
-        report["leave_one_out"] = leave_one_out_report(ns.input, ns.out, frames, ns.cameras)
-        (ns.out / "report.json").write_text(json.dumps(report, indent=1, default=float))
-    status = damaged_exit(report.get("damaged_skipped", []), ns.out / "report.json")
+        data["leave_one_out"] = leave_one_out_report(ns.input, ns.out, frames, ns.cameras)
+        (ns.out / "report.json").write_text(json.dumps(data, indent=1, default=float))
+    status = damaged_exit(report.damaged_skipped, ns.out / "report.json")
     if ns.json:
-        print(json.dumps(report, default=float))
+        print(json.dumps(data, default=float))
         return status
-    for n, fr in report["frames"].items():
-        lo, hi = fr["disparity_range_px"]
+    for n, fr in report.frames.items():
+        lo, hi = fr.disparity_range_px
         print(
-            f"frame {n}: {len(fr['cameras'])} cameras, disparity {lo:.1f}..{hi:.1f} px ({fr['range_source']}), "
-            f"keyed background {fr['keyed_background_share']:.0%}, bound hit on {fr['bound_hit_pixels']} px, "
-            f"{fr['timings_s']['depth']:.1f} s"
+            f"frame {n}: {len(fr.cameras)} cameras, disparity {lo:.1f}..{hi:.1f} px ({fr.range_source}), "
+            f"keyed background {fr.keyed_background_share:.0%}, bound hit on {fr.bound_hit_pixels} px, "
+            f"{fr.depth_s:.1f} s"
         )
-        for cam, st in fr["cameras"].items():
+        for cam, st in fr.cameras.items():
             truth = st.get("against_truth")
-            if truth:
+            if isinstance(truth, dict):
                 print(f"  {cam}: bad 1.0 {truth['bad_1.0']:.2f} %, bad 2.0 {truth['bad_2.0']:.2f} % against the truth")
-    print(f"wrote {ns.out} in {report['seconds']:.1f} s")
+    print(f"wrote {ns.out} in {report.seconds:.1f} s")
     return status

@@ -47,12 +47,12 @@ def run(ns: argparse.Namespace) -> int:
     finally:
         bar.close()
     if ns.json:
-        print(json.dumps(summary))
+        print(json.dumps(summary.to_json()))
     else:
-        w, h = summary["image_size"]
+        w, h = summary.image_size
         print(
-            f"rectified {summary['frames']} frames into {summary['take']}: {w}x{h}, f = {summary['focal_px']:.1f} px; "
-            f"tables {'from cache' if summary['tables_cached'] else 'built'} in {summary['tables_s']:.2f} s, "
-            f"remap {summary['remap_s']:.2f} s of {summary['total_s']:.2f} s"
+            f"rectified {summary.frames} frames into {summary.take}: {w}x{h}, f = {summary.focal_px:.1f} px; "
+            f"tables {'from cache' if summary.tables_cached else 'built'} in {summary.tables_s:.2f} s, "
+            f"remap {summary.remap_s:.2f} s of {summary.total_s:.2f} s"
         )
-    return damaged_exit(summary["damaged_skipped"], ns.out / "take.yaml")
+    return damaged_exit(summary.damaged_skipped, ns.out / "take.yaml")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 from rigctl.cli.args import add_layout
@@ -13,6 +14,7 @@ from rigctl.cli.record import format_summary
 from rigctl.errors import EXIT_DAMAGED
 from rigctl.take.check import check_take
 from rigctl.take.export import export_take
+from rigctl.take.manifest import DamagedFrame
 from rigctl.take.reader import TakeReader
 
 
@@ -81,14 +83,14 @@ def run_export(ns: argparse.Namespace) -> int:
     return damaged_exit(reader.damaged, ns.out / "export.json")
 
 
-def damaged_exit(damaged: list[dict[str, object]], listed_in: Path) -> int:
+def damaged_exit(damaged: Sequence[DamagedFrame], listed_in: Path) -> int:
     """0, or the data-damaged exit status after saying on stderr what was left out and where it is listed."""
     if not damaged:
         return 0
     first = damaged[0]
     print(
         f"warning: damaged data left out ({len(damaged)} item(s)), listed in {listed_in} "
-        f"(first: {first['file']}: byte {first['byte']}: {first['problem']})",
+        f"(first: {first.file}: byte {first.byte}: {first.problem})",
         file=sys.stderr,
     )
     return EXIT_DAMAGED

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.depth.grid import Grid
-from rigctl.depth.pairs import F32, make_sgbm, nan_median, neighbour, pair_disparity, to_u8
+from rigctl.depth.pairs import F32, make_sgbm, nan_median, neighbour, pair_disparity
 from rigctl.errors import ParameterError
 
 
@@ -27,7 +27,7 @@ def sgbm_wls(grid: Grid, ref: str, d_range: tuple[float, float], block: int = 5)
     if other is None:
         raise ParameterError(f"camera {ref} has no horizontal neighbour")
     scale = abs(grid.offsets[other][0] - grid.offsets[ref][0])
-    a, b = to_u8(grid.images[ref]), to_u8(grid.images[other])
+    a, b = grid.bgr8(ref), grid.bgr8(other)
     if flip:
         a, b = np.ascontiguousarray(a[:, ::-1]), np.ascontiguousarray(b[:, ::-1])
     left_m = make_sgbm(d_range[0] * scale, d_range[1] * scale, block)

@@ -8,12 +8,13 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
+from numpy.typing import NDArray
 
 from rigctl.depth.baselines import BASELINES
 from rigctl.depth.estimate import estimate
@@ -32,7 +33,7 @@ class Dataset:
     name: str
     grid: Grid
     camera: str
-    truth: Any
+    truth: NDArray[np.float32]
     d_range: tuple[float, float]
     key: bool
 
@@ -68,7 +69,7 @@ def stratified(size: tuple[int, int] = (256, 256), seed: int = 0) -> list[Datase
 
 
 def dataset_from_array(array: Any, name: str, camera: str = "r1c1") -> Dataset:
-    from rigctl.pixfmt import from_rgb, to_rgb
+    from rigctl.pixfmt import to_bgr8
     from rigctl.rectify import Rectifier
 
     fmt = array.format
@@ -77,10 +78,7 @@ def dataset_from_array(array: Any, name: str, camera: str = "r1c1") -> Dataset:
     rect = Rectifier(array.calibration)
     images = {}
     for i, n in enumerate(array.names):
-        rgb = to_rgb(raw[i], fmt.pixel_format, fmt.width, fmt.height)
-        bgr = np.ascontiguousarray(from_rgb(rgb, "BGR3").reshape(fmt.height, fmt.width, 3))
-        out = rect.frame(n, bgr)
-        images[n] = np.ascontiguousarray(out[..., ::-1], dtype=np.float32) / 255.0
+        images[n] = rect.frame(n, to_bgr8(raw[i], fmt.pixel_format, fmt.width, fmt.height))  # 8-bit, as a take
     g = rect.grid
     origin = np.mean([g.position_m(n) for n in array.names], axis=0)
     offsets = {n: tuple(((g.position_m(n) - origin)[:2] / g.spacing_x_m).tolist()) for n in array.names}
@@ -91,12 +89,54 @@ def dataset_from_array(array: Any, name: str, camera: str = "r1c1") -> Dataset:
     return Dataset(name, grid, camera, truth, d_range, key=True)
 
 
+@dataclass(frozen=True)
+class BenchRow:
+    """One method on one dataset: its scores (:func:`rigctl.depth.metrics.score`) and run time."""
+
+    dataset: str
+    method: str
+    seconds: float
+    scores: dict[str, float | None]
+
+    def metric(self, key: str) -> float:
+        """A score; a missing one (nothing estimated) as infinity, the worst."""
+        value = self.scores[key]
+        return math.inf if value is None else value
+
+    def to_json(self) -> dict[str, object]:
+        return {"dataset": self.dataset, "method": self.method, "seconds": self.seconds, **self.scores}
+
+
+@dataclass
+class BenchResult:
+    rows: list[BenchRow] = field(default_factory=list)
+    datasets: list[str] = field(default_factory=list)
+    repeats: int = 1
+
+    def of(self, dataset: str) -> list[BenchRow]:
+        return [r for r in self.rows if r.dataset == dataset]
+
+    def to_json(self) -> dict[str, object]:
+        return {"rows": [r.to_json() for r in self.rows], "datasets": self.datasets, "repeats": self.repeats}
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """A preset against the best OpenCV baseline of its dataset (on bad 1.0)."""
+
+    dataset: str
+    preset: str
+    baseline: str
+    bad1_improvement: float  # relative: 0.3 is 30 % fewer bad pixels
+    time_ratio: float
+
+
 def run_bench(
     datasets: list[Dataset],
     methods: list[str] | None = None,
     repeats: int = 1,
     progress: Callable[[float, str], None] | None = None,
-) -> dict[str, Any]:
+) -> BenchResult:
     """Every method on every dataset: metrics and seconds (the median of ``repeats`` runs)."""
     cv2.setNumThreads(2)
     names = methods or [*PRESETS, *BASELINES]
@@ -121,34 +161,33 @@ def run_bench(
                     disp = BASELINES[m](ds.grid, ds.camera, ds.d_range)
                 times.append(time.perf_counter() - t0)
             assert disp is not None
-            rows.append(
-                {"dataset": ds.name, "method": m, "seconds": float(np.median(times)), **score(disp, ds.truth, mask)}
-            )
+            rows.append(BenchRow(ds.name, m, float(np.median(times)), score(disp, ds.truth, mask)))
     if progress:
         progress(1.0, "done")
-    return {"rows": rows, "datasets": [d.name for d in datasets], "repeats": repeats}
+    return BenchResult(rows, [d.name for d in datasets], repeats)
 
 
-def comparisons(result: dict[str, Any]) -> list[dict[str, Any]]:
+def comparisons(result: BenchResult) -> list[Comparison]:
     """Per dataset: the best OpenCV baseline on bad 1.0, and every preset against it (relative improvement,
     time ratio)."""
     out = []
-    for ds in result["datasets"]:
-        rows = [r for r in result["rows"] if r["dataset"] == ds]
-        base = [r for r in rows if r["method"] in BASELINES]
-        ours = [r for r in rows if r["method"] in PRESETS]
+    for ds in result.datasets:
+        rows = result.of(ds)
+        base = [r for r in rows if r.method in BASELINES]
+        ours = [r for r in rows if r.method in PRESETS]
         if not base or not ours:
             continue
-        best = min(base, key=lambda r: r["bad_1.0"])
+        best = min(base, key=lambda r: r.metric("bad_1.0"))
+        b1 = best.metric("bad_1.0")
         for r in ours:
             out.append(
-                {
-                    "dataset": ds,
-                    "preset": r["method"],
-                    "baseline": best["method"],
-                    "bad1_improvement": (best["bad_1.0"] - r["bad_1.0"]) / best["bad_1.0"] if best["bad_1.0"] else 0.0,
-                    "time_ratio": r["seconds"] / best["seconds"] if best["seconds"] else math.inf,
-                }
+                Comparison(
+                    ds,
+                    r.method,
+                    best.method,
+                    (b1 - r.metric("bad_1.0")) / b1 if b1 else 0.0,
+                    r.seconds / best.seconds if best.seconds else math.inf,
+                )
             )
     return out
 
@@ -158,65 +197,68 @@ def better(rel: float) -> str:
     return f"{rel * 100:.0f} % better" if rel >= 0 else f"{-rel * 100:.0f} % worse"
 
 
-def format_table(result: dict[str, Any]) -> str:
+def format_table(result: BenchResult) -> str:
     lines = []
-    for ds in result["datasets"]:
+    for ds in result.datasets:
         lines.append(f"{ds}")
         lines.append(
             "  method            bad0.1 bad0.2 bad0.5 bad1.0 bad2.0  MAE px  RMS px  MSEx100 lock %  no est %  seconds"
         )
-        rows = [r for r in result["rows"] if r["dataset"] == ds]
+        rows = result.of(ds)
         front = pareto(rows)
         for r in rows:
-            num = {k: "-" if r.get(k) is None else f"{r[k]:.3f}" for k in ("mae_px", "rms_px")}
-            mse = "-" if r.get("mse_x100") is None else f"{r['mse_x100']:.2f}"
-            lock = "-" if r.get("locking_pct") is None else f"{r['locking_pct']:.1f}"
-            star = "*" if r["method"] in front else " "
+            sc = r.scores
+            num = {k: "-" if sc.get(k) is None else f"{sc[k]:.3f}" for k in ("mae_px", "rms_px")}
+            mse = "-" if sc.get("mse_x100") is None else f"{sc['mse_x100']:.2f}"
+            lock = "-" if sc.get("locking_pct") is None else f"{sc['locking_pct']:.1f}"
+            star = "*" if r.method in front else " "
             lines.append(
-                f" {star}{r['method']:<17} "
-                + " ".join(f"{r[f'bad_{x}']:6.2f}" for x in (0.1, 0.2, 0.5, 1.0, 2.0))
+                f" {star}{r.method:<17} "
+                + " ".join(f"{r.metric(f'bad_{x}'):6.2f}" for x in (0.1, 0.2, 0.5, 1.0, 2.0))
                 + f" {num['mae_px']:>7} {num['rms_px']:>7} {mse:>8} {lock:>6}"
-                f"  {r['no_estimate_pct']:8.2f}  {r['seconds']:7.3f}"
+                f"  {r.metric('no_estimate_pct'):8.2f}  {r.seconds:7.3f}"
             )
     lines.append("* on the Pareto front of bad 0.2 against seconds (nothing is both faster and more accurate)")
     for c in comparisons(result):
         lines.append(
-            f"{c['dataset']}: {c['preset']} vs {c['baseline']}: bad 1.0 {better(c['bad1_improvement'])}, "
-            f"{c['time_ratio']:.2f}x the time"
+            f"{c.dataset}: {c.preset} vs {c.baseline}: bad 1.0 {better(c.bad1_improvement)}, "
+            f"{c.time_ratio:.2f}x the time"
         )
     return "\n".join(lines)
 
 
-def pareto(rows: list[dict[str, Any]], key: str = "bad_0.2") -> set[str]:
+def pareto(rows: list[BenchRow], key: str = "bad_0.2") -> set[str]:
     """Methods no other method beats on both ``key`` and seconds."""
     return {
-        r["method"]
+        r.method
         for r in rows
         if not any(
             o is not r
-            and o[key] <= r[key]
-            and o["seconds"] <= r["seconds"]
-            and (o[key], o["seconds"]) != (r[key], r["seconds"])
+            and o.metric(key) <= r.metric(key)
+            and o.seconds <= r.seconds
+            and (o.metric(key), o.seconds) != (r.metric(key), r.seconds)
             for o in rows
         )
     }
 
 
-def plot(result: dict[str, Any], path: Path) -> Path:
+def plot(result: BenchResult, path: Path) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(result["datasets"]), figsize=(4.6 * len(result["datasets"]), 3.8), squeeze=False)
-    for ax, ds in zip(axes[0], result["datasets"], strict=True):
-        rows = [r for r in result["rows"] if r["dataset"] == ds]
-        front = sorted((r for r in rows if r["method"] in pareto(rows)), key=lambda r: r["seconds"])
-        ax.plot([r["seconds"] for r in front], [r["bad_0.2"] for r in front], c="0.6", lw=1, zorder=0)
+    n = len(result.datasets)
+    fig, axes = plt.subplots(1, n, figsize=(4.6 * n, 3.8), squeeze=False)
+    for ax, ds in zip(axes[0], result.datasets, strict=True):
+        rows = result.of(ds)
+        front = sorted((r for r in rows if r.method in pareto(rows)), key=lambda r: r.seconds)
+        ax.plot([r.seconds for r in front], [r.metric("bad_0.2") for r in front], c="0.6", lw=1, zorder=0)
         for r in rows:
-            ours = r["method"] in PRESETS
-            ax.scatter(r["seconds"], r["bad_0.2"], marker="o" if ours else "s", c="tab:red" if ours else "tab:blue")
-            ax.annotate(r["method"].removeprefix("opencv-"), (r["seconds"], r["bad_0.2"]), fontsize=7)
+            ours = r.method in PRESETS
+            bad = r.metric("bad_0.2")
+            ax.scatter(r.seconds, bad, marker="o" if ours else "s", c="tab:red" if ours else "tab:blue")
+            ax.annotate(r.method.removeprefix("opencv-"), (r.seconds, bad), fontsize=7)
         ax.set_xscale("log")
         ax.set_xlabel("seconds (one camera)")
         ax.set_ylabel("bad 0.2 px (%)")

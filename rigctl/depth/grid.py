@@ -1,9 +1,17 @@
-"""Rectified camera grids as depth input: a rectified take, an ``ideal=true`` simulated take (already
-rectified), or a grid folder (``r{row}c{col}.png`` + ``grid.yaml``, ARCHITECTURE.md)."""
+"""Rectified camera grids as depth input: a take whose manifest has a rectification section (``rigctl
+rectify``'s output, or an ``ideal=true`` simulated take, rectified as recorded), or a grid folder
+(``r{row}c{col}.png`` + ``grid.yaml``).
+
+A grid holds each picture as it came: a take's frame bytes in their captured format, 8-bit BGR from an 8-bit
+PNG, float RGB from a 16-bit PNG or an array. What an engine reads is derived on first use and kept:
+``grid.images[name]`` (float RGB in [0, 1]: the cost volume, the keyer, the EXR picture) and
+:meth:`Grid.bgr8` (8-bit BGR: the semi-global matcher), each straight from what was given, so a take's frames
+reach the matcher without a float round trip and the float picture is not quantised on the way."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -13,10 +21,68 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.errors import ParameterError, RigFileError, TakeError
+from rigctl.pixfmt import bgr8_to_rgb, to_bgr8, to_rgb, to_u8
 from rigctl.rig import CAMERA_NAME
+from rigctl.take.reader import TakeReader
 from rigctl.yamlfile import load_yaml
 
 F32 = NDArray[np.float32]
+U8 = NDArray[np.uint8]
+
+
+class FrameImages(Mapping[str, F32]):
+    """The pictures of a grid by camera: float RGB in [0, 1] when read as a mapping, 8-bit BGR through
+    :meth:`bgr8`. Each is made on first use and kept, from the picture as given (8-bit BGR or float RGB) or
+    straight from a take's captured bytes (:meth:`captured`), so neither goes through the other."""
+
+    def __init__(self, images: Mapping[str, NDArray[Any]]) -> None:
+        self._names = list(images)
+        self._u8: dict[str, U8] = {n: v for n, v in images.items() if v.dtype == np.uint8}
+        self._float: dict[str, F32] = {n: v for n, v in images.items() if v.dtype != np.uint8}
+        self._captured: dict[str, U8] = {}
+        self._format = ("", 0, 0)
+
+    @classmethod
+    def captured(cls, frames: Mapping[str, U8], pixel_format: str, width: int, height: int) -> FrameImages:
+        """Pictures still in a take's captured pixel format (frame bytes as read)."""
+        out = cls({})
+        out._names = list(frames)
+        out._captured = dict(frames)
+        out._format = (pixel_format, width, height)
+        return out
+
+    def __getitem__(self, name: str) -> F32:
+        rgb = self._float.get(name)
+        if rgb is None:
+            if name in self._captured:
+                rgb = to_rgb(self._captured[name], *self._format)
+            else:
+                rgb = bgr8_to_rgb(self._u8[name])
+            self._float[name] = rgb
+        return rgb
+
+    def bgr8(self, name: str) -> U8:
+        bgr = self._u8.get(name)
+        if bgr is None:
+            if name in self._captured:
+                bgr = to_bgr8(self._captured[name], *self._format)
+            else:
+                bgr = np.ascontiguousarray(to_u8(self._float[name]))
+            self._u8[name] = bgr
+        return bgr
+
+    def shape(self) -> tuple[int, int]:
+        if self._captured:
+            return self._format[2], self._format[1]
+        first = self._names[0]
+        img = self._u8[first] if first in self._u8 else self._float[first]
+        return int(img.shape[0]), int(img.shape[1])
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names)
+
+    def __len__(self) -> int:
+        return len(self._names)
 
 
 @dataclass
@@ -26,19 +92,27 @@ class Grid:
     (x - d (ox_b - ox_a), y - d (oy_b - oy_a)) in camera b."""
 
     names: list[str]
-    images: dict[str, F32]  # H x W x 3 RGB in [0, 1]
+    images: Mapping[str, NDArray[Any]]  # as given: 8-bit BGR or float RGB; read back as float RGB in [0, 1]
     offsets: dict[str, tuple[float, float]]
     focal_px: float
     spacing: float  # horizontal spacing, in the unit depth is reported in (metres for takes)
     doffs: float = 0.0
     disparity_range: tuple[float, float] | None = None
     truth: dict[str, F32] | None = None
-    meta: dict[str, Any] = field(default_factory=dict)
+    meta: dict[str, str | int] = field(default_factory=dict)
+    frames: FrameImages = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.frames = self.images if isinstance(self.images, FrameImages) else FrameImages(self.images)
+        self.images = self.frames
+
+    def bgr8(self, name: str) -> U8:
+        """Camera ``name``'s picture as 8-bit BGR (the picture itself when it came as 8 bits)."""
+        return self.frames.bgr8(name)
 
     @property
     def shape(self) -> tuple[int, int]:
-        h, w = next(iter(self.images.values())).shape[:2]
-        return h, w
+        return self.frames.shape()
 
     def depth(self, disparity: F32) -> F32:
         """Z = f * spacing / (d + doffs); +inf where there is no estimate or d + doffs <= 0."""
@@ -48,7 +122,10 @@ class Grid:
         return np.asarray(z, dtype=np.float32)
 
 
-def _check_image(img: NDArray[Any], where: str) -> F32:
+def _check_image(img: NDArray[Any], where: str) -> NDArray[Any]:
+    """Float RGB (or grey, made RGB), finite; 8-bit pictures (BGR) are kept as they are."""
+    if img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3:
+        return img
     arr = np.asarray(img, dtype=np.float32)
     if arr.ndim == 2:
         arr = np.repeat(arr[..., None], 3, axis=2)
@@ -67,7 +144,8 @@ def grid_from_arrays(
     doffs: float = 0.0,
     disparity_range: tuple[float, float] | None = None,
 ) -> Grid:
-    """A grid from images named r{row}c{col} on a regular lattice (spacings in one unit)."""
+    """A grid from images named r{row}c{col} on a regular lattice (spacings in one unit): float RGB (or grey)
+    in [0, 1], or 8-bit BGR."""
     if not images:
         raise ParameterError("a grid needs at least one camera")
     for n in images:
@@ -91,6 +169,16 @@ def grid_from_arrays(
     return Grid(names, imgs, offsets, float(focal_px), float(spacing_x), float(doffs), disparity_range)
 
 
+def _png_picture(img: NDArray[Any]) -> NDArray[Any]:
+    """A PNG as read by OpenCV: 8-bit kept as BGR bytes, 16-bit as float RGB in [0, 1]."""
+    if img.dtype == np.uint8:
+        if img.ndim == 2:
+            return np.asarray(cv2.cvtColor(img, cv2.COLOR_GRAY2BGR), np.uint8)
+        return np.ascontiguousarray(img[..., :3])
+    rgb = img.astype(np.float32) / np.float32(65535.0 if img.dtype == np.uint16 else 255.0)
+    return rgb[..., ::-1][..., :3] if rgb.ndim == 3 else rgb
+
+
 def load_grid_folder(folder: Path) -> Grid:
     path = folder / "grid.yaml"
     spec = load_yaml(path)
@@ -104,9 +192,7 @@ def load_grid_folder(folder: Path) -> Grid:
         img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
         if img is None:
             raise RigFileError(f"{p}: cannot read the image")
-        scale = 65535.0 if img.dtype == np.uint16 else 255.0
-        img = img.astype(np.float32) / scale
-        images[p.stem] = img[..., ::-1][..., :3] if img.ndim == 3 else img
+        images[p.stem] = img
     if not images:
         raise RigFileError(f"{folder}: no r{{row}}c{{col}}.png images")
     first = next(iter(images))
@@ -118,7 +204,7 @@ def load_grid_folder(folder: Path) -> Grid:
     rng = spec.get("disparity_range_px")
     try:
         return grid_from_arrays(
-            images,
+            {n: _png_picture(img) for n, img in images.items()},
             float(spec["focal_px"]),
             float(spec["spacing_x"]),
             float(spec.get("spacing_y") or spec["spacing_x"]),
@@ -134,31 +220,20 @@ class SkippedFrameSet(Exception):
 
 
 class TakeGrid:
-    """Frame sets of a rectified take (or an ideal simulated take) as grids."""
+    """Frame sets of a take whose manifest has a rectification section, as grids of 8-bit BGR pictures."""
 
     def __init__(self, folder: Path, skip_damaged: bool = False) -> None:
-        from rigctl.calibration_model import load_calibration
-        from rigctl.rectgeom import common_plane
-        from rigctl.take.reader import TakeReader
-
         self.reader = TakeReader(folder, skip_damaged=skip_damaged)
-        raw = self.reader.raw
-        rect = raw.get("rectification")
-        settings = (raw.get("devices") or {}).get("settings") or {}
-        if rect:
-            positions = {n: np.asarray(p, float) for n, p in rect["positions_m"].items()}
-            self.focal_px = float(rect["focal_px"])
-            self.spacing = float(rect["spacing_x_m"])
-        elif settings.get("ideal") and (folder / "truth" / "calibration.yaml").exists():
-            cal = load_calibration(folder / "truth" / "calibration.yaml")
-            g = common_plane(cal)
-            positions = {n: g.position_m(n) for n in cal.names}
-            self.focal_px, self.spacing = g.focal_px, g.spacing_x_m
-        else:
+        rect = self.reader.manifest.rectification
+        if rect is None:
             raise TakeError(
-                f"{folder}: not a rectified take (run rigctl rectify first; only ideal=true simulated takes are "
-                "rectified as recorded)"
+                f"{folder}: not a rectified take (run rigctl rectify first; ideal=true simulated takes are "
+                "rectified as recorded, and one recorded before they said so is rectified with its "
+                "truth/calibration.yaml)"
             )
+        positions = {n: np.asarray(p, float) for n, p in rect.positions_m.items()}
+        self.focal_px = rect.focal_px
+        self.spacing = rect.spacing_x_m
         names = self.reader.names
         missing = [n for n in names if n not in positions]
         if missing:
@@ -170,22 +245,23 @@ class TakeGrid:
         }
         self.names = sorted(names, key=lambda n: (self.offsets[n][1], self.offsets[n][0]))
         self.folder = folder
-        self.settings = settings
 
     def frame_numbers(self) -> list[int]:
         return [s.number for s in self.reader.complete_sets()]
 
-    def grid(self, number: int, cameras: list[str] | None = None) -> Grid:
+    def grid(self, number: int) -> Grid:
         sets = {s.number: s for s in self.reader.complete_sets()}
         if number not in sets:
             raise ParameterError(f"{self.folder}: frame set {number} is not complete or does not exist")
         s = sets[number]
-        images = {}
+        frames: dict[str, U8] = {}
         for n in self.names:
-            rgb = self.reader.frame_rgb_or_none(n, s.members[n])
-            if rgb is None:
+            data = self.reader.frame_or_none(n, s.members[n])
+            if data is None:
                 raise SkippedFrameSet(number)  # a damaged frame, skipped: listed in reader.damaged
-            images[n] = rgb
+            frames[n] = data
+        r = self.reader
+        images = FrameImages.captured(frames, r.pixel_format, r.width, r.height)
         truth = None
         tdir = self.folder / "truth" / "disparity" / f"{number:06d}"
         if tdir.is_dir():

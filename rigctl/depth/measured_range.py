@@ -26,8 +26,8 @@ AGREE_PX = 0.5  # cameras agree on a feature's disparity within this
 MIN_CAMERAS = 3  # (two where the grid has only two other cameras)
 
 
-def _gray(img: np.ndarray) -> np.ndarray:
-    return cv2.cvtColor(np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8), cv2.COLOR_RGB2GRAY)
+def _gray(grid: Grid, name: str) -> np.ndarray:
+    return cv2.cvtColor(grid.bgr8(name), cv2.COLOR_BGR2GRAY)
 
 
 def disparity_votes(grid: Grid, max_features: int = 4000) -> np.ndarray:
@@ -38,7 +38,7 @@ def disparity_votes(grid: Grid, max_features: int = 4000) -> np.ndarray:
     centre = np.mean([grid.offsets[n] for n in grid.names], axis=0)
     ref = min(grid.names, key=lambda n: float(np.hypot(*(np.asarray(grid.offsets[n]) - centre))))
     sift = cv2.SIFT.create(nfeatures=max_features)
-    kp_ref, des_ref = sift.detectAndCompute(_gray(grid.images[ref]), None)
+    kp_ref, des_ref = sift.detectAndCompute(_gray(grid, ref), None)
     if des_ref is None or len(kp_ref) < 2:
         return np.zeros(0)
     p_ref = np.array([k.pt for k in kp_ref], np.float64)
@@ -53,7 +53,7 @@ def disparity_votes(grid: Grid, max_features: int = 4000) -> np.ndarray:
         norm = ox * ox + oy * oy
         if norm == 0:
             continue
-        kp, des = sift.detectAndCompute(_gray(grid.images[name]), None)
+        kp, des = sift.detectAndCompute(_gray(grid, name), None)
         others += 1
         if des is None or len(kp) < 2:
             continue

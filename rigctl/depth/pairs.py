@@ -17,10 +17,6 @@ F32 = NDArray[np.float32]
 BLOCK = 3
 
 
-def to_u8(img: F32) -> NDArray[np.uint8]:
-    return np.ascontiguousarray(np.clip(img[..., ::-1] * 255 + 0.5, 0, 255).astype(np.uint8))
-
-
 def make_sgbm(lo: float, hi: float, block: int = BLOCK) -> cv2.StereoSGBM:
     min_d = math.floor(lo)
     num = max(16, math.ceil((hi - min_d + 1) / 16.0) * 16)
@@ -109,9 +105,9 @@ def pair_disparity(
     y0, y1, x0, x1 = box if box is not None else (0, h, 0, w)
     if u8 is None:
         u8 = {}
-    for n in (ref, other):  # 8-bit BGR once per image, however many pairs use it
+    for n in (ref, other):  # 8-bit BGR as the grid holds it (made once when it came as float)
         if n not in u8:
-            u8[n] = to_u8(grid.images[n])
+            u8[n] = grid.bgr8(n)
     a, b = u8[ref], u8[other]
     if abs(ry) < abs(rx):
         a, b = a[y0:y1], b[y0:y1]

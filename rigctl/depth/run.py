@@ -8,9 +8,8 @@ import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import cv2
 import numpy as np
@@ -26,6 +25,7 @@ from rigctl.errors import ParameterError
 from rigctl.exr import picture, picture_attributes, to_colour, write_exr
 from rigctl.layout import output_path
 from rigctl.pfm import write_pfm
+from rigctl.take.manifest import DamagedFrame
 from rigctl.timecode import Timecode
 
 F32 = NDArray[np.float32]
@@ -170,6 +170,55 @@ def write_outputs(
         write_exr(target.path(name, ".exr"), channels, attrs)
 
 
+@dataclass
+class FrameDepth:
+    """One frame set's depth: the range searched and why, what was left out, each camera's estimator
+    statistics (with its score against the truth, when the take has one) and the time of each stage."""
+
+    disparity_range_px: tuple[float, float]
+    range_source: str
+    levels_skipped_by_plan: float
+    keyed_background_share: float
+    bound_hit_pixels: int
+    cameras: dict[str, dict[str, object]]
+    load_s: float
+    depth_s: float
+    write_s: float
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "disparity_range_px": list(self.disparity_range_px),
+            "range_source": self.range_source,
+            "levels_skipped_by_plan": self.levels_skipped_by_plan,
+            "keyed_background_share": self.keyed_background_share,
+            "bound_hit_pixels": self.bound_hit_pixels,
+            "cameras": self.cameras,
+            "timings_s": {"load": self.load_s, "depth": self.depth_s, "write": self.write_s},
+        }
+
+
+@dataclass
+class DepthReport:
+    """What ``rigctl depth`` did (``report.json`` is :meth:`to_json`)."""
+
+    source: str
+    preset: str
+    frames: dict[str, FrameDepth] = field(default_factory=dict)
+    damaged_skipped: list[DamagedFrame] = field(default_factory=list)
+    seconds: float = 0.0
+
+    def to_json(self) -> dict[str, object]:
+        data: dict[str, object] = {
+            "source": self.source,
+            "preset": self.preset,
+            "frames": {n: f.to_json() for n, f in self.frames.items()},
+        }
+        if self.damaged_skipped:
+            data["damaged_skipped"] = [d.model_dump(exclude_none=True) for d in self.damaged_skipped]
+        data["seconds"] = self.seconds
+        return data
+
+
 def run_depth(
     source: Path,
     out: Path,
@@ -180,7 +229,7 @@ def run_depth(
     skip_damaged: bool = False,
     layout: str = "frames",
     colour: str = "rec709",
-) -> dict[str, Any]:
+) -> DepthReport:
     """Depth for a rectified take or a grid folder; writes outputs (in ``layout``, see rigctl.layout) and
     ``report.json``; returns the report.
 
@@ -220,7 +269,7 @@ def run_depth(
             return Target(out, layout, n, flat=layout == "frames", colour=colour)
     else:
         raise ParameterError(f"{source}: not a take (take.yaml) or a grid folder (grid.yaml)")
-    report: dict[str, Any] = {"source": str(source), "preset": opt.preset, "frames": {}}
+    report = DepthReport(str(source), opt.preset)
     total = len(numbers)
     for i, n in enumerate(numbers):
         t0 = time.perf_counter()
@@ -245,32 +294,30 @@ def run_depth(
         for cam, res in results.items():
             write_outputs(target(n), cam, grid, res, d_range, formats)
         t_write = time.perf_counter() - t0
-        per_cam = {}
+        per_cam: dict[str, dict[str, object]] = {}
         for cam, res in results.items():
-            st = dict(res.stats)
+            st: dict[str, object] = dict(res.stats)
             truth = grid.truth.get(cam) if grid.truth else None
             if truth is not None:
                 st["against_truth"] = score(res.disparity, truth, np.isfinite(truth))
             per_cam[cam] = st
         levels_planned = d_range[1] - d_range[0]
-        report["frames"][str(n)] = {
-            "disparity_range_px": list(d_range),
-            "range_source": why,
-            "levels_skipped_by_plan": max(0.0, (full[1] - full[0]) - levels_planned),
-            "keyed_background_share": float(np.mean([r.stats["keyed_background_share"] for r in results.values()])),
-            "bound_hit_pixels": int(sum(r.stats.get("bound_hit_pixels", 0) for r in results.values())),
-            "cameras": per_cam,
-            "timings_s": {
-                "load": t_load,
-                "depth": float(sum(r.stats.get("seconds", 0.0) for r in results.values())),
-                "write": t_write,
-            },
-        }
-    if take is not None and take.reader.damaged:
-        report["damaged_skipped"] = take.reader.damaged
-    report["seconds"] = time.perf_counter() - t_start
+        report.frames[str(n)] = FrameDepth(
+            d_range,
+            why,
+            max(0.0, (full[1] - full[0]) - levels_planned),
+            float(np.mean([r.stats["keyed_background_share"] for r in results.values()])),
+            int(sum(r.stats.get("bound_hit_pixels", 0) for r in results.values())),
+            per_cam,
+            t_load,
+            float(sum(r.stats.get("seconds", 0.0) for r in results.values())),
+            t_write,
+        )
+    if take is not None:
+        report.damaged_skipped = list(take.reader.damaged)
+    report.seconds = time.perf_counter() - t_start
     out.mkdir(parents=True, exist_ok=True)
-    (out / "report.json").write_text(json.dumps(report, indent=1, default=float))
+    (out / "report.json").write_text(json.dumps(report.to_json(), indent=1, default=float))
     if progress:
         progress(1.0, "done")
     return report

@@ -172,8 +172,7 @@ def write_grid_folder(grid: Grid, folder: Path) -> Path:
     """The grid as a grid folder (r{row}c{col}.png + grid.yaml), with the truth as truth/<camera>.pfm."""
     folder.mkdir(parents=True, exist_ok=True)
     for n in grid.names:
-        bgr = np.round(np.clip(grid.images[n][..., ::-1], 0, 1) * 255).astype(np.uint8)
-        cv2.imwrite(str(folder / f"{n}.png"), bgr)
+        cv2.imwrite(str(folder / f"{n}.png"), grid.bgr8(n))
     spacing_y = min((abs(o[1]) for o in grid.offsets.values() if abs(o[1]) > 1e-6), default=1.0) * grid.spacing
     spec: dict[str, object] = {
         "spacing_x": grid.spacing,

@@ -50,7 +50,7 @@ def volume_engine(job: SearchJob) -> BoxEstimate:
         crop.disparity = np.asarray(cv2.medianBlur(np.ascontiguousarray(crop.disparity), 5), np.float32)
         return crop
     stats["engine"] = "cost volume"
-    sw, views = volume_disparity(job.grid.images, job.ref, rel, job.box, job.d_range, params, stats)
+    sw, views = volume_disparity(dict(job.grid.images), job.ref, rel, job.box, job.d_range, params, stats)
     t0 = time.perf_counter()
     d = sw.disparity
     if p.lk_iterations:

@@ -69,9 +69,9 @@ class RectifyingGrid:
         self.reader = TakeReader(take)
         self.rect = rectifier_for_take(self.reader, calibration)
         rec = self.rect.record()
-        self.focal_px = float(rec["focal_px"])
-        self.spacing = float(rec["spacing_x_m"])
-        positions = {n: np.asarray(p, float) for n, p in rec["positions_m"].items()}
+        self.focal_px = rec.focal_px
+        self.spacing = rec.spacing_x_m
+        positions = {n: np.asarray(p, float) for n, p in rec.positions_m.items()}
         origin = np.mean([positions[n] for n in self.reader.names], axis=0)
         self.offsets = {
             n: (float((positions[n] - origin)[0] / self.spacing), float((positions[n] - origin)[1] / self.spacing))
@@ -84,18 +84,13 @@ class RectifyingGrid:
         return [s.number for s in self.reader.complete_sets()]
 
     def grid(self, number: int) -> Grid:
-        from rigctl.pixfmt import to_rgb
         from rigctl.rectify import frame_bgr
 
         sets = {s.number: s for s in self.reader.complete_sets()}
         if number not in sets:
             raise ParameterError(f"{self.folder}: frame set {number} is not complete or does not exist")
-        images = {}
-        for n in self.names:
-            bgr = self.rect.frame(n, frame_bgr(self.reader, n, sets[number].members[n]))
-            h, w = bgr.shape[:2]
-            images[n] = to_rgb(np.ascontiguousarray(bgr).reshape(-1), "BGR3", w, h)
-        meta = {"take": str(self.folder), "frame": number}
+        images = {n: self.rect.frame(n, frame_bgr(self.reader, n, sets[number].members[n])) for n in self.names}
+        meta: dict[str, str | int] = {"take": str(self.folder), "frame": number}
         return Grid(list(self.names), images, dict(self.offsets), self.focal_px, self.spacing, meta=meta)
 
 
@@ -124,7 +119,27 @@ def publish(tmp: Path, final: Path) -> None:
     tmp.rmdir()
 
 
-def compute_frame(job: FrameJob) -> dict[str, Any]:
+@dataclass
+class FrameDone:
+    """What a worker reports of one frame set: the cameras written, the range searched and why, timings."""
+
+    cameras: list[str]
+    disparity_range_px: tuple[float, float]
+    range_source: str
+    depth_s: float
+    write_s: float
+    load_s: float = 0.0
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "cameras": self.cameras,
+            "disparity_range_px": list(self.disparity_range_px),
+            "range_source": self.range_source,
+            "timings_s": {"depth": self.depth_s, "write": self.write_s, "load": self.load_s},
+        }
+
+
+def compute_frame(job: FrameJob) -> FrameDone:
     """Rectify (when needed), depth and export of one frame set; returns timings and small statistics."""
     t0 = time.perf_counter()
     source = open_source(job.take, job.calibration)
@@ -132,12 +147,12 @@ def compute_frame(job: FrameJob) -> dict[str, Any]:
     # the pictures carry the rate and the frame set's timecode, as rigctl depth writes them
     sets = {s.number: s for s in source.reader.frame_sets}
     target = Target(Path(job.out), "frames", job.frame, source.reader.fps, source.reader.set_timecode(sets[job.frame]))
-    stats = depth_and_publish(grid, job.options, target)
-    stats["timings_s"]["load"] = time.perf_counter() - t0 - sum(stats["timings_s"].values())
-    return stats
+    done = depth_and_publish(grid, job.options, target)
+    done.load_s = time.perf_counter() - t0 - done.depth_s - done.write_s
+    return done
 
 
-def depth_and_publish(grid: Grid, options: DepthOptions, final: Target) -> dict[str, Any]:
+def depth_and_publish(grid: Grid, options: DepthOptions, final: Target) -> FrameDone:
     """Depth of every requested camera of ``grid``, written to a temporary folder beside ``out/name`` and then
     renamed into it file by file (``rigctl bench depth --size`` measures exactly this)."""
     t0 = time.perf_counter()
@@ -153,12 +168,8 @@ def depth_and_publish(grid: Grid, options: DepthOptions, final: Target) -> dict[
         publish(tmp, final.out / name)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return {
-        "cameras": list(results),
-        "disparity_range_px": [float(d_range[0]), float(d_range[1])],
-        "range_source": why,
-        "timings_s": {"depth": t_depth, "write": time.perf_counter() - t0 - t_depth},
-    }
+    d_lo, d_hi = float(d_range[0]), float(d_range[1])
+    return FrameDone(list(results), (d_lo, d_hi), why, t_depth, time.perf_counter() - t0 - t_depth)
 
 
 def run_frame(job: FrameJob) -> dict[str, Any]:
@@ -167,7 +178,7 @@ def run_frame(job: FrameJob) -> dict[str, Any]:
     t0 = time.perf_counter()
     entry: dict[str, Any] = {"frame": job.frame, "worker": worker_address()}
     try:
-        entry.update(compute_frame(job))
+        entry.update(compute_frame(job).to_json())
         entry["status"] = "done"
     except (RigctlError, OSError, ValueError, MemoryError) as exc:
         log.warning("frame %s failed: %s", job.frame, exc)

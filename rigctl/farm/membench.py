@@ -81,9 +81,9 @@ def _measure(make: Callable[[], Any], width: int, height: int, preset: str, came
     return {
         "size": [width, height],
         "preset": preset,
-        "cameras": stats["cameras"],
+        "cameras": stats.cameras,
         "seconds": seconds,
-        "timings_s": stats["timings_s"],
+        "timings_s": {"depth": stats.depth_s, "write": stats.write_s},
         "peak_rss_bytes": _peak_rss(),
         "peak_rss_while_building_input_bytes": before,
         "input_bytes": int(sum(v.nbytes for v in grid.images.values())),

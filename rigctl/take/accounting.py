@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import queue
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,3 +39,21 @@ class CameraStats:
     @property
     def queue_fill(self) -> float:
         return self.queued / self.pool_size if self.pool_size else 0.0
+
+    def stalled(self, pending: queue.Queue[tuple[Any, int] | None], busy: int | None) -> str:
+        """A writer that did not stop in time: the frames still queued for it (and the one it was writing,
+        sequence ``busy``) are not written; returns the note that says so."""
+        while True:
+            try:
+                item = pending.get_nowait()
+            except queue.Empty:
+                break
+            if item is not None:
+                self.not_written.append(item[0].sequence)
+        if busy is not None:
+            self.not_written.append(busy)
+        n = len(self.not_written)
+        return (
+            f"writer of {self.name} stalled at stop: {n} frame(s) not written "
+            f"(sequences {self.not_written[:10]}{' ...' if n > 10 else ''})"
+        )

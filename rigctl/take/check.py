@@ -38,7 +38,7 @@ def check_take(folder: Path, verify_data: bool = True) -> CheckReport:
             f"{folder / 'take.yaml'}: status 'recording': the recording did not end cleanly (crash or power loss); "
             "what the indexes hold is checked"
         )
-    left_out = reader.raw.get("damaged_skipped")
+    left_out = man.damaged_skipped
     if left_out:
         report.warnings.append(
             f"{folder / 'take.yaml'}: damaged_skipped: {len(left_out)} damaged source frame(s) were left out when "

@@ -69,16 +69,16 @@ def export_take(
             if name not in fs.members:
                 missing += 1
                 continue
-            rgb = reader.frame_rgb_or_none(name, fs.members[name])
-            if rgb is None:
+            image = reader.image_or_none(name, fs.members[name], "bgr8" if fmt == "png" else "float")
+            if image is None:
                 continue  # damaged, skipped: listed in reader.damaged
             path = output_path(out, layout, n, name, f".{fmt}")
             path.parent.mkdir(parents=True, exist_ok=True)
             if fmt == "png":
-                bgr = np.clip(np.rint(rgb[..., ::-1] * 255.0), 0, 255).astype(np.uint8)
-                if not cv2.imwrite(str(path), bgr):
+                if not cv2.imwrite(str(path), image):
                     raise TakeError(f"{path}: cannot write")
             else:
+                rgb = np.asarray(image, np.float32)
                 attrs = picture_attributes(reader.fps, tc, colour)
                 attrs.update({"rigctl:camera": name, "rigctl:frame_set": str(n)})
                 write_exr(path, picture(rgb, keyer.matte(rgb), colour), attrs)
@@ -87,6 +87,7 @@ def export_take(
             progress(k + 1, len(chosen))
     result = {"images": written, "missing": missing, "sets": len(chosen), "skipped_damaged": len(reader.damaged)}
     if reader.damaged:
-        manifest = {"take": str(reader.folder), **result, "skipped_damaged": reader.damaged}
+        skipped = [d.model_dump(exclude_none=True) for d in reader.damaged]
+        manifest = {"take": str(reader.folder), **result, "skipped_damaged": skipped}
         (out / "export.json").write_text(json.dumps(manifest, indent=1))
     return result

@@ -31,12 +31,28 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.errors import TakeError
+from rigctl.interfaces import FrameFlags
+from rigctl.timecode import Timecode
 
 MAGIC = b"RGIX"
 VERSION = 1
 RECORD = struct.Struct("<4sHHQqqQIIiI4s")
 assert RECORD.size == 60
 RECORD_SIZE = 64
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    """What a take's index says about one frame, besides where its bytes are: a processed frame copies it."""
+
+    camera: str
+    sequence: int
+    capture_ns: int
+    host_ns: int
+    flags: FrameFlags  # without the timecode bits: the timecode is carried in ``timecode``
+    frame_set: int
+    timecode: Timecode | None
+
 
 DTYPE = np.dtype(
     [

@@ -1,28 +1,58 @@
 """The take manifest, ``take.yaml`` (``spec: 1``): what a take is and what it claims to hold.
 
+One typed model, :class:`Manifest`, is what the recorder writes and what every reader gets back: capture
+(format, timing, cameras, frame sets, how the take ended), rectification (a rectified take, or an ideal
+simulated take that is rectified as recorded) and the crew's verdict. :func:`write_manifest` takes only the
+model and :func:`read_manifest` returns only the model, so a field is spelled once.
+
 It is written when recording starts (``status: recording``) and replaced atomically when the take ends,
 so a take interrupted by a crash still says what it is; its frames are then counted from the indexes.
+
+The YAML is the same as before the model existed: sections written as they always were, optional sections
+(``frame_sets``, ``end``, ``rectification``, ``verdict``, ``damaged_skipped``) left out until they are set,
+and keys another tool added at the top level kept when rigctl rewrites the file.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Literal, cast
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    JsonValue,
+    StrictInt,
+    ValidationError,
+    ValidationInfo,
+    field_serializer,
+    field_validator,
+)
+from pydantic.main import IncEx
 
 from rigctl.errors import TakeError
+from rigctl.timecode import Timecode, TimecodeError, rate_of
 from rigctl.yamlfile import check_spec, describe_validation_error, load_yaml_with_lines
+
+log = logging.getLogger(__name__)
 
 TAKE_SPEC = 1
 MANIFEST = "take.yaml"
 STATUSES = ("recording", "complete", "ended", "interrupted")
+VERDICTS = ("circled", "no-good")
+Verdict = Literal["circled", "no-good"]
 
 
-class CameraEntry(BaseModel):
-    model_config = ConfigDict(extra="allow")
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class CameraEntry(_Section):
+    """One camera's files and what was lost where (sequence numbers)."""
 
     essence: str
     index: str
@@ -33,11 +63,11 @@ class CameraEntry(BaseModel):
     error_frames: list[int] = []
     writer_drops: list[int] = []
     not_written: list[int] = []
+    ended_early: str | None = None  # why the camera's stream ended before the take did
+    format_changed_at: list[int] | None = None  # sequences flagged as a format change
 
 
-class FormatEntry(BaseModel):
-    model_config = ConfigDict(extra="allow")
-
+class FormatEntry(_Section):
     width: Annotated[int, Field(gt=0, le=65536)]
     height: Annotated[int, Field(gt=0, le=65536)]
     pixel_format: str
@@ -45,27 +75,157 @@ class FormatEntry(BaseModel):
     bytes_per_frame: Annotated[int, Field(gt=0)]
 
 
-class Manifest(BaseModel):
-    """The parts of a manifest every reader relies on; anything else is kept as it was written."""
+class Timing(_Section):
+    """When the take ran, on the capture clock; ``start_timecode`` is the take's time-of-day start, typed
+    (read with the rate of ``format.fps``)."""
 
-    model_config = ConfigDict(extra="allow")
+    clock: str = "CLOCK_MONOTONIC"
+    t0_ns: StrictInt | None = None
+    t1_ns: StrictInt | None = None
+    frame_period_ns: StrictInt | None = None
+    start_timecode: Timecode | None = None
+
+    model_config = ConfigDict(extra="forbid", arbitrary_types_allowed=True)
+
+    @field_serializer("start_timecode")
+    def _tc_text(self, tc: Timecode | None) -> str | None:
+        return None if tc is None else str(tc)
+
+
+class Skew(_Section):
+    p50_us: float = 0.0
+    p99_us: float = 0.0
+    max_us: float = 0.0
+    sets: int = 0
+
+
+class IncompleteSet(_Section):
+    number: int
+    missing: list[str]
+
+
+class FrameSetSummary(_Section):
+    count: int
+    complete: int
+    incomplete: list[IncompleteSet] = []
+    skew: Skew = Skew()
+    file: str = "sets.csv"
+
+
+class End(_Section):
+    reason: str
+    message: str = ""
+
+
+class Software(_Section):
+    name: str = "rigctl"
+    version: str = ""
+
+
+class Devices(_Section):
+    description: str = ""
+    settings: dict[str, JsonValue] = {}  # the simulator's settings, as given (empty for real cameras)
+
+
+class Rectification(_Section):
+    """The common-plane geometry a take's frames are in (``rigctl.rectgeom``): what depth reads."""
+
+    calibration_sha256: str
+    R: list[list[float]]
+    K: list[list[float]]
+    image_size: list[int]
+    spacing_x_m: float
+    spacing_y_m: float
+    focal_px: float
+    lattice_residual_mm: float
+    positions_m: dict[str, list[float]]
+    source_take: str | None = None  # rigctl rectify: the take it read
+    calibration: str | None = None  # rigctl rectify: the calibration file; an ideal take: "true (simulated)"
+    truth_note: str | None = None
+
+
+class DamagedFrame(_Section):
+    """A frame left out because it was damaged (``--skip-damaged``), with where it was found."""
+
+    camera: str
+    file: str
+    byte: int
+    problem: str
+    sequence: int | None = None
+
+
+# sections left out of the YAML while they are unset, as the manifest was written before it had a model
+_OPTIONAL = ("software", "checksum", "devices", "frame_sets", "end", "rectification", "verdict", "damaged_skipped")
+
+
+class Manifest(BaseModel):
+    """A take's manifest: capture, rectification and verdict sections. Unknown top-level keys (another tool's)
+    are kept as they were written."""
+
+    model_config = ConfigDict(extra="allow", validate_assignment=True)
 
     spec: int
     take: str
     status: str
+    started_utc: str = ""
+    software: Software | None = None
+    rig: dict[str, JsonValue] = {}  # the rig file as recorded (``rigctl.rig.rig_from_dict`` loads it)
     format: FormatEntry
+    timing: Timing = Timing()
+    checksum: str | None = None
+    devices: Devices | None = None
     cameras: dict[str, CameraEntry]
-    timing: dict[str, Any] = {}
-    frame_sets: dict[str, Any] = {}
-    rig: dict[str, Any] = {}
     notes: list[str] = []
+    frame_sets: FrameSetSummary | None = None
+    end: End | None = None
+    rectification: Rectification | None = None
+    verdict: Verdict | None = None
+    damaged_skipped: list[DamagedFrame] | None = None
+
+    @field_validator("timing", mode="before")
+    @classmethod
+    def _typed_timecode(cls, value: object, info: ValidationInfo) -> object:
+        """``timing.start_timecode`` as text in the file, a :class:`Timecode` at the rate of ``format.fps``."""
+        if not isinstance(value, dict) or not isinstance(value.get("start_timecode"), str):
+            return value
+        fmt = info.data.get("format")
+        if not isinstance(fmt, FormatEntry):
+            return {k: v for k, v in value.items() if k != "start_timecode"}  # the format's own error is raised
+        text = value["start_timecode"]
+        try:
+            tc = Timecode.parse(text, rate_of(fmt.fps)[0])
+        except TimecodeError as exc:
+            raise ValueError(f"start_timecode {text!r}: {exc}") from None
+        return {**value, "start_timecode": tc}
+
+    def mark(self, verdict: str, note: str = "") -> None:
+        """Set the crew's verdict, and say it (with the note) in the notes."""
+        if verdict not in VERDICTS:
+            raise TakeError(f"{self.take}: unknown verdict {verdict!r} ({', '.join(VERDICTS)})")
+        self.verdict = cast(Verdict, verdict)
+        self.notes = [*self.notes, f"{verdict}: {note}" if note else verdict]
+
+    def to_yaml_data(self) -> dict[str, object]:
+        """The manifest as the YAML holds it: optional sections and keys left out while unset."""
+        exclude: dict[str, IncEx | bool] = {k: True for k in _OPTIONAL if getattr(self, k) is None}
+        cams = {
+            n: {k for k in ("ended_early", "format_changed_at") if getattr(e, k) is None}
+            for n, e in self.cameras.items()
+        }
+        exclude["cameras"] = {n: keys for n, keys in cams.items() if keys}
+        if self.rectification is not None:
+            r = self.rectification
+            exclude["rectification"] = {
+                k for k in ("source_take", "calibration", "truth_note") if getattr(r, k) is None
+            }
+        return dict(self.model_dump(mode="json", exclude=exclude))
 
 
-def write_manifest(folder: Path, data: dict[str, Any]) -> None:
+def write_manifest(folder: Path, manifest: Manifest) -> None:
     """Replace ``folder/take.yaml`` atomically (write, fsync, rename, fsync the folder)."""
     path = folder / MANIFEST
     tmp = folder / (MANIFEST + ".tmp")
-    text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120)
+    text = yaml.safe_dump(manifest.to_yaml_data(), sort_keys=False, default_flow_style=None, width=120)
     with open(tmp, "w", encoding="utf-8") as f:
         f.write(text)
         f.flush()
@@ -78,8 +238,8 @@ def write_manifest(folder: Path, data: dict[str, Any]) -> None:
         os.close(dir_fd)
 
 
-def read_manifest(folder: Path) -> tuple[Manifest, dict[str, Any]]:
-    """The validated manifest and the raw data; errors name file, line and field."""
+def read_manifest(folder: Path) -> Manifest:
+    """The validated manifest; errors name file, line and field."""
     path = folder / MANIFEST
     if not folder.is_dir():
         raise TakeError(f"{folder}: no such take folder")
@@ -88,6 +248,6 @@ def read_manifest(folder: Path) -> tuple[Manifest, dict[str, Any]]:
     data, lines = load_yaml_with_lines(path)
     check_spec(path, data, lines, TAKE_SPEC, "take manifest")
     try:
-        return Manifest.model_validate(data), data
+        return Manifest.model_validate(data)
     except ValidationError as exc:
         raise TakeError(describe_validation_error(path, exc, lines)) from None

@@ -7,31 +7,46 @@ file, fewer frames than the manifest counts -- raises :class:`~rigctl.errors.Dam
 and byte offset. With ``skip_damaged`` such frames are left out instead and listed in :attr:`damaged`,
 for the caller to put in its output's manifest and exit status. Paths in ``take.yaml`` must resolve
 inside the take folder.
+
+Frames come out as the matcher and the exporters want them, from the bytes read once: :meth:`TakeReader.image`
+gives 8-bit BGR (packed 4:2:2 converted directly, BT.709), 8-bit grey or float RGB. Each camera's essence file
+is opened once and read with ``pread``; :meth:`TakeReader.close` (or ``with``) closes them.
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import weakref
 import zlib
 from functools import cached_property
 from pathlib import Path
+from types import TracebackType
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.errors import DamagedDataError, TakeError
 from rigctl.interfaces import FrameFlags
-from rigctl.pixfmt import to_rgb
+from rigctl.pixfmt import to_bgr8, to_gray8, to_rgb
 from rigctl.take import framesets
-from rigctl.take.index import RECORD_SIZE, IndexProblem, read_index
-from rigctl.take.manifest import Manifest, read_manifest
+from rigctl.take.index import RECORD_SIZE, FrameRecord, IndexProblem, read_index
+from rigctl.take.manifest import DamagedFrame, Manifest, read_manifest
 from rigctl.take.reserve import remove_stale_reserves
 from rigctl.timecode import Timecode, TimecodeError, rate_of, start_timecode
 
 log = logging.getLogger(__name__)
 
 BYTES_PER_PIXEL = {"UYVY": 2, "YUYV": 2, "BGR3": 3, "GREY": 1}
+ImageKind = Literal["bgr8", "gray8", "float"]
+KINDS: tuple[ImageKind, ...] = ("bgr8", "gray8", "float")
+
+
+def _close_all(fds: dict[str, int]) -> None:
+    for fd in fds.values():
+        os.close(fd)
+    fds.clear()
 
 
 class TakeReader:
@@ -40,8 +55,10 @@ class TakeReader:
     def __init__(self, folder: Path, skip_damaged: bool = False) -> None:
         self.folder = Path(folder)
         self.skip_damaged = skip_damaged
-        self.damaged: list[dict[str, object]] = []  # what was left out, with file and byte (skip_damaged)
-        self.manifest, self.raw = read_manifest(self.folder)
+        self.damaged: list[DamagedFrame] = []  # what was left out, with file and byte (skip_damaged)
+        self._fds: dict[str, int] = {}  # camera -> its essence file, opened on first read
+        self._finalizer = weakref.finalize(self, _close_all, self._fds)
+        self.manifest: Manifest = read_manifest(self.folder)
         self.names = list(self.manifest.cameras)
         fmt = self.manifest.format
         self.width, self.height, self.pixel_format, self.fps = fmt.width, fmt.height, fmt.pixel_format, fmt.fps
@@ -53,10 +70,8 @@ class TakeReader:
                 f"bytes_per_frame {fmt.bytes_per_frame} is not a format rigctl reads "
                 f"({', '.join(BYTES_PER_PIXEL)}; width x height x bytes per pixel)"
             )
-        period = self.manifest.timing.get("frame_period_ns")
-        if not (isinstance(period, int) and not isinstance(period, bool) and period > 0):
-            period = round(1e9 / fmt.fps)
-        self.period_ns = int(period)
+        period = self.manifest.timing.frame_period_ns
+        self.period_ns = period if period is not None and period > 0 else round(1e9 / fmt.fps)
         self.index: dict[str, NDArray[np.void]] = {}
         self.problems: dict[str, list[IndexProblem]] = {}
         for name in self.names:
@@ -93,10 +108,23 @@ class TakeReader:
     def _damaged(self, name: str, path: Path, offset: int, message: str, sequence: int | None = None) -> None:
         if not self.skip_damaged:
             raise DamagedDataError(f"{path}: byte {offset}: {message} (--skip-damaged leaves damaged frames out)")
-        entry: dict[str, object] = {"camera": name, "file": str(path), "byte": offset, "problem": message}
-        if sequence is not None:
-            entry["sequence"] = sequence
-        self.damaged.append(entry)
+        self.damaged.append(DamagedFrame(camera=name, file=str(path), byte=offset, problem=message, sequence=sequence))
+
+    def close(self) -> None:
+        """Close the essence files (reading again opens them again)."""
+        _close_all(self._fds)
+
+    def __enter__(self) -> TakeReader:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+        self.close()
+
+    def _essence_fd(self, name: str) -> int:
+        fd = self._fds.get(name)
+        if fd is None:
+            fd = self._fds[name] = os.open(self.essence_path(name), os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+        return fd
 
     @property
     def status(self) -> str:
@@ -140,11 +168,7 @@ class TakeReader:
         rec = self.index[name][i]
         size, offset = int(rec["size"]), int(rec["offset"])
         path = self.essence_path(name)
-        fd = os.open(path, os.O_RDONLY)
-        try:
-            data = os.pread(fd, size, offset)
-        finally:
-            os.close(fd)
+        data = os.pread(self._essence_fd(name), size, offset)
         if size != self.bytes_per_frame:
             raise DamagedDataError(
                 f"{self.index_path(name)}: byte {i * RECORD_SIZE}: frame of {size} bytes, the format needs "
@@ -170,6 +194,28 @@ class TakeReader:
             )
             return None
 
+    def convert(self, data: NDArray[np.uint8], kind: ImageKind) -> NDArray[np.uint8] | NDArray[np.float32]:
+        """A frame's bytes as ``kind``: ``bgr8`` (H x W x 3), ``gray8`` (H x W, full-range BT.709 luma) or
+        ``float`` (RGB float32 in [0, 1]); each straight from the captured pixel format."""
+        if kind == "bgr8":
+            return to_bgr8(data, self.pixel_format, self.width, self.height)
+        if kind == "gray8":
+            return to_gray8(data, self.pixel_format, self.width, self.height)
+        if kind == "float":
+            return to_rgb(data, self.pixel_format, self.width, self.height)
+        raise TakeError(f"unknown image kind {kind!r} ({', '.join(KINDS)})")
+
+    def image(self, camera: str, index: int, kind: ImageKind = "bgr8") -> NDArray[np.uint8] | NDArray[np.float32]:
+        """Frame ``index`` of ``camera`` as ``kind`` (see :meth:`convert`); a damaged frame raises."""
+        return self.convert(self.frame_bytes(camera, index), kind)
+
+    def image_or_none(
+        self, camera: str, index: int, kind: ImageKind = "bgr8"
+    ) -> NDArray[np.uint8] | NDArray[np.float32] | None:
+        """As :meth:`image`, None for a damaged frame when skipping (see :meth:`frame_or_none`)."""
+        data = self.frame_or_none(camera, index)
+        return None if data is None else self.convert(data, kind)
+
     def frame_rgb(self, name: str, i: int) -> NDArray[np.float32]:
         """Frame ``i`` of ``name`` as RGB float32 in [0, 1] (converted from the captured pixel format)."""
         return to_rgb(self.frame_bytes(name, i), self.pixel_format, self.width, self.height)
@@ -178,6 +224,20 @@ class TakeReader:
         """As :meth:`frame_rgb`, None for a damaged frame when skipping (see :meth:`frame_or_none`)."""
         data = self.frame_or_none(name, i)
         return None if data is None else to_rgb(data, self.pixel_format, self.width, self.height)
+
+    def record(self, name: str, i: int) -> FrameRecord:
+        """Frame ``i``'s index record of camera ``name``: what :meth:`TakeWriter.append` copies."""
+        rec = self.index[name][i]
+        flags = FrameFlags(int(rec["flags"])) & ~(FrameFlags.TIMECODE | FrameFlags.DROP_FRAME)
+        return FrameRecord(
+            name,
+            int(rec["sequence"]),
+            int(rec["capture_ns"]),
+            int(rec["host_ns"]),
+            flags,
+            int(rec["set"]),
+            self.timecode(name, i),
+        )
 
     @cached_property
     def frame_sets(self) -> list[framesets.FrameSet]:
@@ -195,7 +255,7 @@ class TakeReader:
             timecodes = None
         if timecodes is not None:
             self._check_timecode_span(timecodes)
-        t0 = self.manifest.timing.get("t0_ns")
+        t0 = self.manifest.timing.t0_ns
         return framesets.assemble(stamps, self.period_ns, t0, timecodes)
 
     def timecode_rate(self, drop: bool) -> tuple[int, bool]:
@@ -227,7 +287,7 @@ class TakeReader:
             tc = self.timecode(name, i)
             if tc is not None:
                 return tc
-        return start_timecode(str(self.raw.get("started_utc", "")), self.fps) + fs.number
+        return start_timecode(self.manifest.started_utc, self.fps) + fs.number
 
     def _check_timecode_span(self, timecodes: dict[str, NDArray[np.int64]]) -> None:
         """Frame sets by timecode make one slot per timecode from the first to the last: a damaged or hostile
@@ -267,15 +327,11 @@ class TakeReader:
             "frame_sets": len(sets),
             "complete_sets": sum(1 for s in sets if s.complete(self.names)),
             "skew": framesets.skew_stats(sets),
-            "started_utc": self.raw.get("started_utc", ""),
-            "end": self.raw.get("end", {}),
+            "started_utc": self.manifest.started_utc,
+            "end": self.manifest.end.model_dump() if self.manifest.end else {},
             "notes": self.manifest.notes,
         }
 
     def _gaps(self, name: str) -> int:
         seq = self.index[name]["sequence"].astype(np.int64)
         return int(np.sum(np.clip(np.diff(seq) - 1, 0, None))) if len(seq) > 1 else 0
-
-    @property
-    def manifest_model(self) -> Manifest:
-        return self.manifest

@@ -15,9 +15,13 @@ import time
 import zlib
 from pathlib import Path
 
+import numpy as np
+from numpy.typing import NDArray
+
 from rigctl.errors import DiskFullError, TakeError
 from rigctl.interfaces import Frame, FrameFlags
 from rigctl.take import index
+from rigctl.take.index import FrameRecord
 
 _TC_FLAGS = int(FrameFlags.TIMECODE | FrameFlags.DROP_FRAME)
 
@@ -102,3 +106,39 @@ class CameraWriter:
             self.sync()
         os.close(self._essence)
         os.close(self._index)
+
+
+class TakeWriter:
+    """The camera files of a take made from another take (``rigctl rectify``): each processed image is
+    appended with its source frame's record copied (sequence, capture and host times, flags, frame set and
+    timecode), so the new take's frame sets and timecodes are the source's."""
+
+    def __init__(self, folder: Path, fps: float, checksum: bool = True) -> None:
+        self.folder = folder
+        self.fps = fps
+        self.checksum = checksum
+        self.writers: dict[str, CameraWriter] = {}
+
+    def open(self, camera: str) -> CameraWriter:
+        """``camera``'s writer, its files created on first use."""
+        writer = self.writers.get(camera)
+        if writer is None:
+            writer = self.writers[camera] = CameraWriter(camera, self.folder, self.fps, self.checksum, 0)
+        return writer
+
+    def append(self, camera: str, image: NDArray[np.uint8], source: FrameRecord) -> None:
+        """Append ``image`` (any shape, C-contiguous bytes are written as they are) to ``camera``'s files."""
+        writer = self.open(camera)
+        data = memoryview(np.ascontiguousarray(image).reshape(-1).data)
+        frame = Frame(camera, source.sequence, source.capture_ns, source.host_ns, source.flags, data, source.timecode)
+        writer.write(frame, source.frame_set)
+
+    def close(self) -> None:
+        for writer in self.writers.values():
+            writer.close()
+
+    def __enter__(self) -> TakeWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

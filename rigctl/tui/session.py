@@ -233,10 +233,9 @@ class Session:
         if not self.last_take:
             raise RigctlError("no take to mark yet")
         folder = Path(self.last_take)
-        _, raw = read_manifest(folder)
-        raw["verdict"] = verdict
-        raw.setdefault("notes", []).append(f"{verdict}: {note}" if note else verdict)
-        write_manifest(folder, raw)
+        manifest = read_manifest(folder)
+        manifest.mark(verdict, note)
+        write_manifest(folder, manifest)
         self.message = f"{folder.name} marked {verdict}"
         return self.message
 

@@ -203,13 +203,14 @@ def test_vanishing_device_ends_its_stream_while_others_record(v4l2_devices, tmp_
     _ctrl(v4l2_devices[4], disconnect=1)
     assert rec.wait(timeout_s=60)
     man = rec.finish()
-    lost = man["cameras"]["r1c1"]
-    assert "disappeared" in lost.get("ended_early", ""), lost
+    assert man is not None
+    lost = man.cameras["r1c1"]
+    assert "disappeared" in (lost.ended_early or ""), lost
     assert any("r1c1" in r.getMessage() and "disappeared" in r.getMessage() for r in caplog.records)
-    others = [man["cameras"][n] for n in ("r0c0", "r2c2")]
-    assert all(c["frames"] > lost["frames"] for c in others)
-    slots = [c["frames"] + len(c["source_drops"]) + len(c["writer_drops"]) + len(c["error_frames"]) for c in others]
-    assert all(n >= 245 for n in slots), (slots, [c["frames"] for c in others], man["end"])
+    others = [man.cameras[n] for n in ("r0c0", "r2c2")]
+    assert all(c.frames > lost.frames for c in others)
+    slots = [c.frames + len(c.source_drops) + len(c.writer_drops) + len(c.error_frames) for c in others]
+    assert all(n >= 245 for n in slots), (slots, [c.frames for c in others], man.end)
 
 
 def test_devices_lists_vivid_and_maps_the_rig(v4l2_devices, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
@@ -251,6 +252,7 @@ def test_no_signal_refuses_to_arm_and_a_signal_change_is_recorded(v4l2_devices, 
         man = rec.finish()
     finally:
         _ctrl(dev, dv_timings_signal_mode=0)
-    cam = man["cameras"]["r2c1"]
-    assert cam.get("format_changed_at"), cam  # recorded, and the take went on
-    assert man["status"] == "complete" and cam["frames"] > 20
+    assert man is not None
+    cam = man.cameras["r2c1"]
+    assert cam.format_changed_at, cam  # recorded, and the take went on
+    assert man.status == "complete" and cam.frames > 20

@@ -123,7 +123,7 @@ def test_motorcycle_two_view_no_worse_than_sgbm_3way_on_bad_2() -> None:
     from rigctl.depth.bench import motorcycle, run_bench
 
     result = run_bench([motorcycle()], methods=["balanced", "opencv-sgbm-3way"])
-    rows = {r["method"]: r for r in result["rows"]}
+    rows = {r.method: r.scores for r in result.rows}
     assert rows["balanced"]["bad_2.0"] <= rows["opencv-sgbm-3way"]["bad_2.0"], rows
 
 
@@ -135,6 +135,47 @@ def ideal_take(tmp_path_factory: pytest.TempPathFactory) -> Path:
     )
     assert res.returncode == 0, res.stderr
     return out / "ideal"
+
+
+def test_an_ideal_take_is_recorded_with_its_rectification_and_an_old_one_is_rectified_once(
+    ideal_take: Path, tmp_path: Path
+) -> None:
+    """An ideal simulated take carries the rectification of its true calibration from the moment it is recorded
+    (depth has no simulator branch). One recorded before that (no section) is refused, naming the fix, and
+    rectified with its own truth/calibration.yaml it gives depth the same pictures."""
+    import shutil
+
+    from rigctl.calibration_model import load_calibration
+    from rigctl.depth.grid import TakeGrid
+    from rigctl.rectgeom import common_plane
+    from rigctl.take.manifest import read_manifest, write_manifest
+
+    rect = read_manifest(ideal_take).rectification
+    assert rect is not None
+    truth = common_plane(load_calibration(ideal_take / "truth" / "calibration.yaml"))
+    for name, pos in rect.positions_m.items():
+        assert np.allclose(pos, truth.position_m(name), atol=1e-9), name
+    assert rect.focal_px == pytest.approx(truth.focal_px, rel=1e-9)
+
+    old = tmp_path / "old"
+    shutil.copytree(ideal_take, old)
+    man = read_manifest(old)
+    man.rectification = None
+    write_manifest(old, man)
+    res = run_rigctl("depth", str(old), "--out", str(tmp_path / "d"))
+    assert res.returncode != 0 and "truth/calibration.yaml" in res.stderr and "Traceback" not in res.stderr
+    res = run_rigctl(
+        "rectify", str(old), "--calibration", str(old / "truth" / "calibration.yaml"), "--out", str(tmp_path / "r")
+    )
+    assert res.returncode == 0, res.stderr
+    before, after = TakeGrid(ideal_take), TakeGrid(tmp_path / "r")
+    n = before.frame_numbers()[0]
+    g0, g1 = before.grid(n), after.grid(n)
+    assert g1.offsets == pytest.approx(g0.offsets) and g1.focal_px == pytest.approx(g0.focal_px)
+    inner = (slice(2, -2), slice(2, -2))  # the remap's border
+    for cam in g0.names:
+        diff = np.abs(g0.bgr8(cam)[inner].astype(int) - g1.bgr8(cam)[inner].astype(int))
+        assert diff.max() <= 1, (cam, diff.max())
 
 
 def test_cli_depth_writes_every_output(ideal_take: Path, tmp_path: Path) -> None:
@@ -240,10 +281,10 @@ def test_best_beats_the_best_opencv_baseline_on_the_realistic_presenter_by_30_pe
 
     result = run_bench([presenter(ideal=False)], methods=["best", *BASELINES])
     (cmp,) = comparisons(result)
-    rows = {r["method"]: r for r in result["rows"]}
-    assert cmp["baseline"] == min(BASELINES, key=lambda m: rows[m]["bad_1.0"])
-    assert cmp["bad1_improvement"] >= 0.30, rows
-    assert rows["best"]["bad_2.0"] < rows[cmp["baseline"]]["bad_2.0"], rows
+    rows = {r.method: r.scores for r in result.rows}
+    assert cmp.baseline == min(BASELINES, key=lambda m: rows[m]["bad_1.0"])
+    assert cmp.bad1_improvement >= 0.30, rows
+    assert rows["best"]["bad_2.0"] < rows[cmp.baseline]["bad_2.0"], rows
 
 
 def occlusion_grid(d_back: float = 5.0, d_front: float = 15.0, h: int = 120, w: int = 160):  # type: ignore[no-untyped-def]

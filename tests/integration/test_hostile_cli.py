@@ -322,7 +322,7 @@ def test_writers_close_only_after_the_flush_thread_ends(tmp_path: Path) -> None:
     assert syncing.wait(30)
     rec.stop()
     man = rec.finish()
-    assert man["status"] in ("complete", "ended") and "close" in trace
+    assert man is not None and man.status in ("complete", "ended") and "close" in trace
     first_close = trace.index("close")
     assert trace[:first_close].count("sync-start") == trace[:first_close].count("sync-end")
     assert "sync-start" not in trace[first_close:]

@@ -20,7 +20,7 @@ from rigctl.exr import REC709_CHROMATICITIES, read_exr
 from rigctl.interfaces import CaptureFormat, Frame, FrameFlags
 from rigctl.take.accounting import CameraStats
 from rigctl.take.framesets import FrameSet
-from rigctl.take.manifest import TAKE_SPEC, write_manifest
+from rigctl.take.manifest import TAKE_SPEC, Manifest, write_manifest
 from rigctl.take.reader import TakeReader
 from rigctl.take.sidecars import write_ale, write_sets_csv
 from rigctl.take.writer import CameraWriter
@@ -54,15 +54,17 @@ def write_take(folder: Path, fps: float, frames: dict[str, list[Timecode | None]
         cams[name] = {"essence": f"{name}.essence", "index": f"{name}.index", "frames": len(tcs)}
     write_manifest(
         folder,
-        {
-            "spec": TAKE_SPEC,
-            "take": folder.name,
-            "status": "complete",
-            "started_utc": "2026-05-01T10:20:30.500+00:00",
-            "format": {"width": W, "height": H, "pixel_format": "BGR3", "fps": fps, "bytes_per_frame": W * H * 3},
-            "timing": {"frame_period_ns": period_ns},
-            "cameras": cams,
-        },
+        Manifest.model_validate(
+            {
+                "spec": TAKE_SPEC,
+                "take": folder.name,
+                "status": "complete",
+                "started_utc": "2026-05-01T10:20:30.500+00:00",
+                "format": {"width": W, "height": H, "pixel_format": "BGR3", "fps": fps, "bytes_per_frame": W * H * 3},
+                "timing": {"frame_period_ns": period_ns},
+                "cameras": cams,
+            }
+        ),
     )
     return folder
 

@@ -46,16 +46,17 @@ def test_rectified_take_lines_up_with_the_truth(take: Path, tmp_path: Path, run_
     rect = TakeReader(out)
     assert rect.pixel_format == "BGR3" and rect.names == TakeReader(take).names
     assert len(rect.complete_sets()) == 2
-    record = rect.raw["rectification"]
-    assert record["calibration_sha256"] and np.asarray(record["K"]).shape == (3, 3)
+    record = rect.manifest.rectification
+    assert record is not None
+    assert record.calibration_sha256 and np.asarray(record.K).shape == (3, 3)
     # the contract: a point at x in r1c1 is at x - d * (k - j) in its horizontal neighbours, and at
     # y - d * dy/dx * (m - i) below, with the cameras' true positions in the rectified frame
     truth = take / "truth" / "disparity"
     frame_dir = sorted(truth.iterdir())[0]
     disps = {n: read_pfm(frame_dir / f"{n}.pfm") for n in ("r1c1", *STEP)}
     images = {n: grey(rect, n) for n in disps}
-    pos = {n: np.asarray(p) for n, p in record["positions_m"].items()}
-    offsets = {n: tuple((pos[n] - pos["r1c1"])[:2] / record["spacing_x_m"]) for n in STEP}
+    pos = {n: np.asarray(p) for n, p in record.positions_m.items()}
+    offsets = {n: tuple((pos[n] - pos["r1c1"])[:2] / record.spacing_x_m) for n in STEP}
     result = mae_against_neighbours(images, disps, offsets)  # type: ignore[arg-type]
     for name, (mae, pixels) in result.items():
         assert pixels > 15000 and mae < 3.0, (name, mae, pixels)

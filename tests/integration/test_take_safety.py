@@ -129,8 +129,9 @@ def test_injected_enospc_at_the_write_call(tmp_path: Path) -> None:
     rec = _recorder(tmp_path, FillsUp)
     assert rec.wait(timeout_s=30)
     man = rec.finish()
-    assert man["end"]["reason"] == "disk full" and "destination full" in man["end"]["message"]
-    assert man["cameras"]["r0c1"]["frames"] == 6
+    assert man is not None and man.end is not None
+    assert man.end.reason == "disk full" and "destination full" in man.end.message
+    assert man.cameras["r0c1"].frames == 6
     assert check_take(tmp_path / "t").ok
 
 
@@ -150,11 +151,12 @@ def test_stalled_writer_still_stops_in_bounded_time(tmp_path: Path) -> None:
     # the writer stalls for 60 s; finishing gives up on it after stop_timeout_s (1 s). The bound is generous
     # for loaded CI machines and still far below what waiting for the stalled writer would take
     assert time.monotonic() - t0 < 30.0
-    stalled = man["cameras"]["r0c2"]
-    assert stalled["frames"] == 4
-    assert len(stalled["not_written"]) >= 1
-    assert any("writer of r0c2 stalled" in n for n in man["notes"])
-    assert man["cameras"]["r0c0"]["frames"] == 25
+    assert man is not None
+    stalled = man.cameras["r0c2"]
+    assert stalled.frames == 4
+    assert len(stalled.not_written) >= 1
+    assert any("writer of r0c2 stalled" in n for n in man.notes)
+    assert man.cameras["r0c0"].frames == 25
     release.set()
 
 

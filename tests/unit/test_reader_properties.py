@@ -165,7 +165,7 @@ def test_grid_yaml_any_values(tmp_path: Path, spec: dict[str, Any]) -> None:
 
 def small_take(folder: Path, frames: int = 2) -> dict[str, Any]:
     from rigctl.interfaces import Frame, FrameFlags
-    from rigctl.take.manifest import write_manifest
+    from rigctl.take.manifest import Manifest, write_manifest
     from rigctl.take.writer import CameraWriter
 
     folder.mkdir(parents=True, exist_ok=True)
@@ -180,7 +180,7 @@ def small_take(folder: Path, frames: int = 2) -> dict[str, Any]:
         "format": {"width": 4, "height": 4, "pixel_format": "UYVY", "fps": 25.0, "bytes_per_frame": 32},
         "cameras": {"r0c0": {"essence": "cameras/r0c0.essence", "index": "cameras/r0c0.index", "frames": frames}},
     }
-    write_manifest(folder, manifest)
+    write_manifest(folder, Manifest.model_validate(manifest))
     return manifest
 
 
