@@ -1,0 +1,262 @@
+"""The renderer's compiled kernels (Numba, parallel over rows; no Python objects inside).
+
+Three passes per view, each written as a GPU would run it:
+
+- ``prepare_source`` -- once per frame and camera (the texture upload): RGB + key alpha to 8-bit RGBA, the
+  disparity to float32 with ``NONE`` where there is none, and the range of its half-resolution samples;
+- ``target_disparity`` -- the target's half-resolution disparity: every source's half-resolution samples
+  forward-splatted with a depth test (a scatter with a max reduction, into one private buffer per thread,
+  then merged), one-pixel cracks closed (3x3 closing, on holes only), disocclusions filled along rows then
+  columns from the background side, and a ring of ``RING`` pixels around the subject for the key's soft edge;
+- ``shade`` -- per full-resolution pixel, a fixed number of taps: for each of up to ``MAX_TAPS`` sources one
+  bilinear RGBA sample and one nearest disparity sample where the target's disparity puts the point, the
+  weight (closeness in the array plane times agreement of the two disparities) and the normalised sum,
+  written as 8-bit RGBA.
+
+``cache=True`` keeps the machine code next to this file (or in Numba's user cache when that is read-only):
+only the first call on a machine compiles (a few seconds, reported by ``rigctl bench render``).
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+from numba import njit, prange
+from numpy.typing import NDArray
+
+log = logging.getLogger(__name__)
+
+NONE = np.float32(-1e6)  # "no disparity" inside the renderer (PFM's +inf would poison interpolation)
+RING = 2  # half-resolution pixels of the key's soft edge kept around the subject
+MAX_TAPS = 4  # sources per pixel: fixed, as in a pixel shader
+
+F32 = NDArray[np.float32]
+U8 = NDArray[np.uint8]
+I64 = NDArray[np.int64]
+
+
+@njit(parallel=True, cache=True, fastmath=False)
+def prepare_source(rgb: F32, alpha: F32, disparity: F32, rgba: U8, disp: F32, half: F32, spans: I64) -> None:
+    """Fill ``rgba`` (H x W x 4: RGB and alpha in 8 bits), ``disp`` (H x W, ``NONE`` where not finite),
+    ``half`` (its even rows and columns: the splat's samples) and ``spans`` (per half-resolution row, the
+    first and one past the last column holding a disparity; 0, 0 when none)."""
+    h, w = alpha.shape
+    hl, wl = half.shape
+    top = np.float32(255.0)
+    for y in prange(h):
+        for x in range(w):
+            for c in range(3):
+                rgba[y, x, c] = np.uint8(min(max(rgb[y, x, c] * top + np.float32(0.5), 0.0), top))
+            rgba[y, x, 3] = np.uint8(min(max(alpha[y, x] * top + np.float32(0.5), 0.0), top))
+            d = disparity[y, x]
+            disp[y, x] = d if np.isfinite(d) else NONE
+    for j in prange(hl):
+        first, last = wl, -1
+        for i in range(wl):
+            d = disp[2 * j, 2 * i]
+            half[j, i] = d
+            if d > NONE:
+                first, last = min(first, i), i
+        spans[j, 0], spans[j, 1] = (first, last + 1) if last >= 0 else (0, 0)
+
+
+@njit(parallel=True, cache=True, fastmath=False)
+def splat(halves: tuple[F32, ...], spans: tuple[I64, ...], n: int, du: F32, dv: F32, bufs: F32) -> None:
+    """Forward-splat the half-resolution disparities of the first ``n`` sources (offsets du, dv from the
+    target, in horizontal spacings) into ``bufs`` (threads x hl x wl) with a depth test: the largest
+    disparity (the nearest surface) wins. Each thread scans a band of source rows into its own buffer (the
+    scatter has no atomic max); the caller merges them with a max."""
+    nt, hl, wl = bufs.shape
+    for c in prange(nt):
+        buf = bufs[c]
+        buf[:, :] = NONE
+        for k in range(n):
+            src, span = halves[k], spans[k]
+            a, b = du[k], dv[k]
+            for j in range(c * hl // nt, (c + 1) * hl // nt):
+                fy = np.float32(2 * j)
+                for i in range(span[j, 0], span[j, 1]):
+                    d = src[j, i]
+                    if d > NONE:
+                        xt = int(np.rint((np.float32(2 * i) + d * a) * np.float32(0.5)))
+                        yt = int(np.rint((fy + d * b) * np.float32(0.5)))
+                        if 0 <= xt < wl and 0 <= yt < hl and d > buf[yt, xt]:
+                            buf[yt, xt] = d
+
+
+@njit(cache=True, fastmath=False)
+def close_and_fill(low: F32, closed: F32, max_gap: int, last: NDArray[np.int64]) -> None:
+    """In one pass down the rows of the splatted half-resolution disparity ``low``: holes take the 3x3
+    closing ``closed`` where it has a value (one-pixel cracks), then runs of holes between two valid pixels
+    at most ``max_gap`` apart take the smaller (farther) disparity of the two -- along the row, then, with
+    ``last`` (one entry per column) remembering each column's last valid row, along the columns."""
+    hl, wl = low.shape
+    last[:] = -1
+    for y in range(hl):
+        row = low[y]
+        for x in range(wl):
+            if row[x] <= NONE and closed[y, x] > NONE:
+                row[x] = closed[y, x]
+        prev = -1
+        for x in range(wl):
+            if row[x] > NONE:
+                if 0 <= prev < x - 1 and x - prev <= max_gap:
+                    fill = min(row[prev], row[x])
+                    for xx in range(prev + 1, x):
+                        row[xx] = fill
+                prev = x
+        for x in range(wl):
+            if row[x] > NONE:
+                top = last[x]
+                if 0 <= top < y - 1 and y - top <= max_gap:
+                    fill = min(low[top, x], row[x])
+                    for yy in range(top + 1, y):
+                        low[yy, x] = fill
+                last[x] = y
+
+
+LANES = 0x00FF00FF  # two 8-bit channels 16 bits apart: R and B, or G and A (>> 8) of a packed pixel
+ROUND = 0x00800080
+
+
+@njit(inline="always")
+def _row(img: NDArray[np.uint32], y: int, x: int, qx: int) -> tuple[int, int, int, int]:
+    """The horizontal half of the bilinear filter for the two pixels of a block on row ``y``: taps x, x + 1,
+    x + 2 mixed with 8-bit weight ``qx``, two channels per integer multiply (each product fits 16 bits).
+    Returns (R | B << 16, G | A << 16) of the left pixel, then of the right one."""
+    p0, p1, p2 = int(img[y, x]), int(img[y, x + 1]), int(img[y, x + 2])
+    r0, r1, r2 = p0 & LANES, p1 & LANES, p2 & LANES
+    g0, g1, g2 = p0 >> 8 & LANES, p1 >> 8 & LANES, p2 >> 8 & LANES
+    qx0 = 256 - qx
+    return (
+        (qx0 * r0 + qx * r1 + ROUND) >> 8 & LANES,
+        (qx0 * g0 + qx * g1 + ROUND) >> 8 & LANES,
+        (qx0 * r1 + qx * r2 + ROUND) >> 8 & LANES,
+        (qx0 * g1 + qx * g2 + ROUND) >> 8 & LANES,
+    )
+
+
+@njit(inline="always")
+def _mix(top: int, bottom: int, qy: int) -> int:
+    """The vertical half: two rows' lanes mixed with 8-bit weight ``qy``."""
+    return ((256 - qy) * top + qy * bottom + ROUND) >> 8 & LANES
+
+
+@njit(inline="always")
+def _add(cell: F32, wk: float, rb: int, ga: int) -> None:
+    cell[0] += wk * np.float32(rb & 0xFF)
+    cell[1] += wk * np.float32(ga & 0xFF)
+    cell[2] += wk * np.float32(rb >> 16)
+    cell[3] += wk * np.float32(ga >> 16)
+    cell[4] += wk
+
+
+@njit(parallel=True, cache=True, fastmath=False)
+def shade(
+    low: F32,
+    ring: F32,
+    rgbas: tuple[NDArray[np.uint32], ...],
+    disps: tuple[F32, ...],
+    n: int,
+    du: F32,
+    dv: F32,
+    closeness: F32,
+    inv_agree: float,
+    out: NDArray[np.uint32],
+) -> None:
+    """Write the view's RGBA (packed: R in the low byte) into ``out`` (H x W) from the half-resolution
+    target disparity (``low``, or ``ring`` -- the key's soft edge -- where ``low`` has none; ``low`` is
+    completed in place) and the first ``n`` sources (packed RGBA, H x W). Per pixel and source: one bilinear
+    RGBA sample (8-bit weights; zero outside the image) and one nearest disparity sample where the target's
+    disparity puts the point, weighted by closeness x agreement (floored at 1e-3 of the closeness); pixels
+    with no target disparity are transparent black.
+
+    One iteration is a 2x2 block of pixels, which share the target disparity (read at nearest) and so the
+    bilinear weights; each pixel still takes its own four taps per source, as a pixel shader would."""
+    h, w = out.shape
+    hl, wl = low.shape
+    one = np.float32(1.0)
+    floor_w = np.float32(1e-3)
+    agree = np.float32(inv_agree)
+    for by in prange(hl):
+        first, last = wl, -1
+        for bx in range(wl):
+            if low[by, bx] <= NONE:
+                low[by, bx] = ring[by, bx]
+            if low[by, bx] > NONE:
+                first, last = min(first, bx), bx
+        y = 2 * by
+        rows = min(2, h - y)
+        if last < 0:
+            out[y : y + rows, :] = 0
+            continue
+        # per pixel: weighted R, G, B, A and the weight, summed over the sources
+        acc = np.zeros((2, 2 * (last + 1 - first), 5), np.float32)
+        for k in range(n):
+            img, dsrc = rgbas[k], disps[k]
+            a, b, cl = du[k], dv[k], closeness[k]
+            for bx in range(first, last + 1):
+                d = low[by, bx]
+                if d <= NONE:
+                    continue
+                mx = np.float32(2 * bx) - d * a
+                my = np.float32(y) - d * b
+                fx, fy = np.floor(mx), np.floor(my)
+                ix, iy = int(fx), int(fy)
+                qx = int((mx - fx) * np.float32(256.0) + np.float32(0.5))
+                qy = int((my - fy) * np.float32(256.0) + np.float32(0.5))
+                w11 = (qx * qy + 128) >> 8
+                w00, w01, w10 = 256 - qx - qy + w11, qx - w11, qy - w11
+                rx, ry = (1 if qx >= 128 else 0), (1 if qy >= 128 else 0)
+                ax = 2 * bx
+                c = ax - 2 * first
+                if ix >= 0 and ix + 2 < w and iy >= 0 and iy + 2 < h and ax + 1 < w and y + 1 < h:
+                    # the block's four pixels take their taps from one 3 x 3 patch (3 x 2 when qy is 0)
+                    r00, g00, r01, g01 = _row(img, iy, ix, qx)
+                    r10, g10, r11, g11 = _row(img, iy + 1, ix, qx)
+                    if qy:
+                        r20, g20, r21, g21 = _row(img, iy + 2, ix, qx)
+                        r00, g00 = _mix(r00, r10, qy), _mix(g00, g10, qy)
+                        r01, g01 = _mix(r01, r11, qy), _mix(g01, g11, qy)
+                        r10, g10 = _mix(r10, r20, qy), _mix(g10, g20, qy)
+                        r11, g11 = _mix(r11, r21, qy), _mix(g11, g21, qy)
+                    s0, s1 = dsrc[iy + ry], dsrc[iy + 1 + ry]
+                    floor_k = cl * floor_w
+                    _add(acc[0, c], max(cl * (one - abs(s0[ix + rx] - d) * agree), floor_k), r00, g00)
+                    _add(acc[0, c + 1], max(cl * (one - abs(s0[ix + 1 + rx] - d) * agree), floor_k), r01, g01)
+                    _add(acc[1, c], max(cl * (one - abs(s1[ix + rx] - d) * agree), floor_k), r10, g10)
+                    _add(acc[1, c + 1], max(cl * (one - abs(s1[ix + 1 + rx] - d) * agree), floor_k), r11, g11)
+                    continue
+                # at the image's edge: taps outside read zero (a constant border)
+                for py in range(rows):
+                    for px in range(min(2, w - ax)):
+                        x0, y0 = ix + px, iy + py
+                        rb = ga = 0
+                        for ty in range(2):
+                            for tx in range(2):
+                                yy, xx = y0 + ty, x0 + tx
+                                if 0 <= yy < h and 0 <= xx < w:
+                                    wt = (w11 if tx else w10) if ty else (w01 if tx else w00)
+                                    p = int(img[yy, xx])
+                                    rb += wt * (p & LANES)
+                                    ga += wt * (p >> 8 & LANES)
+                        rb, ga = (rb + ROUND) >> 8, (ga + ROUND) >> 8
+                        ny, nx = y0 + ry, x0 + rx
+                        seen = dsrc[ny, nx] if 0 <= nx < w and 0 <= ny < h else NONE
+                        wk = max(cl * (one - abs(seen - d) * agree), cl * floor_w)
+                        _add(acc[py, c + px], wk, rb & LANES, ga & LANES)
+        for py in range(rows):
+            orow = out[y + py]
+            orow[: 2 * first] = 0
+            orow[2 * (last + 1) :] = 0
+            for x in range(2 * first, min(w, 2 * (last + 1))):
+                cell = acc[py, x - 2 * first]
+                if cell[4] > 0:
+                    inv = one / cell[4]
+                    v = np.uint32(0)
+                    for ch in range(4):
+                        v |= np.uint32(min(cell[ch] * inv + np.float32(0.5), np.float32(255.0))) << (8 * ch)
+                    orow[x] = v
+                else:
+                    orow[x] = 0
