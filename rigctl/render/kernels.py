@@ -4,10 +4,11 @@ Three passes per view, each written as a GPU would run it:
 
 - ``prepare_source`` -- once per frame and camera (the texture upload): RGB + key alpha to 8-bit RGBA, the
   disparity to float32 with ``NONE`` where there is none, and the range of its half-resolution samples;
-- ``target_disparity`` -- the target's half-resolution disparity: every source's half-resolution samples
-  forward-splatted with a depth test (a scatter with a max reduction, into one private buffer per thread,
-  then merged), one-pixel cracks closed (3x3 closing, on holes only), disocclusions filled along rows then
-  columns from the background side, and a ring of ``RING`` pixels around the subject for the key's soft edge;
+- ``splat`` and ``close_and_fill`` -- the target's half-resolution disparity: every source's
+  half-resolution samples forward-splatted with a depth test (a scatter with a max reduction), one-pixel
+  cracks closed (OpenCV's 3x3 closing applied to holes only), disocclusions filled along rows then columns
+  from the background side; OpenCV adds a ring of ``RING`` pixels for the key's soft edge. Serial and
+  without the GIL: the two eyes of a pair run side by side on two threads;
 - ``shade`` -- per full-resolution pixel, a fixed number of taps: for each of up to ``MAX_TAPS`` sources one
   bilinear RGBA sample and one nearest disparity sample where the target's disparity puts the point, the
   weight (closeness in the array plane times agreement of the two disparities) and the normalised sum,
@@ -61,31 +62,29 @@ def prepare_source(rgb: F32, alpha: F32, disparity: F32, rgba: U8, disp: F32, ha
         spans[j, 0], spans[j, 1] = (first, last + 1) if last >= 0 else (0, 0)
 
 
-@njit(parallel=True, cache=True, fastmath=False)
-def splat(halves: tuple[F32, ...], spans: tuple[I64, ...], n: int, du: F32, dv: F32, bufs: F32) -> None:
+@njit(cache=True, nogil=True, fastmath=False)
+def splat(halves: tuple[F32, ...], spans: tuple[I64, ...], n: int, du: F32, dv: F32, low: F32) -> None:
     """Forward-splat the half-resolution disparities of the first ``n`` sources (offsets du, dv from the
-    target, in horizontal spacings) into ``bufs`` (threads x hl x wl) with a depth test: the largest
-    disparity (the nearest surface) wins. Each thread scans a band of source rows into its own buffer (the
-    scatter has no atomic max); the caller merges them with a max."""
-    nt, hl, wl = bufs.shape
-    for c in prange(nt):
-        buf = bufs[c]
-        buf[:, :] = NONE
-        for k in range(n):
-            src, span = halves[k], spans[k]
-            a, b = du[k], dv[k]
-            for j in range(c * hl // nt, (c + 1) * hl // nt):
-                fy = np.float32(2 * j)
-                for i in range(span[j, 0], span[j, 1]):
-                    d = src[j, i]
-                    if d > NONE:
-                        xt = int(np.rint((np.float32(2 * i) + d * a) * np.float32(0.5)))
-                        yt = int(np.rint((fy + d * b) * np.float32(0.5)))
-                        if 0 <= xt < wl and 0 <= yt < hl and d > buf[yt, xt]:
-                            buf[yt, xt] = d
+    target, in horizontal spacings) into ``low`` (hl x wl) with a depth test: the largest disparity (the
+    nearest surface) wins. Serial (a scatter with a max has no race-free parallel form without a buffer per
+    thread); an eye pair runs its two splats side by side instead."""
+    hl, wl = low.shape
+    low[:, :] = NONE
+    for k in range(n):
+        src, span = halves[k], spans[k]
+        a, b = du[k], dv[k]
+        for j in range(hl):
+            fy = np.float32(2 * j)
+            for i in range(span[j, 0], span[j, 1]):
+                d = src[j, i]
+                if d > NONE:
+                    xt = int(np.rint((np.float32(2 * i) + d * a) * np.float32(0.5)))
+                    yt = int(np.rint((fy + d * b) * np.float32(0.5)))
+                    if 0 <= xt < wl and 0 <= yt < hl and d > low[yt, xt]:
+                        low[yt, xt] = d
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, nogil=True, fastmath=False)
 def close_and_fill(low: F32, closed: F32, max_gap: int, last: NDArray[np.int64]) -> None:
     """In one pass down the rows of the splatted half-resolution disparity ``low``: holes take the 3x3
     closing ``closed`` where it has a value (one-pixel cracks), then runs of holes between two valid pixels

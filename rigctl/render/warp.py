@@ -30,7 +30,10 @@ shader.
 from __future__ import annotations
 
 import logging
+import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import TypeVar
 
 import cv2
 import numba
@@ -44,7 +47,11 @@ log = logging.getLogger(__name__)
 
 F32 = NDArray[np.float32]
 U8 = NDArray[np.uint8]
+A = TypeVar("A", bound=NDArray[np.generic])
 TAPS = 4
+# block rows handed to a thread at a time: the subject fills some rows and not others, and a thread that the
+# machine's other work holds back should not hold up the view (static halves would)
+CHUNK_ROWS = 8
 _K3 = np.ones((3, 3), np.uint8)
 _KRING = np.ones((2 * RING + 1, 2 * RING + 1), np.uint8)
 __all__ = ["MAX_TAPS", "NONE", "RING", "TAPS", "Rendered", "Renderer", "Source", "prepare"]
@@ -97,6 +104,8 @@ class Rendered:
     rgba8: U8  # H x W x 4, straight (not premultiplied) colour and alpha
     low: F32  # half-resolution target disparity, NONE where none
     sources: list[str]
+    target_ms: float = 0.0  # time of step 1 (splat, closing, fill, ring)
+    shade_ms: float = 0.0  # time of steps 2-3
 
     @property
     def rgba(self) -> F32:
@@ -127,9 +136,7 @@ class Renderer:
         self.hl, self.wl = (h + 1) // 2, (w + 1) // 2
         spread = [s.span[1] - s.span[0] for s in sources if s.span[1] >= s.span[0]]
         self.max_gap = int(max(spread, default=0.0) * 1.5 / 2) + 4  # in half-resolution pixels
-        # scratch for the splat (one buffer per thread: the depth test is a scatter), kept between views
-        self._bufs = np.empty((numba.get_num_threads(), self.hl, self.wl), np.float32)
-        self._last = np.empty(self.wl, np.int64)
+        self._plans: ThreadPoolExecutor | None = None  # the second eye's target, beside the first
 
     def nearest(self, u: float, v: float, exclude: tuple[str, ...] = ()) -> list[Source]:
         pool = [s for s in self.sources if s.name not in exclude]
@@ -149,7 +156,7 @@ class Renderer:
         return n, du, dv, closeness
 
     @staticmethod
-    def _padded(arrays: list[NDArray[np.generic]]) -> tuple[NDArray[np.generic], ...]:
+    def _padded(arrays: list[A]) -> tuple[A, ...]:
         """Always MAX_TAPS arrays (the unused ones repeat the first and are never read): one compiled
         kernel whatever the number of sources."""
         return tuple(arrays + [arrays[0]] * (MAX_TAPS - len(arrays)))
@@ -157,12 +164,13 @@ class Renderer:
     # ---- step 1: the target's disparity --------------------------------------------------------------
     def _target(self, n: int, du: F32, dv: F32, sources: list[Source]) -> tuple[F32, F32]:
         """(splatted disparity with cracks closed and disocclusions filled, its ring): half resolution."""
+        low = np.empty((self.hl, self.wl), np.float32)
         halves, spans = self._padded([s.half for s in sources]), self._padded([s.spans for s in sources])
-        kernels.splat(halves, spans, n, du, dv, self._bufs)
-        low = np.max(self._bufs, axis=0) if len(self._bufs) > 1 else self._bufs[0].copy()
-        closed = cv2.erode(cv2.dilate(low, _K3), _K3)
-        kernels.close_and_fill(low, closed, self.max_gap, self._last)
-        return low, cv2.dilate(low, _KRING)
+        kernels.splat(halves, spans, n, du, dv, low)
+        closed = np.asarray(cv2.erode(cv2.dilate(low, _K3), _K3), np.float32)
+        kernels.close_and_fill(low, closed, self.max_gap, np.empty(self.wl, np.int64))
+        ring = np.asarray(cv2.dilate(low, _KRING), np.float32)
+        return low, ring
 
     def splat(self, u: float, v: float, sources: list[Source]) -> F32:
         """Half-resolution target disparity (NONE where no source lands), depth-tested, cracks closed,
@@ -171,17 +179,53 @@ class Renderer:
         low, ring = self._target(n, du, dv, sources)
         return np.where(low > NONE, low, ring)
 
-    # ---- steps 2 and 3: sample and blend --------------------------------------------------------------
-    def render(self, u: float, v: float, exclude: tuple[str, ...] = ()) -> Rendered:
-        """The view at (u, v) (horizontal spacings, relative to the grid's origin) from the ``taps`` nearest
-        sources not in ``exclude``."""
+    def _plan(self, u: float, v: float, exclude: tuple[str, ...]) -> _Plan:
+        t0 = time.perf_counter()
         sources = self.nearest(u, v, exclude)
         if not sources:
             raise ValueError("no source cameras left")
         n, du, dv, closeness = self._taps(u, v, sources)
         low, ring = self._target(n, du, dv, sources)
+        return _Plan(sources, n, du, dv, closeness, low, ring, (time.perf_counter() - t0) * 1e3)
+
+    # ---- steps 2 and 3: sample and blend --------------------------------------------------------------
+    def _shade(self, p: _Plan) -> Rendered:
+        t0 = time.perf_counter()
         out = np.empty((*self.shape, 4), np.uint8)
-        rgbas = self._padded([_packed(s.rgba) for s in sources])
-        disps = self._padded([s.disparity for s in sources])
-        kernels.shade(low, ring, rgbas, disps, n, du, dv, closeness, 1.0 / self.agree_px, _packed(out))
-        return Rendered(out, low, [s.name for s in sources])
+        rgbas = self._padded([_packed(s.rgba) for s in p.sources])
+        disps = self._padded([s.disparity for s in p.sources])
+        with numba.parallel_chunksize(CHUNK_ROWS):
+            kernels.shade(p.low, p.ring, rgbas, disps, p.n, p.du, p.dv, p.closeness, 1.0 / self.agree_px, _packed(out))
+        shade_ms = (time.perf_counter() - t0) * 1e3
+        return Rendered(out, p.low, [s.name for s in p.sources], p.target_ms, shade_ms)
+
+    def render(self, u: float, v: float, exclude: tuple[str, ...] = ()) -> Rendered:
+        """The view at (u, v) (horizontal spacings, relative to the grid's origin) from the ``taps`` nearest
+        sources not in ``exclude``."""
+        return self._shade(self._plan(u, v, exclude))
+
+    def render_pair(
+        self, left: tuple[float, float], right: tuple[float, float], exclude: tuple[str, ...] = ()
+    ) -> tuple[Rendered, Rendered]:
+        """Two views (an eye pair): their target disparities are made side by side on two threads (each of
+        those passes is serial and releases the GIL), then each view is shaded on all threads."""
+        if self._plans is None:
+            self._plans = ThreadPoolExecutor(max_workers=1, thread_name_prefix="render-eye")
+        second = self._plans.submit(self._plan, *right, exclude)
+        first = self._plan(*left, exclude)
+        return self._shade(first), self._shade(second.result())
+
+
+@dataclass
+class _Plan:
+    """A view's sources, their offsets and weights, and its target disparity (and ring): what step 1 makes
+    and steps 2-3 read."""
+
+    sources: list[Source]
+    n: int
+    du: F32
+    dv: F32
+    closeness: F32
+    low: F32
+    ring: F32
+    target_ms: float

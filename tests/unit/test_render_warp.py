@@ -120,3 +120,14 @@ def test_the_kernels_agree_with_the_reference(size: tuple[int, int]) -> None:
         diff = np.abs(got.rgba8.astype(int) - np.round(want_rgba * 255).astype(int))
         assert diff.mean() < 0.5 and np.mean(diff > 3) < 0.005, (u, v, diff.mean(), np.mean(diff > 3))
         assert np.array_equal(got.rgba8[..., 3] == 0, want_rgba[..., 3] == 0)  # the same pixels transparent
+
+
+def test_an_eye_pair_is_the_two_views_rendered_alone() -> None:
+    views = layered_scene(64, 96)
+    ren = Renderer([prepare(n, o, rgb, a, d) for n, (o, rgb, a, d) in views.items()])
+    left, right = ren.render_pair((-0.25, 0.1), (0.25, 0.1))
+    for got, u in ((left, -0.25), (right, 0.25)):
+        alone = ren.render(u, 0.1)
+        assert np.array_equal(got.rgba8, alone.rgba8) and np.array_equal(got.low, alone.low)
+        assert got.sources == alone.sources
+    assert not np.array_equal(left.rgba8, right.rgba8)  # two positions, two views
