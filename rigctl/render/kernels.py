@@ -2,7 +2,8 @@
 
 Three passes per view, each written as a GPU would run it:
 
-- ``prepare_source`` -- once per frame and camera (the texture upload): RGB + key alpha to 8-bit RGBA, the
+- ``prepare_source`` -- once per frame and camera (the texture upload): RGB + key alpha to 8-bit RGBA
+  texels (four 16-bit lanes of an int64), the
   disparity to float32 with ``NONE`` where there is none, and the range of its half-resolution samples;
 - ``splat`` and ``close_and_fill`` -- the target's half-resolution disparity: every source's
   half-resolution samples forward-splatted with a depth test (a scatter with a max reduction), one-pixel
@@ -10,9 +11,9 @@ Three passes per view, each written as a GPU would run it:
   from the background side; OpenCV adds a ring of ``RING`` pixels for the key's soft edge. Serial and
   without the GIL: the two eyes of a pair run side by side on two threads;
 - ``shade`` -- per full-resolution pixel, a fixed number of taps: for each of up to ``MAX_TAPS`` sources one
-  bilinear RGBA sample and one nearest disparity sample where the target's disparity puts the point, the
-  weight (closeness in the array plane times agreement of the two disparities) and the normalised sum,
-  written as 8-bit RGBA.
+  bilinear RGBA sample (7-bit weights, all four channels per integer multiply) and one nearest disparity
+  sample where the target's disparity puts the point, the weight (closeness in the array plane times
+  agreement of the two disparities) and the normalised sum, written as 8-bit RGBA.
 
 ``cache=True`` keeps the machine code next to this file (or in Numba's user cache when that is read-only):
 only the first call on a machine compiles (a few seconds, reported by ``rigctl bench render``).
@@ -38,8 +39,9 @@ I64 = NDArray[np.int64]
 
 
 @njit(parallel=True, cache=True, fastmath=False)
-def prepare_source(rgb: F32, alpha: F32, disparity: F32, rgba: U8, disp: F32, half: F32, spans: I64) -> None:
-    """Fill ``rgba`` (H x W x 4: RGB and alpha in 8 bits), ``disp`` (H x W, ``NONE`` where not finite),
+def prepare_source(rgb: F32, alpha: F32, disparity: F32, tex: I64, disp: F32, half: F32, spans: I64) -> None:
+    """Fill ``tex`` (H x W: 8-bit R, G, B and alpha 16 bits apart in one integer, so that one multiply
+    weighs all four), ``disp`` (H x W, ``NONE`` where not finite),
     ``half`` (its even rows and columns: the splat's samples) and ``spans`` (per half-resolution row, the
     first and one past the last column holding a disparity; 0, 0 when none)."""
     h, w = alpha.shape
@@ -47,9 +49,10 @@ def prepare_source(rgb: F32, alpha: F32, disparity: F32, rgba: U8, disp: F32, ha
     top = np.float32(255.0)
     for y in prange(h):
         for x in range(w):
-            for c in range(3):
-                rgba[y, x, c] = np.uint8(min(max(rgb[y, x, c] * top + np.float32(0.5), 0.0), top))
-            rgba[y, x, 3] = np.uint8(min(max(alpha[y, x] * top + np.float32(0.5), 0.0), top))
+            v = int(min(max(alpha[y, x] * top + np.float32(0.5), 0.0), top))
+            for c in range(2, -1, -1):
+                v = v << 16 | int(min(max(rgb[y, x, c] * top + np.float32(0.5), 0.0), top))
+            tex[y, x] = v
             d = disparity[y, x]
             disp[y, x] = d if np.isfinite(d) else NONE
     for j in prange(hl):
@@ -115,39 +118,41 @@ def close_and_fill(low: F32, closed: F32, max_gap: int, last: NDArray[np.int64])
                 last[x] = y
 
 
-LANES = 0x00FF00FF  # two 8-bit channels 16 bits apart: R and B, or G and A (>> 8) of a packed pixel
-ROUND = 0x00800080
+# A texel: 8-bit R, G, B, A in the low bytes of four 16-bit lanes of an int64. Filter weights are 7-bit
+# (positions to 1/128 pixel, finer than cv2.remap's 1/32), so a weighted sum of two texels stays below
+# 255 * 128 < 2^15 in every lane: no carry into the next lane, never the sign bit.
+LANES = 0x00FF00FF00FF00FF
+HALF = 0x0040004000400040  # rounding: half of the weights' 128 in every lane
+Q = 128
 
 
 @njit(inline="always")
-def _row(img: NDArray[np.uint32], y: int, x: int, qx: int) -> tuple[int, int, int, int]:
-    """The horizontal half of the bilinear filter for the two pixels of a block on row ``y``: taps x, x + 1,
-    x + 2 mixed with 8-bit weight ``qx``, two channels per integer multiply (each product fits 16 bits).
-    Returns (R | B << 16, G | A << 16) of the left pixel, then of the right one."""
-    p0, p1, p2 = int(img[y, x]), int(img[y, x + 1]), int(img[y, x + 2])
-    r0, r1, r2 = p0 & LANES, p1 & LANES, p2 & LANES
-    g0, g1, g2 = p0 >> 8 & LANES, p1 >> 8 & LANES, p2 >> 8 & LANES
-    qx0 = 256 - qx
-    return (
-        (qx0 * r0 + qx * r1 + ROUND) >> 8 & LANES,
-        (qx0 * g0 + qx * g1 + ROUND) >> 8 & LANES,
-        (qx0 * r1 + qx * r2 + ROUND) >> 8 & LANES,
-        (qx0 * g1 + qx * g2 + ROUND) >> 8 & LANES,
-    )
+def _lerp(a: int, b: int, q: int) -> int:
+    """Texels ``a`` and ``b`` mixed with 7-bit weight ``q`` (of 128) on ``b``, all four channels at once."""
+    return ((Q - q) * a + q * b + HALF) >> 7 & LANES
 
 
 @njit(inline="always")
-def _mix(top: int, bottom: int, qy: int) -> int:
-    """The vertical half: two rows' lanes mixed with 8-bit weight ``qy``."""
-    return ((256 - qy) * top + qy * bottom + ROUND) >> 8 & LANES
+def _row(img: I64, y: int, x: int, qx: int) -> tuple[int, int]:
+    """The horizontal half of the bilinear filter for the two pixels of a block on row ``y``: taps x, x + 1
+    (left pixel) and x + 1, x + 2 (right pixel)."""
+    p1 = img[y, x + 1]
+    return _lerp(img[y, x], p1, qx), _lerp(p1, img[y, x + 2], qx)
 
 
 @njit(inline="always")
-def _add(cell: F32, wk: float, rb: int, ga: int) -> None:
-    cell[0] += wk * np.float32(rb & 0xFF)
-    cell[1] += wk * np.float32(ga & 0xFF)
-    cell[2] += wk * np.float32(rb >> 16)
-    cell[3] += wk * np.float32(ga >> 16)
+def _tap(img: I64, y: int, x: int) -> int:
+    """A texel, or zero outside the image (a constant border)."""
+    h, w = img.shape
+    return img[y, x] if 0 <= y < h and 0 <= x < w else 0
+
+
+@njit(inline="always")
+def _add(cell: F32, wk: float, t: int) -> None:
+    cell[0] += wk * np.float32(t & 0xFF)
+    cell[1] += wk * np.float32(t >> 16 & 0xFF)
+    cell[2] += wk * np.float32(t >> 32 & 0xFF)
+    cell[3] += wk * np.float32(t >> 48)
     cell[4] += wk
 
 
@@ -155,7 +160,7 @@ def _add(cell: F32, wk: float, rb: int, ga: int) -> None:
 def shade(
     low: F32,
     ring: F32,
-    rgbas: tuple[NDArray[np.uint32], ...],
+    texs: tuple[I64, ...],
     disps: tuple[F32, ...],
     n: int,
     du: F32,
@@ -193,7 +198,7 @@ def shade(
         # per pixel: weighted R, G, B, A and the weight, summed over the sources
         acc = np.zeros((2, 2 * (last + 1 - first), 5), np.float32)
         for k in range(n):
-            img, dsrc = rgbas[k], disps[k]
+            img, dsrc = texs[k], disps[k]
             a, b, cl = du[k], dv[k], closeness[k]
             for bx in range(first, last + 1):
                 d = low[by, bx]
@@ -203,48 +208,35 @@ def shade(
                 my = np.float32(y) - d * b
                 fx, fy = np.floor(mx), np.floor(my)
                 ix, iy = int(fx), int(fy)
-                qx = int((mx - fx) * np.float32(256.0) + np.float32(0.5))
-                qy = int((my - fy) * np.float32(256.0) + np.float32(0.5))
-                w11 = (qx * qy + 128) >> 8
-                w00, w01, w10 = 256 - qx - qy + w11, qx - w11, qy - w11
-                rx, ry = (1 if qx >= 128 else 0), (1 if qy >= 128 else 0)
+                qx = int((mx - fx) * np.float32(Q) + np.float32(0.5))
+                qy = int((my - fy) * np.float32(Q) + np.float32(0.5))
+                rx, ry = (1 if 2 * qx >= Q else 0), (1 if 2 * qy >= Q else 0)
                 ax = 2 * bx
                 c = ax - 2 * first
+                floor_k = cl * floor_w
                 if ix >= 0 and ix + 2 < w and iy >= 0 and iy + 2 < h and ax + 1 < w and y + 1 < h:
                     # the block's four pixels take their taps from one 3 x 3 patch (3 x 2 when qy is 0)
-                    r00, g00, r01, g01 = _row(img, iy, ix, qx)
-                    r10, g10, r11, g11 = _row(img, iy + 1, ix, qx)
+                    t00, t01 = _row(img, iy, ix, qx)
+                    t10, t11 = _row(img, iy + 1, ix, qx)
                     if qy:
-                        r20, g20, r21, g21 = _row(img, iy + 2, ix, qx)
-                        r00, g00 = _mix(r00, r10, qy), _mix(g00, g10, qy)
-                        r01, g01 = _mix(r01, r11, qy), _mix(g01, g11, qy)
-                        r10, g10 = _mix(r10, r20, qy), _mix(g10, g20, qy)
-                        r11, g11 = _mix(r11, r21, qy), _mix(g11, g21, qy)
+                        t20, t21 = _row(img, iy + 2, ix, qx)
+                        t00, t01 = _lerp(t00, t10, qy), _lerp(t01, t11, qy)
+                        t10, t11 = _lerp(t10, t20, qy), _lerp(t11, t21, qy)
                     s0, s1 = dsrc[iy + ry], dsrc[iy + 1 + ry]
-                    floor_k = cl * floor_w
-                    _add(acc[0, c], max(cl * (one - abs(s0[ix + rx] - d) * agree), floor_k), r00, g00)
-                    _add(acc[0, c + 1], max(cl * (one - abs(s0[ix + 1 + rx] - d) * agree), floor_k), r01, g01)
-                    _add(acc[1, c], max(cl * (one - abs(s1[ix + rx] - d) * agree), floor_k), r10, g10)
-                    _add(acc[1, c + 1], max(cl * (one - abs(s1[ix + 1 + rx] - d) * agree), floor_k), r11, g11)
+                    _add(acc[0, c], max(cl * (one - abs(s0[ix + rx] - d) * agree), floor_k), t00)
+                    _add(acc[0, c + 1], max(cl * (one - abs(s0[ix + 1 + rx] - d) * agree), floor_k), t01)
+                    _add(acc[1, c], max(cl * (one - abs(s1[ix + rx] - d) * agree), floor_k), t10)
+                    _add(acc[1, c + 1], max(cl * (one - abs(s1[ix + 1 + rx] - d) * agree), floor_k), t11)
                     continue
-                # at the image's edge: taps outside read zero (a constant border)
+                # at the image's edge: the same filter, taps outside reading zero (a constant border)
                 for py in range(rows):
                     for px in range(min(2, w - ax)):
                         x0, y0 = ix + px, iy + py
-                        rb = ga = 0
-                        for ty in range(2):
-                            for tx in range(2):
-                                yy, xx = y0 + ty, x0 + tx
-                                if 0 <= yy < h and 0 <= xx < w:
-                                    wt = (w11 if tx else w10) if ty else (w01 if tx else w00)
-                                    p = int(img[yy, xx])
-                                    rb += wt * (p & LANES)
-                                    ga += wt * (p >> 8 & LANES)
-                        rb, ga = (rb + ROUND) >> 8, (ga + ROUND) >> 8
+                        top = _lerp(_tap(img, y0, x0), _tap(img, y0, x0 + 1), qx)
+                        t = _lerp(top, _lerp(_tap(img, y0 + 1, x0), _tap(img, y0 + 1, x0 + 1), qx), qy)
                         ny, nx = y0 + ry, x0 + rx
                         seen = dsrc[ny, nx] if 0 <= nx < w and 0 <= ny < h else NONE
-                        wk = max(cl * (one - abs(seen - d) * agree), cl * floor_w)
-                        _add(acc[py, c + px], wk, rb & LANES, ga & LANES)
+                        _add(acc[py, c + px], max(cl * (one - abs(seen - d) * agree), floor_k), t)
         for py in range(rows):
             orow = out[y + py]
             orow[: 2 * first] = 0

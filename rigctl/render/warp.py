@@ -63,7 +63,7 @@ class Source:
 
     name: str
     offset: tuple[float, float]
-    rgba: U8  # H x W x 4: RGB and the key's alpha
+    texture: NDArray[np.int64]  # H x W: RGB and the key's alpha, 8 bits each, 16 bits apart (kernels)
     disparity: F32  # NONE where there is no estimate
     half: F32  # its even rows and columns: the samples the splat takes
     spans: NDArray[np.int64]  # per row of ``half``: first and one past the last column with a disparity
@@ -78,12 +78,12 @@ class Source:
 def prepare(name: str, offset: tuple[float, float], rgb: F32, alpha: F32, disparity: F32) -> Source:
     """A source from RGB in [0, 1], alpha in [0, 1] and disparity (+inf or NaN where there is none)."""
     h, w = alpha.shape
-    rgba = np.empty((h, w, 4), np.uint8)
+    texture = np.empty((h, w), np.int64)
     disp = np.empty((h, w), np.float32)
     half = np.empty(((h + 1) // 2, (w + 1) // 2), np.float32)
     spans = np.empty((half.shape[0], 2), np.int64)
-    kernels.prepare_source(_c32(rgb), _c32(alpha), _c32(disparity), rgba, disp, half, spans)
-    return Source(name, (float(offset[0]), float(offset[1])), rgba, disp, half, spans)
+    kernels.prepare_source(_c32(rgb), _c32(alpha), _c32(disparity), texture, disp, half, spans)
+    return Source(name, (float(offset[0]), float(offset[1])), texture, disp, half, spans)
 
 
 def _packed(rgba: U8) -> NDArray[np.uint32]:
@@ -192,10 +192,10 @@ class Renderer:
     def _shade(self, p: _Plan) -> Rendered:
         t0 = time.perf_counter()
         out = np.empty((*self.shape, 4), np.uint8)
-        rgbas = self._padded([_packed(s.rgba) for s in p.sources])
+        texs = self._padded([s.texture for s in p.sources])
         disps = self._padded([s.disparity for s in p.sources])
         with numba.parallel_chunksize(CHUNK_ROWS):
-            kernels.shade(p.low, p.ring, rgbas, disps, p.n, p.du, p.dv, p.closeness, 1.0 / self.agree_px, _packed(out))
+            kernels.shade(p.low, p.ring, texs, disps, p.n, p.du, p.dv, p.closeness, 1.0 / self.agree_px, _packed(out))
         shade_ms = (time.perf_counter() - t0) * 1e3
         return Rendered(out, p.low, [s.name for s in p.sources], p.target_ms, shade_ms)
 
