@@ -121,6 +121,7 @@ def close_and_fill(low: F32, closed: F32, max_gap: int, last: NDArray[np.int64])
 # A texel: 8-bit R, G, B, A in the low bytes of four 16-bit lanes of an int64. Filter weights are 7-bit
 # (positions to 1/128 pixel, finer than cv2.remap's 1/32), so a weighted sum of two texels stays below
 # 255 * 128 < 2^15 in every lane: no carry into the next lane, never the sign bit.
+WEIGHT = 1 << 20  # the nearest source's full weight in the integer sums
 LANES = 0x00FF00FF00FF00FF
 HALF = 0x0040004000400040  # rounding: half of the weights' 128 in every lane
 Q = 128
@@ -148,12 +149,14 @@ def _tap(img: I64, y: int, x: int) -> int:
 
 
 @njit(inline="always")
-def _add(cell: F32, wk: float, t: int) -> None:
-    cell[0] += wk * np.float32(t & 0xFF)
-    cell[1] += wk * np.float32(t >> 16 & 0xFF)
-    cell[2] += wk * np.float32(t >> 32 & 0xFF)
-    cell[3] += wk * np.float32(t >> 48)
-    cell[4] += wk
+def _add(cell: I64, wk: float, t: int) -> None:
+    """Add texel ``t`` with weight ``wk`` (at most ``WEIGHT``) to a pixel's sums: R and G 32 bits apart in
+    ``cell[0]``, B and A in ``cell[1]``, the weight in ``cell[2]`` (integers: no float conversion per
+    channel; four sources sum to under 2^30 per lane)."""
+    q = int(wk + np.float32(0.5))
+    cell[0] += q * (t & 0xFF | (t & 0xFF0000) << 16)
+    cell[1] += q * (t >> 32 & 0xFF | (t >> 48) << 32)
+    cell[2] += q
 
 
 @njit(parallel=True, cache=True, fastmath=False)
@@ -183,6 +186,7 @@ def shade(
     one = np.float32(1.0)
     floor_w = np.float32(1e-3)
     agree = np.float32(inv_agree)
+    scale = np.float32(WEIGHT) / closeness[:n].max()
     for by in prange(hl):
         first, last = wl, -1
         for bx in range(wl):
@@ -195,11 +199,12 @@ def shade(
         if last < 0:
             out[y : y + rows, :] = 0
             continue
-        # per pixel: weighted R, G, B, A and the weight, summed over the sources
-        acc = np.zeros((2, 2 * (last + 1 - first), 5), np.float32)
+        # per pixel: weighted R | G << 32, B | A << 32 and the weight, summed over the sources
+        acc = np.zeros((2, 2 * (last + 1 - first), 3), np.int64)
         for k in range(n):
             img, dsrc = texs[k], disps[k]
-            a, b, cl = du[k], dv[k], closeness[k]
+            a, b, cl = du[k], dv[k], closeness[k] * scale
+            cla = cl * agree
             for bx in range(first, last + 1):
                 d = low[by, bx]
                 if d <= NONE:
@@ -223,10 +228,10 @@ def shade(
                         t00, t01 = _lerp(t00, t10, qy), _lerp(t01, t11, qy)
                         t10, t11 = _lerp(t10, t20, qy), _lerp(t11, t21, qy)
                     s0, s1 = dsrc[iy + ry], dsrc[iy + 1 + ry]
-                    _add(acc[0, c], max(cl * (one - abs(s0[ix + rx] - d) * agree), floor_k), t00)
-                    _add(acc[0, c + 1], max(cl * (one - abs(s0[ix + 1 + rx] - d) * agree), floor_k), t01)
-                    _add(acc[1, c], max(cl * (one - abs(s1[ix + rx] - d) * agree), floor_k), t10)
-                    _add(acc[1, c + 1], max(cl * (one - abs(s1[ix + 1 + rx] - d) * agree), floor_k), t11)
+                    _add(acc[0, c], max(cl - abs(s0[ix + rx] - d) * cla, floor_k), t00)
+                    _add(acc[0, c + 1], max(cl - abs(s0[ix + 1 + rx] - d) * cla, floor_k), t01)
+                    _add(acc[1, c], max(cl - abs(s1[ix + rx] - d) * cla, floor_k), t10)
+                    _add(acc[1, c + 1], max(cl - abs(s1[ix + 1 + rx] - d) * cla, floor_k), t11)
                     continue
                 # at the image's edge: the same filter, taps outside reading zero (a constant border)
                 for py in range(rows):
@@ -236,18 +241,19 @@ def shade(
                         t = _lerp(top, _lerp(_tap(img, y0 + 1, x0), _tap(img, y0 + 1, x0 + 1), qx), qy)
                         ny, nx = y0 + ry, x0 + rx
                         seen = dsrc[ny, nx] if 0 <= nx < w and 0 <= ny < h else NONE
-                        _add(acc[py, c + px], max(cl * (one - abs(seen - d) * agree), floor_k), t)
+                        _add(acc[py, c + px], max(cl - abs(seen - d) * cla, floor_k), t)
         for py in range(rows):
             orow = out[y + py]
             orow[: 2 * first] = 0
             orow[2 * (last + 1) :] = 0
             for x in range(2 * first, min(w, 2 * (last + 1))):
                 cell = acc[py, x - 2 * first]
-                if cell[4] > 0:
-                    inv = one / cell[4]
+                if cell[2] > 0:
+                    inv = one / np.float32(cell[2])
                     v = np.uint32(0)
                     for ch in range(4):
-                        v |= np.uint32(min(cell[ch] * inv + np.float32(0.5), np.float32(255.0))) << (8 * ch)
+                        total = cell[ch >> 1] >> (32 * (ch & 1)) & 0xFFFFFFFF
+                        v |= np.uint32(min(np.float32(total) * inv + np.float32(0.5), np.float32(255.0))) << (8 * ch)
                     orow[x] = v
                 else:
                     orow[x] = 0

@@ -115,8 +115,8 @@ def test_the_kernels_agree_with_the_reference(size: tuple[int, int]) -> None:
         # the target disparity (splat, depth test, closing, fill, ring) is the same to the bit
         assert np.array_equal(got.disparity, np.where(want_d > NONE, want_d, np.inf)), (u, v)
         # colour and alpha: the reference blends in 8 bits step by step with 1/32-pixel remap positions,
-        # the kernel in float with 1/256: a fraction of a level apart, except at a few depth edges where a
-        # nearest disparity sample falls on the other side
+        # the kernel sums once with 1/128-pixel positions: a fraction of a level apart, except at a few
+        # depth edges where a nearest disparity sample falls on the other side
         diff = np.abs(got.rgba8.astype(int) - np.round(want_rgba * 255).astype(int))
         assert diff.mean() < 0.5 and np.mean(diff > 3) < 0.005, (u, v, diff.mean(), np.mean(diff > 3))
         assert np.array_equal(got.rgba8[..., 3] == 0, want_rgba[..., 3] == 0)  # the same pixels transparent
