@@ -22,6 +22,12 @@ only the first call on a machine compiles (a few seconds, reported by ``rigctl b
 from __future__ import annotations
 
 import logging
+import os
+
+# Numba's OpenMP threads spin between parallel regions by default; on two cores shared with other work (CI
+# runs two CPU-bound processes beside the tests) a spinning thread holds the core the working one needs:
+# the CPU time of a 1080p pair nearly doubled. Waiting threads sleep instead, unless the user chose.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np
 from numba import njit, prange
