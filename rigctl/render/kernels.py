@@ -180,8 +180,9 @@ def shade(
 ) -> None:
     """Write the view's RGBA (packed: R in the low byte) into ``out`` (H x W) from the half-resolution
     target disparity (``low``, or ``ring`` -- the key's soft edge -- where ``low`` has none; ``low`` is
-    completed in place) and the first ``n`` sources (packed RGBA, H x W). Per pixel and source: one bilinear
-    RGBA sample (8-bit weights; zero outside the image) and one nearest disparity sample where the target's
+    completed in place) and the first ``n`` sources (texels as ``prepare_source`` makes them, H x W). Per
+    pixel and source: one bilinear RGBA sample (7-bit weights; zero outside the image) and one nearest
+    disparity sample where the target's
     disparity puts the point, weighted by closeness x agreement (floored at 1e-3 of the closeness); pixels
     with no target disparity are transparent black.
 
