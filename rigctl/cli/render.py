@@ -6,10 +6,13 @@ import argparse
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rigctl.cli.args import distance
 from rigctl.errors import ParameterError
+
+if TYPE_CHECKING:
+    from rigctl.render.views import LeaveOneOutRow
 
 
 def position(text: str) -> tuple[float, float]:
@@ -82,7 +85,7 @@ def simulator_hooks(source: Path, width: int) -> tuple[Any, Any]:
 
 def leave_one_out_report(
     source: Path, disparity: Path, frames: list[int] | None, cameras: list[str] | None
-) -> list[dict[str, Any]]:
+) -> list[LeaveOneOutRow]:
     """Leave-one-out rows for ``rigctl depth --check``: the cameras just computed, scored from the others."""
     from rigctl.render.inputs import RenderInput
     from rigctl.render.views import leave_one_out
@@ -123,15 +126,15 @@ def run(ns: argparse.Namespace) -> int:
         def eyes(frame: Any) -> list[Any]:
             return [e for c, r in ns.at for e in eyes_for(frame, c, r, ns.stereo)]
 
-    rows = render_views(inp, numbers, eyes, ns.out, truth, box)
+    views = render_views(inp, numbers, eyes, ns.out, truth, box)
     if ns.json:
-        print(json.dumps({"views": rows}))
+        print(json.dumps({"views": views}))
         return 0
-    for r in rows:
+    for r in views:
         t = r.get("against_truth")
         vs = f", against the simulator's view: PSNR {t['psnr_db']:.2f} dB, SSIM {t['ssim']:.4f}" if t else ""
         print(f"{r['frame']}/{r['view']} at {r['col']:g},{r['row']:g} from {' '.join(r['sources'])}{vs}")
-    print(f"wrote {len(rows)} view(s) to {ns.out}")
+    print(f"wrote {len(views)} view(s) to {ns.out}")
     return 0
 
 

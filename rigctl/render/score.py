@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import math
+from typing import TypedDict
 
 import numpy as np
 from numpy.typing import NDArray
@@ -13,6 +14,12 @@ log = logging.getLogger(__name__)
 
 F32 = NDArray[np.float32]
 PSNR_CAP_DB = 99.0  # identical images: a finite figure, never infinity
+
+
+class Score(TypedDict):
+    psnr_db: float
+    ssim: float
+    pixels: int  # the subject's pixels scored
 
 
 def psnr_db(rendered: F32, reference: F32, mask: NDArray[np.bool_]) -> float:
@@ -50,7 +57,7 @@ def ssim(rendered: F32, reference: F32, mask: NDArray[np.bool_]) -> float:
 
 def score(
     rendered: F32, reference: F32, reference_alpha: F32, ignore: tuple[int, int, int, int] | None = None
-) -> dict[str, float | int]:
+) -> Score:
     """PSNR (dB), SSIM and the pixel count on the reference's subject (alpha > 0.5). ``ignore`` =
     (y0, y1, x0, x1) leaves out a window that differs between cameras by design (a simulated take's burnt-in
     frame id, which no view of the scene can reproduce)."""

@@ -7,22 +7,47 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import NotRequired, TypedDict
 
 import cv2
 import numpy as np
+from numpy.typing import NDArray
 
 from rigctl.errors import ParameterError
 from rigctl.exr import picture, picture_attributes, write_exr
 from rigctl.render.inputs import F32, Frame, RenderInput
-from rigctl.render.score import score
+from rigctl.render.score import Score, score
 from rigctl.render.warp import Renderer, prepare
 
 log = logging.getLogger(__name__)
 
 Box = tuple[int, int, int, int]
 # (col, row) -> (RGB, subject mask) of the truth at that grid position, or None
-TruthFn = Callable[[float, float], Any]
+TruthFn = Callable[[float, float], tuple[F32, NDArray[np.bool_]] | None]
+
+
+class ViewRow(TypedDict):
+    """One written view (``rigctl render --json``: ``views``)."""
+
+    frame: str
+    view: str
+    col: float
+    row: float
+    sources: list[str]
+    ms: float
+    against_truth: NotRequired[Score]
+
+
+class LeaveOneOutRow(TypedDict):
+    """One camera rendered from the others (``rigctl render --leave-one-out --json``)."""
+
+    frame: str
+    camera: str
+    psnr_db: float
+    ssim: float
+    pixels: int
+    sources: list[str]
+    ms: float
 
 
 def renderer_for(frame: Frame, taps: int = 4) -> Renderer:
@@ -87,9 +112,9 @@ def render_views(
     out: Path,
     truth: TruthFn | None = None,
     ignore: Box | None = None,
-) -> list[dict[str, Any]]:
+) -> list[ViewRow]:
     """Render and write every eye of every frame; score against ``truth`` where the simulator gives one."""
-    rows = []
+    rows: list[ViewRow] = []
     for n in numbers:
         frame = inp.frame(n)
         ren = renderer_for(frame)
@@ -103,7 +128,7 @@ def render_views(
                 "rigctl_sources": ",".join(res.sources),
             }
             write_view(out / f"{n:06d}", eye.stem, res.rgba, attrs)
-            row: dict[str, Any] = {
+            row: ViewRow = {
                 "frame": f"{n:06d}",
                 "view": eye.stem,
                 "col": eye.col,
@@ -122,9 +147,9 @@ def render_views(
 
 def leave_one_out(
     inp: RenderInput, numbers: list[int], cameras: list[str] | None = None, ignore: Box | None = None
-) -> list[dict[str, Any]]:
+) -> list[LeaveOneOutRow]:
     """Every named camera rendered from the others (never from itself) and scored against its own image."""
-    rows = []
+    rows: list[LeaveOneOutRow] = []
     for n in numbers:
         frame = inp.frame(n)
         names = cameras or sorted(frame.views)
@@ -140,11 +165,14 @@ def leave_one_out(
             res = ren.render(*view.offset, exclude=(cam,))
             ms = (time.perf_counter() - t0) * 1e3
             sc = score(res.rgba[..., :3], view.rgb, view.alpha if view.keyed else np.ones_like(view.alpha), ignore)
-            rows.append({"frame": f"{n:06d}", "camera": cam, **sc, "sources": res.sources, "ms": round(ms, 2)})
+            rows.append(
+                {"frame": f"{n:06d}", "camera": cam, "psnr_db": sc["psnr_db"], "ssim": sc["ssim"],
+                 "pixels": sc["pixels"], "sources": res.sources, "ms": round(ms, 2)}
+            )  # fmt: skip
     return rows
 
 
-def format_table(rows: list[dict[str, Any]]) -> str:
+def format_table(rows: list[LeaveOneOutRow]) -> str:
     lines = [f"{'frame':<8} {'camera':<7} {'PSNR dB':>8} {'SSIM':>7} {'pixels':>8}  sources"]
     for r in rows:
         lines.append(

@@ -8,36 +8,53 @@ folded into v). Per view:
    resolution) with a depth test (the largest disparity, the nearest surface, wins); one-pixel cracks are
    closed; gaps left between two surfaces (disocclusions) are filled along rows, then columns, from the
    background side (the smaller disparity of the two ends), never across the keyed background;
-2. **colour** -- each source is sampled at x_i with ``cv2.remap`` (bilinear, RGB + key alpha) and its own
-   disparity at x_i (nearest); the source *sees* the point when that disparity agrees with the target's;
+2. **colour** -- each source is sampled at x_i (bilinear, RGB + key alpha, as ``cv2.remap`` would) and its
+   own disparity at x_i (nearest); the source *sees* the point when that disparity agrees with the target's;
 3. **blend** -- weight = closeness in the array plane (1 / (distance + 0.1)^2) times agreement
    (1 - |d_i(x_i) - d| / tolerance, floored at a small epsilon so that a point no source sees still gets the
    distance-weighted colour of its background-side fill). Alpha is blended like the colour; pixels with no
    target disparity (the keyed background) are transparent.
 
+The passes are compiled kernels (``rigctl.render.kernels``): step 1 is one call at half resolution, steps
+2-3 one call per full-resolution pixel; everything that is the same for every view of a frame (8-bit RGBA,
+float32 disparity with ``NONE``, the disparity range) is prepared once per source by ``prepare``.
+
 **GPU mapping.** Step 1 is a point-sprite pass per source into a depth-tested target (GL_MAX / depth
-buffer), then two tiny fixed-radius passes (3x3 closing; the fill as a jump-flood or a bounded row search).
-Steps 2-3 are one fragment shader with a fixed number of taps: for each of the K (default 4) sources one
-bilinear RGBA texture fetch and one nearest disparity fetch at x_i, a few multiply-adds for the weight, and
-the normalised sum. No loops depend on the data, so it maps one-to-one onto an HLSL/GLSL pixel shader.
+buffer), then tiny fixed-radius passes (3x3 closing; the fill as a jump-flood or a bounded row search; the
+5x5 ring). Steps 2-3 are one fragment shader with a fixed number of taps: for each of the K (at most 4)
+sources one bilinear RGBA texture fetch and one nearest disparity fetch at x_i, a few multiply-adds for the
+weight, and the normalised sum. No loops depend on the data, so it maps one-to-one onto an HLSL/GLSL pixel
+shader.
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
-from typing import Any
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import TypeVar
 
 import cv2
+import numba
 import numpy as np
 from numpy.typing import NDArray
+
+from rigctl.render import kernels
+from rigctl.render.kernels import MAX_TAPS, NONE, RING
 
 log = logging.getLogger(__name__)
 
 F32 = NDArray[np.float32]
-NONE = np.float32(-1e6)  # "no disparity" inside the renderer (PFM's +inf would poison interpolation)
+U8 = NDArray[np.uint8]
+A = TypeVar("A", bound=NDArray[np.generic])
 TAPS = 4
-RING = 2
+# block rows handed to a thread at a time: the subject fills some rows and not others, and a thread that the
+# machine's other work holds back should not hold up the view (static halves would)
+CHUNK_ROWS = 8
+_K3 = np.ones((3, 3), np.uint8)
+_KRING = np.ones((2 * RING + 1, 2 * RING + 1), np.uint8)
+__all__ = ["MAX_TAPS", "NONE", "RING", "TAPS", "Rendered", "Renderer", "Source", "prepare"]
 
 
 @dataclass
@@ -46,30 +63,61 @@ class Source:
 
     name: str
     offset: tuple[float, float]
-    rgba: NDArray[np.uint8]  # H x W x 4: RGB and the key's alpha
+    texture: NDArray[np.int64]  # H x W: RGB and the key's alpha, 8 bits each, 16 bits apart (kernels)
     disparity: F32  # NONE where there is no estimate
-    # valid half-resolution samples for the splat: full-resolution coordinates and disparity
-    sx: F32 = field(default_factory=lambda: np.zeros(0, np.float32))
-    sy: F32 = field(default_factory=lambda: np.zeros(0, np.float32))
-    sd: F32 = field(default_factory=lambda: np.zeros(0, np.float32))
+    half: F32  # its even rows and columns: the samples the splat takes
+    spans: NDArray[np.int64]  # per row of ``half``: first and one past the last column with a disparity
+
+    @property
+    def span(self) -> tuple[float, float]:
+        """(min, max) of the half-resolution disparities; (inf, -inf) when there are none."""
+        valid = self.half[self.half > NONE]
+        return (float(valid.min()), float(valid.max())) if valid.size else (np.inf, -np.inf)
 
 
 def prepare(name: str, offset: tuple[float, float], rgb: F32, alpha: F32, disparity: F32) -> Source:
     """A source from RGB in [0, 1], alpha in [0, 1] and disparity (+inf or NaN where there is none)."""
-    rgba = np.empty((*rgb.shape[:2], 4), np.uint8)
-    rgba[..., :3] = np.clip(rgb * 255.0 + 0.5, 0, 255)
-    rgba[..., 3] = np.clip(alpha * 255.0 + 0.5, 0, 255)
-    d = np.where(np.isfinite(disparity), disparity, NONE).astype(np.float32)
-    half = d[::2, ::2]
-    ys, xs = np.nonzero(half > NONE)
-    return Source(name, offset, rgba, d, (xs * 2).astype(np.float32), (ys * 2).astype(np.float32), half[ys, xs].copy())
+    h, w = alpha.shape
+    texture = np.empty((h, w), np.int64)
+    disp = np.empty((h, w), np.float32)
+    half = np.empty(((h + 1) // 2, (w + 1) // 2), np.float32)
+    spans = np.empty((half.shape[0], 2), np.int64)
+    kernels.prepare_source(_c32(rgb), _c32(alpha), _c32(disparity), texture, disp, half, spans)
+    return Source(name, (float(offset[0]), float(offset[1])), texture, disp, half, spans)
+
+
+def _packed(rgba: U8) -> NDArray[np.uint32]:
+    """H x W x 4 bytes as H x W packed 32-bit pixels (no copy; R in the low byte on the little-endian
+    machines Numba runs on)."""
+    return rgba.view(np.uint32).reshape(rgba.shape[:2])
+
+
+def _c32(a: NDArray[np.floating]) -> F32:
+    return np.ascontiguousarray(a, dtype=np.float32)
 
 
 @dataclass
 class Rendered:
-    rgba: F32  # H x W x 4, straight (not premultiplied) colour and alpha in [0, 1]
-    disparity: F32  # target disparity, +inf where none
+    """A view: 8-bit RGBA as the kernel wrote it (what a display takes) and the half-resolution target
+    disparity; the float forms are made only when asked for."""
+
+    rgba8: U8  # H x W x 4, straight (not premultiplied) colour and alpha
+    low: F32  # half-resolution target disparity, NONE where none
     sources: list[str]
+    target_ms: float = 0.0  # time of step 1 (splat, closing, fill, ring)
+    shade_ms: float = 0.0  # time of steps 2-3
+
+    @property
+    def rgba(self) -> F32:
+        """H x W x 4 in [0, 1]."""
+        return self.rgba8.astype(np.float32) * np.float32(1 / 255)
+
+    @property
+    def disparity(self) -> F32:
+        """The target disparity at full resolution (nearest), +inf where none."""
+        h, w = self.rgba8.shape[:2]
+        full = np.repeat(np.repeat(self.low, 2, axis=0), 2, axis=1)[:h, :w]
+        return np.where(full > NONE, full, np.float32(np.inf)).astype(np.float32)
 
 
 class Renderer:
@@ -78,116 +126,106 @@ class Renderer:
     def __init__(self, sources: list[Source], taps: int = TAPS, agree_px: float = 1.5) -> None:
         if not sources:
             raise ValueError("no source cameras")
+        if not 1 <= taps <= MAX_TAPS:
+            raise ValueError(f"taps must be 1..{MAX_TAPS} (a fixed number per pixel), got {taps}")
         self.sources = sources
         self.taps = taps
         self.agree_px = agree_px
         h, w = sources[0].disparity.shape
         self.shape = (h, w)
         self.hl, self.wl = (h + 1) // 2, (w + 1) // 2
-        self.xgrid, self.ygrid = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
-        spread = [float(s.sd.max() - s.sd.min()) for s in sources if s.sd.size]
+        spread = [s.span[1] - s.span[0] for s in sources if s.span[1] >= s.span[0]]
         self.max_gap = int(max(spread, default=0.0) * 1.5 / 2) + 4  # in half-resolution pixels
+        self._plans: ThreadPoolExecutor | None = None  # the second eye's target, beside the first
 
     def nearest(self, u: float, v: float, exclude: tuple[str, ...] = ()) -> list[Source]:
         pool = [s for s in self.sources if s.name not in exclude]
         pool.sort(key=lambda s: ((s.offset[0] - u) ** 2 + (s.offset[1] - v) ** 2, s.name))
         return pool[: self.taps]
 
-    # ---- step 1: the target's disparity --------------------------------------------------------------
-    def splat(self, u: float, v: float, sources: list[Source]) -> F32:
-        """Half-resolution target disparity (NONE where no source lands), depth-tested, cracks closed and
-        disocclusions filled from the background side."""
-        hl, wl = self.hl, self.wl
-        target = np.full(hl * wl, NONE, np.float32)
-        for s in sources:
-            du, dv = s.offset[0] - u, s.offset[1] - v
-            xt = np.rint((s.sx + s.sd * du) * 0.5).astype(np.int32)
-            yt = np.rint((s.sy + s.sd * dv) * 0.5).astype(np.int32)
-            ok = (xt >= 0) & (xt < wl) & (yt >= 0) & (yt < hl)
-            np.maximum.at(target, yt[ok] * wl + xt[ok], s.sd[ok])
-        t = target.reshape(hl, wl)
-        kernel = np.ones((3, 3), np.uint8)
-        closed = cv2.erode(cv2.dilate(t, kernel), kernel)
-        t = np.where(t > NONE, t, closed)
-        t = _fill_background_side(t, self.max_gap)
-        t = np.ascontiguousarray(_fill_background_side(t.T, self.max_gap).T)
-        # a ring of RING half-resolution pixels around the subject: the key's soft edge, where the
-        # estimate stops short; the sources' alpha decides how much of it shows
-        ring = cv2.dilate(t, np.ones((2 * RING + 1, 2 * RING + 1), np.uint8))
-        return np.where(t > NONE, t, ring)
+    def _taps(self, u: float, v: float, sources: list[Source]) -> tuple[int, F32, F32, F32]:
+        n = len(sources)
+        du = np.zeros(MAX_TAPS, np.float32)
+        dv = np.zeros(MAX_TAPS, np.float32)
+        du[:n] = [s.offset[0] - u for s in sources]
+        dv[:n] = [s.offset[1] - v for s in sources]
+        # a fitted grid puts a camera on the target's row 1e-16 off it: on it, its samples need one row
+        du[np.abs(du) < 1e-6] = 0.0
+        dv[np.abs(dv) < 1e-6] = 0.0
+        closeness = (1.0 / (np.hypot(du, dv) + 0.1) ** 2).astype(np.float32)
+        return n, du, dv, closeness
 
-    # ---- steps 2 and 3: sample and blend --------------------------------------------------------------
-    def render(
-        self, u: float, v: float, exclude: tuple[str, ...] = (), box: tuple[int, int, int, int] | None = None
-    ) -> Rendered:
-        """The view at (u, v) (horizontal spacings, relative to the grid's origin) from the ``taps`` nearest
-        sources not in ``exclude``. ``box`` = (y0, y1, x0, x1) limits the work to a window."""
+    @staticmethod
+    def _padded(arrays: list[A]) -> tuple[A, ...]:
+        """Always MAX_TAPS arrays (the unused ones repeat the first and are never read): one compiled
+        kernel whatever the number of sources."""
+        return tuple(arrays + [arrays[0]] * (MAX_TAPS - len(arrays)))
+
+    # ---- step 1: the target's disparity --------------------------------------------------------------
+    def _target(self, n: int, du: F32, dv: F32, sources: list[Source]) -> tuple[F32, F32]:
+        """(splatted disparity with cracks closed and disocclusions filled, its ring): half resolution."""
+        low = np.empty((self.hl, self.wl), np.float32)
+        halves, spans = self._padded([s.half for s in sources]), self._padded([s.spans for s in sources])
+        kernels.splat(halves, spans, n, du, dv, low)
+        closed = np.asarray(cv2.erode(cv2.dilate(low, _K3), _K3), np.float32)
+        kernels.close_and_fill(low, closed, self.max_gap, np.empty(self.wl, np.int64))
+        ring = np.asarray(cv2.dilate(low, _KRING), np.float32)
+        return low, ring
+
+    def splat(self, u: float, v: float, sources: list[Source]) -> F32:
+        """Half-resolution target disparity (NONE where no source lands), depth-tested, cracks closed,
+        disocclusions filled from the background side and the ring of the key's soft edge added."""
+        n, du, dv, _ = self._taps(u, v, sources)
+        low, ring = self._target(n, du, dv, sources)
+        return np.where(low > NONE, low, ring)
+
+    def _plan(self, u: float, v: float, exclude: tuple[str, ...]) -> _Plan:
+        t0 = time.perf_counter()
         sources = self.nearest(u, v, exclude)
         if not sources:
             raise ValueError("no source cameras left")
-        h, w = self.shape
-        low = self.splat(u, v, sources)
-        dfull = np.asarray(
-            cv2.resize(low, (2 * self.wl, 2 * self.hl), interpolation=cv2.INTER_NEAREST)[:h, :w], np.float32
-        )
-        y0, y1, x0, x1 = box or _valid_box(dfull)
-        out = np.zeros((h, w, 4), np.float32)
-        disp = np.full((h, w), np.inf, np.float32)
-        if y1 <= y0 or x1 <= x0:
-            return Rendered(out, disp, [s.name for s in sources])
-        d = np.ascontiguousarray(dfull[y0:y1, x0:x1])
-        xg, yg = self.xgrid[y0:y1, x0:x1], self.ygrid[y0:y1, x0:x1]
-        blended: Any = None
-        wsum: Any = None
-        for s in sources:
-            du, dv = s.offset[0] - u, s.offset[1] - v
-            closeness = 1.0 / (float(np.hypot(du, dv)) + 0.1) ** 2
-            mx = cv2.scaleAdd(d, -du, xg)
-            my = cv2.scaleAdd(d, -dv, yg)
-            colour = cv2.remap(s.rgba, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-            seen = cv2.remap(
-                s.disparity, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=float(NONE)
-            )
-            # agreement in [eps, 1], times closeness (OpenCV calls throughout: numpy's temporaries cost 10x)
-            agree = cv2.addWeighted(cv2.absdiff(seen, d), -closeness / self.agree_px, seen, 0.0, closeness)
-            wgt = cv2.max(agree, np.full_like(agree, closeness * 1e-3))
-            if blended is None or wsum is None:
-                blended, wsum = colour, wgt
-            else:
-                # running weighted mean: (W a + w b) / (W + w), in 8 bits like a texture blend
-                blended = cv2.blendLinear(blended, colour, wsum, wgt)
-                wsum = cv2.add(wsum, wgt)
-        assert blended is not None
-        valid = (d > NONE).astype(np.uint8)
-        rgba = cv2.bitwise_and(blended, blended, mask=valid).astype(np.float32) * np.float32(1 / 255)
-        out[y0:y1, x0:x1] = rgba
-        disp[y0:y1, x0:x1] = np.where(valid > 0, d, np.inf)
-        return Rendered(out, disp, [s.name for s in sources])
+        n, du, dv, closeness = self._taps(u, v, sources)
+        low, ring = self._target(n, du, dv, sources)
+        return _Plan(sources, n, du, dv, closeness, low, ring, (time.perf_counter() - t0) * 1e3)
+
+    # ---- steps 2 and 3: sample and blend --------------------------------------------------------------
+    def _shade(self, p: _Plan) -> Rendered:
+        t0 = time.perf_counter()
+        out = np.empty((*self.shape, 4), np.uint8)
+        texs = self._padded([s.texture for s in p.sources])
+        disps = self._padded([s.disparity for s in p.sources])
+        with numba.parallel_chunksize(CHUNK_ROWS):
+            kernels.shade(p.low, p.ring, texs, disps, p.n, p.du, p.dv, p.closeness, 1.0 / self.agree_px, _packed(out))
+        shade_ms = (time.perf_counter() - t0) * 1e3
+        return Rendered(out, p.low, [s.name for s in p.sources], p.target_ms, shade_ms)
+
+    def render(self, u: float, v: float, exclude: tuple[str, ...] = ()) -> Rendered:
+        """The view at (u, v) (horizontal spacings, relative to the grid's origin) from the ``taps`` nearest
+        sources not in ``exclude``."""
+        return self._shade(self._plan(u, v, exclude))
+
+    def render_pair(
+        self, left: tuple[float, float], right: tuple[float, float], exclude: tuple[str, ...] = ()
+    ) -> tuple[Rendered, Rendered]:
+        """Two views (an eye pair): their target disparities are made side by side on two threads (each of
+        those passes is serial and releases the GIL), then each view is shaded on all threads."""
+        if self._plans is None:
+            self._plans = ThreadPoolExecutor(max_workers=1, thread_name_prefix="render-eye")
+        second = self._plans.submit(self._plan, *right, exclude)
+        first = self._plan(*left, exclude)
+        return self._shade(first), self._shade(second.result())
 
 
-def _valid_box(d: F32) -> tuple[int, int, int, int]:
-    valid = d > NONE
-    rows = np.flatnonzero(valid.any(1))
-    cols = np.flatnonzero(valid.any(0))
-    if not rows.size:
-        return 0, 0, 0, 0
-    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+@dataclass
+class _Plan:
+    """A view's sources, their offsets and weights, and its target disparity (and ring): what step 1 makes
+    and steps 2-3 read."""
 
-
-def _fill_background_side(t: F32, max_gap: int) -> F32:
-    """Fill runs of NONE along rows that lie between two valid pixels at most ``max_gap`` apart with the
-    smaller (farther) of the two disparities: what a disocclusion uncovers is the background's."""
-    h, w = t.shape
-    valid = t > NONE
-    if valid.all() or not valid.any():
-        return t
-    idx = np.broadcast_to(np.arange(w, dtype=np.int32), (h, w))
-    left = np.maximum.accumulate(np.where(valid, idx, -1), axis=1)
-    right = np.minimum.accumulate(np.where(valid, idx, w)[:, ::-1], axis=1)[:, ::-1]
-    hole = ~valid & (left >= 0) & (right < w) & (right - left <= max_gap)
-    if not hole.any():
-        return t
-    rows = np.broadcast_to(np.arange(h)[:, None], (h, w))
-    out = t.copy()
-    out[hole] = np.minimum(t[rows[hole], left[hole]], t[rows[hole], right[hole]])
-    return out
+    sources: list[Source]
+    n: int
+    du: F32
+    dv: F32
+    closeness: F32
+    low: F32
+    ring: F32
+    target_ms: float

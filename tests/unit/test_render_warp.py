@@ -1,22 +1,15 @@
-"""The renderer's logic on synthetic grids: exact shifts of a textured plane, the background-side fill and
-the depth test."""
+"""The renderer's logic on synthetic grids: exact shifts of a textured plane, the depth test, the
+disocclusion fill from the background side, and the compiled kernels against the numpy/OpenCV reference
+(``tests/render_reference.py``) on a layered scene, with a missing camera and odd image sizes."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
+from render_reference import ReferenceRenderer, Src
 
-from rigctl.render.warp import NONE, Renderer, _fill_background_side, prepare
-
-
-def test_a_gap_between_two_surfaces_takes_the_farther_one_and_the_screen_stays_empty() -> None:
-    t = np.full((1, 12), NONE, np.float32)
-    t[0, 1:3] = 20.0  # near
-    t[0, 6:9] = 5.0  # far
-    out = _fill_background_side(t, max_gap=8)
-    assert np.all(out[0, 3:6] == 5.0)  # the disocclusion between them: background side
-    assert out[0, 0] == NONE and np.all(out[0, 9:] == NONE)  # outside: the keyed background, left empty
-    assert np.all(_fill_background_side(t, max_gap=2)[0, 3:6] == NONE)  # wider than any parallax: not filled
+from rigctl.render.warp import NONE, RING, Renderer, prepare
 
 
 def test_a_textured_plane_is_rendered_exactly_between_cameras() -> None:
@@ -51,3 +44,90 @@ def test_the_nearer_surface_wins_the_depth_test() -> None:
     out = Renderer([src], taps=1).render(-1.0, 0.0)  # one spacing to the left: near moves 12 px, far 2 px
     assert np.allclose(out.disparity[15:25, 34:50], 12.0)
     assert out.rgba[20, 40, 0] > 0.9  # the near square's colour, not the plane behind it
+
+
+def test_a_disocclusion_takes_the_background_and_the_keyed_screen_stays_empty() -> None:
+    h, w = 40, 80
+    disp = np.full((h, w), np.inf, np.float32)  # the keyed screen: no disparity
+    disp[:, 10:70] = 2.0  # a far plane
+    disp[10:30, 30:50] = 12.0  # a near square in front of it
+    rgb = np.full((h, w, 3), 0.2, np.float32)
+    rgb[10:30, 30:50] = 0.9
+    alpha = np.isfinite(disp).astype(np.float32)
+    ren = Renderer([prepare("r0c0", (0.0, 0.0), rgb, alpha, disp)], taps=1)
+    low = ren.splat(-1.0, 0.0, ren.sources)  # half resolution; the square moves 12 px, the plane 2 px
+    # the plane behind the square's old place (full-resolution columns 32..41) was never seen: it is filled
+    # with the farther of the two surfaces on either side, the plane, not the square
+    assert np.all(low[6:14, 16:21] == 2.0), low[10, 12:26]
+    assert np.all(low[6:14, 21:31] == 12.0)
+    # the screen left of the plane stays empty beyond the key's soft edge (RING half-resolution pixels)
+    assert np.all(low[:, : 6 - RING] == NONE)
+    out = ren.render(-1.0, 0.0)
+    assert np.all(out.rgba8[:, :8, 3] == 0) and np.all(out.rgba8[:, 14:70, 3] == 255)
+    assert np.isinf(out.disparity[:, :8]).all()
+    assert out.disparity[20, 36] == 2.0 and out.disparity[20, 50] == 12.0  # full resolution, as at half
+    assert out.rgba[20, 20, 0] == pytest.approx(0.2, abs=0.01) and out.rgba[20, 50, 0] == pytest.approx(0.9, abs=0.01)
+
+
+def test_taps_are_a_fixed_small_number() -> None:
+    src = prepare("r0c0", (0.0, 0.0), np.zeros((8, 8, 3), np.float32), np.ones((8, 8), np.float32),
+                  np.ones((8, 8), np.float32))  # fmt: skip
+    with pytest.raises(ValueError, match="taps"):
+        Renderer([src], taps=5)
+
+
+def layered_scene(h: int, w: int) -> dict[str, tuple[tuple[float, float], np.ndarray, np.ndarray, np.ndarray]]:
+    """A 3x3 grid seeing a textured far plane (with screen around it) and a textured near card, each camera
+    rendered exactly: a point seen at x by the camera at offset 0 appears at x - d * offset."""
+    rng = np.random.default_rng(3)
+    far_tex = cv2.GaussianBlur(rng.random((h, w, 3)).astype(np.float32), (0, 0), 1.5)
+    near_tex = cv2.GaussianBlur(rng.random((h, w, 3)).astype(np.float32), (0, 0), 1.5)
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    views = {}
+    for r in range(3):
+        for c in range(3):
+            ox, oy = c - 1.0, (r - 1.0) * 0.8
+            rgb = np.zeros((h, w, 3), np.float32)
+            disp = np.full((h, w), np.inf, np.float32)
+            layers = ((3.0, far_tex, (4, h - 4, 8, w - 8)), (9.0, near_tex, (h // 3, 2 * h // 3, w // 3, w // 2)))
+            for d, tex, (y0, y1, x0, x1) in layers:
+                sx, sy = xs + d * ox, ys + d * oy  # where the reference camera saw this pixel's point
+                inside = (sy >= y0) & (sy < y1) & (sx >= x0) & (sx < x1)
+                sample = cv2.remap(tex, sx, sy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+                rgb[inside] = sample[inside]
+                disp[inside] = d
+            views[f"r{r}c{c}"] = ((ox, oy), rgb, np.isfinite(disp).astype(np.float32), disp)
+    return views
+
+
+@pytest.mark.parametrize("size", [(96, 128), (77, 101)])  # even, and odd both ways (the kernel's edge path)
+def test_the_kernels_agree_with_the_reference(size: tuple[int, int]) -> None:
+    views = layered_scene(*size)
+    views["r0c2"][3][:] = np.inf  # a camera without a single disparity
+    del views["r2c0"]  # and a camera that is missing
+    fast = Renderer([prepare(n, o, rgb, a, d) for n, (o, rgb, a, d) in views.items()])
+    ref = ReferenceRenderer([Src(n, o, rgb, a, d) for n, (o, rgb, a, d) in views.items()])
+    for u, v, exclude in [(0.0, 0.0, ("r1c1",)), (0.37, -0.2, ()), (-0.9, 0.75, ()), (1.0, -0.8, ("r0c2",))]:
+        got = fast.render(u, v, exclude)
+        want_rgba, want_d = ref.render(u, v, exclude)
+        assert got.sources == [s.name for s in ref.nearest(u, v, exclude)]
+        assert "r2c0" not in got.sources and not set(exclude) & set(got.sources)
+        # the target disparity (splat, depth test, closing, fill, ring) is the same to the bit
+        assert np.array_equal(got.disparity, np.where(want_d > NONE, want_d, np.inf)), (u, v)
+        # colour and alpha: the reference blends in 8 bits step by step with 1/32-pixel remap positions,
+        # the kernel sums once with 1/128-pixel positions: a fraction of a level apart, except at a few
+        # depth edges where a nearest disparity sample falls on the other side
+        diff = np.abs(got.rgba8.astype(int) - np.round(want_rgba * 255).astype(int))
+        assert diff.mean() < 0.5 and np.mean(diff > 3) < 0.005, (u, v, diff.mean(), np.mean(diff > 3))
+        assert np.array_equal(got.rgba8[..., 3] == 0, want_rgba[..., 3] == 0)  # the same pixels transparent
+
+
+def test_an_eye_pair_is_the_two_views_rendered_alone() -> None:
+    views = layered_scene(64, 96)
+    ren = Renderer([prepare(n, o, rgb, a, d) for n, (o, rgb, a, d) in views.items()])
+    left, right = ren.render_pair((-0.25, 0.1), (0.25, 0.1))
+    for got, u in ((left, -0.25), (right, 0.25)):
+        alone = ren.render(u, 0.1)
+        assert np.array_equal(got.rgba8, alone.rgba8) and np.array_equal(got.low, alone.low)
+        assert got.sources == alone.sources
+    assert not np.array_equal(left.rgba8, right.rgba8)  # two positions, two views
