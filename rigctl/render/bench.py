@@ -21,7 +21,7 @@ import numba
 import numpy as np
 
 from rigctl.render import kernels
-from rigctl.render.inputs import F32, Frame, View
+from rigctl.render.inputs import F32, FrameViews, View
 from rigctl.render.score import Score, score
 from rigctl.render.views import renderer_for
 from rigctl.render.warp import Renderer, Source, prepare
@@ -41,7 +41,7 @@ COUNTS = (
 class RenderBenchData:
     """A simulated frame (colour, key, true disparity) and the simulator's view at ``truth_at``."""
 
-    frame: Frame
+    frame: FrameViews
     truth_at: tuple[float, float]
     truth_rgb: F32
     ignore: tuple[int, int, int, int] | None = None
@@ -80,7 +80,7 @@ class BenchResult(TypedDict):
     quality: BenchQuality
 
 
-def scaled(frame: Frame, width: int, height: int) -> list[tuple[str, tuple[float, float], F32, F32, F32]]:
+def scaled(frame: FrameViews, width: int, height: int) -> list[tuple[str, tuple[float, float], F32, F32, F32]]:
     """(name, offset, RGB, alpha, disparity) of ``frame``'s cameras resampled to width x height (disparity
     scaled with the width)."""
     h0, w0 = frame.shape
@@ -124,7 +124,7 @@ def time_pair(ren: Renderer, u: float, v: float, half: float, repeats: int) -> P
 _FIRST: list[tuple[float, bool]] = []  # the first call's figures, kept for later runs in the process
 
 
-def first_call(frame: Frame) -> tuple[float, bool]:
+def first_call(frame: FrameViews) -> tuple[float, bool]:
     """Seconds of the kernels' first call in this process on a small copy of the frame, and whether Numba
     compiled them (False: loaded from its cache). Later calls give the first one's figures again."""
     if _FIRST:
@@ -215,6 +215,6 @@ def format_bench(r: BenchResult) -> str:
 
 def frame_from_arrays(
     views: dict[str, tuple[tuple[float, float], F32, F32, F32]], focal: float, spacing: float
-) -> Frame:
+) -> FrameViews:
     """A frame from {name: (offset, rgb, alpha, disparity)}."""
-    return Frame(0, {n: View(n, o, rgb, a, d, True) for n, (o, rgb, a, d) in views.items()}, focal, spacing)
+    return FrameViews(0, {n: View(n, o, rgb, a, d, True) for n, (o, rgb, a, d) in views.items()}, focal, spacing)

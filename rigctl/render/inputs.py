@@ -36,7 +36,9 @@ class View:
 
 
 @dataclass
-class Frame:
+class FrameViews:
+    """One frame set as the renderer reads it: each camera's view (colour, alpha, disparity) and the grid's scale."""
+
     number: int
     views: dict[str, View]
     focal_px: float
@@ -112,7 +114,7 @@ class RenderInput:
             folder = self.disparity_dir  # a grid folder's depth output has no frame level
         return folder / f"{name}.pfm"
 
-    def frame(self, number: int) -> Frame:
+    def frame(self, number: int) -> FrameViews:
         grid = self.take.grid(number) if self.take is not None else self.grid0
         assert grid is not None
         h, w = grid.shape
@@ -143,4 +145,4 @@ class RenderInput:
         missing = sorted(set(files) - set(found))
         if missing:
             log.warning("frame %d: no disparity for %s: not used as sources", number, ", ".join(missing))
-        return Frame(number, views, grid.focal_px, grid.spacing)
+        return FrameViews(number, views, grid.focal_px, grid.spacing)

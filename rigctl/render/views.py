@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from rigctl.errors import ParameterError
 from rigctl.exr import picture, picture_attributes, write_exr
-from rigctl.render.inputs import F32, Frame, RenderInput
+from rigctl.render.inputs import F32, FrameViews, RenderInput
 from rigctl.render.score import Score, score
 from rigctl.render.warp import Renderer, prepare
 
@@ -50,7 +50,7 @@ class LeaveOneOutRow(TypedDict):
     ms: float
 
 
-def renderer_for(frame: Frame, taps: int = 4) -> Renderer:
+def renderer_for(frame: FrameViews, taps: int = 4) -> Renderer:
     srcs = [
         prepare(v.name, v.offset, v.rgb, v.alpha, v.disparity) for v in frame.views.values() if v.disparity is not None
     ]
@@ -72,7 +72,7 @@ def position_name(col: float, row: float) -> str:
     return f"c{col:g}r{row:g}"
 
 
-def eyes_for(frame: Frame, col: float, row: float, ipd_m: float | None, stem: str | None = None) -> list[Eye]:
+def eyes_for(frame: FrameViews, col: float, row: float, ipd_m: float | None, stem: str | None = None) -> list[Eye]:
     """The image(s) for a position: one, or an eye pair ``ipd_m`` apart along the rows (converted through the
     rig's horizontal spacing), centred on it."""
     stem = stem or position_name(col, row)
@@ -108,7 +108,7 @@ def write_view(folder: Path, stem: str, rgba: F32, attrs: dict[str, object]) -> 
 def render_views(
     inp: RenderInput,
     numbers: list[int],
-    eyes: Callable[[Frame], list[Eye]],
+    eyes: Callable[[FrameViews], list[Eye]],
     out: Path,
     truth: TruthFn | None = None,
     ignore: Box | None = None,
