@@ -15,12 +15,29 @@ from rigctl.simulators import burnin
 from rigctl.take.reader import TakeReader
 
 FAST = ["--sim", "motion=false"]
+INJECTED = [12, 13, 20, 33, 34, 47, 48, 61, 62, 75]  # r0c1's dropped sequence numbers
+TAKE_SETS = 40
+
+
+def dropped_in_take(folder: Path) -> tuple[int, list[int]]:
+    """r0c1's sequence number at frame set 0 (its sequence minus its set is the same for every frame it
+    recorded: sets are grid slots) and the injected drops that fall inside the take's frame sets."""
+    reader = TakeReader(folder)
+    seq = reader.index["r0c1"]["sequence"]
+    offsets = {int(seq[s.members["r0c1"]]) - s.number for s in reader.frame_sets if "r0c1" in s.members}
+    assert len(offsets) == 1, f"r0c1's sequence minus its frame set varies: {sorted(offsets)}"
+    s0 = offsets.pop()
+    inside = [d for d in INJECTED if s0 <= d < s0 + TAKE_SETS]
+    assert inside, f"the take began at r0c1 sequence {s0}, after every injected drop: spread INJECTED further"
+    return s0, inside
 
 
 @pytest.fixture(scope="module")
 def dropped_take(tmp_path_factory):  # type: ignore[no-untyped-def]
-    """A 9-camera take with drops at known sequence numbers on r0c1 (numbers counted from the device's
-    stream start: the take starts a few frames in, so the drops land inside it)."""
+    """A 9-camera take with drops at known sequence numbers on r0c1. Sequence numbers count from the device's
+    stream start, and the take starts whenever the machine gets there (later under load), so the drops are
+    spread over more than a take's length: whatever the start, some land inside it, and the tests work out
+    which from the take's own index."""
     from tests_support import run_rigctl  # type: ignore[import-not-found]
 
     out = tmp_path_factory.mktemp("takes")
@@ -34,7 +51,7 @@ def dropped_take(tmp_path_factory):  # type: ignore[no-untyped-def]
         str(out),
         *FAST,
         "--sim",
-        "drops.r0c1=[12,13,20]",
+        f"drops.r0c1={INJECTED}".replace(" ", ""),
         "--sim",
         "skew_us.r2c2=3000",
         "--json",
@@ -47,15 +64,16 @@ def test_drops_reported_exactly_where_injected(dropped_take) -> None:  # type: i
     folder, summary = dropped_take
     man = yaml.safe_load((folder / "take.yaml").read_text())
     assert man["status"] == "complete"
+    _, inside = dropped_in_take(folder)
     for name, cam in man["cameras"].items():
         if name == "r0c1":
-            assert cam["source_drops"] == [12, 13, 20]
-            assert cam["frames"] == 37
+            assert cam["source_drops"] == inside
+            assert cam["frames"] == TAKE_SETS - len(inside)
         else:
             assert cam["source_drops"] == [], name
             assert cam["frames"] == 40
         assert cam["writer_drops"] == [] and cam["error_frames"] == []
-    assert summary["cameras"]["r0c1"]["source_drops"] == 3
+    assert summary["cameras"]["r0c1"]["source_drops"] == len(inside)
 
 
 def test_burnt_ids_prove_order_and_no_duplicates(dropped_take) -> None:  # type: ignore[no-untyped-def]
@@ -81,8 +99,8 @@ def test_missing_members_are_gaps_and_later_sets_unaffected(dropped_take) -> Non
     assert len(sets) == 40
     incomplete = [s.number for s in sets if not s.complete(reader.names)]
     first_seq = int(reader.index["r0c0"]["sequence"][0])
-    r0c1_first = int(reader.index["r0c1"]["sequence"][0])
-    expected = sorted(s - r0c1_first for s in (12, 13, 20))
+    s0, inside = dropped_in_take(folder)
+    expected = [d - s0 for d in inside]
     assert incomplete == expected
     # every set's members show the same scene frame: nothing shifted after the gaps
     for s in sets:
@@ -110,17 +128,18 @@ def test_skew_injected_on_one_camera_shows_in_statistics(dropped_take) -> None: 
 
 def test_sidecars_and_truth(dropped_take) -> None:  # type: ignore[no-untyped-def]
     folder, _ = dropped_take
+    _, inside = dropped_in_take(folder)
     ale = (folder / "drops.ale").read_text().splitlines()
     assert ale[0] == "Heading" and "FIELD_DELIM\tTABS" in ale
     data = ale[ale.index("Data") + 1 :]
-    assert len(data) == 9 and data[1].split("\t")[0] == "drops_r0c1" and data[1].split("\t")[-1] == "3"
+    assert len(data) == 9 and data[1].split("\t")[0] == "drops_r0c1" and data[1].split("\t")[-1] == str(len(inside))
     with open(folder / "log.csv") as f:
         log = {r["camera"]: r for r in csv.DictReader(f)}
-    assert log["r0c1"]["source_drops"] == "3" and log["r0c0"]["frames"] == "40"
+    assert log["r0c1"]["source_drops"] == str(len(inside)) and log["r0c0"]["frames"] == "40"
     truth = folder / "truth"
     assert (truth / "calibration.yaml").exists()
     pfms = sorted((truth / "disparity").glob("*/*.pfm"))
-    assert len(pfms) == 9 * 40 - 3
+    assert len(pfms) == 9 * 40 - len(inside)
     from rigctl.pfm import read_pfm
 
     d = read_pfm(truth / "disparity" / "000000" / "r1c1.pfm")
