@@ -12,11 +12,11 @@ import argparse
 import subprocess
 
 from rigctl.cli.render import size
-from rigctl.render.bench import BUDGET_MS, PAPER_PAIR_MS, BenchResult, bench_render, format_bench
+from rigctl.render.bench import BUDGET_MS, PAPER_PAIR_MS, RenderBenchResult, bench_render, format_bench
 from rigctl.simulated_presenter import presenter_render
 
 
-def beside(busy: int, data: object, wh: tuple[int, int], repeats: int) -> BenchResult:
+def beside(busy: int, data: object, wh: tuple[int, int], repeats: int) -> RenderBenchResult:
     """The benchmark with ``busy`` copies of ``yes`` writing to /dev/null beside it (stopped after)."""
     hogs = [subprocess.Popen(["yes"], stdout=subprocess.DEVNULL) for _ in range(busy)]
     try:

@@ -44,7 +44,7 @@ class UsbEntry(TypedDict, total=False):
     error: str
 
 
-class CameraState(TypedDict):
+class CameraDiscovery(TypedDict):
     name: str
     device: str
     state: str  # "found", "MISSING" or "simulated"
@@ -70,7 +70,7 @@ class AttachedReport(TypedDict):
     v4l2: list[V4L2Node]
     serial: list[SerialPort]
     usb: list[UsbEntry]
-    cameras: list[CameraState]
+    cameras: list[CameraDiscovery]
     lines: list[LineState]
     usb_identities: list[IdentityState]
     missing: list[str]
@@ -144,15 +144,15 @@ def describe_attached(rig: Rig) -> AttachedReport:
             for d in list_v4l2()
         ]
     known = {d["path"] for d in v4l2}
-    cams: list[CameraState] = []
+    cams: list[CameraDiscovery] = []
     missing: list[str] = []
     for cam in rig.cameras:
         if addresses[cam.name].scheme == "sim":
-            entry = CameraState(name=cam.name, device=cam.device, state="simulated")
+            entry = CameraDiscovery(name=cam.name, device=cam.device, state="simulated")
         else:
             resolved = os.path.realpath(addresses[cam.name].target)
             state = "found" if resolved in known else "MISSING"
-            entry = CameraState(name=cam.name, device=cam.device, resolved=resolved, state=state)
+            entry = CameraDiscovery(name=cam.name, device=cam.device, resolved=resolved, state=state)
             if resolved not in known:
                 missing.append(f"{cam.name} ({cam.device})")
         cams.append(entry)

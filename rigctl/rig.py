@@ -100,7 +100,7 @@ class Tally(_Section):
     usb: UsbIdentity | None = None  # the USB-serial adapter behind ``port``
 
 
-class CameraControl(_Section):
+class CameraControlSection(_Section):
     """Camera control through an SDI bridge (see the bridge protocol in the README)."""
 
     bridge: str = Field(min_length=1)
@@ -128,7 +128,7 @@ class RigModel(_Section):
     cameras: list[CameraAssignment] = Field(min_length=1)
     plan: PlanDefaults | None = None
     tally: Tally | None = None
-    camera_control: CameraControl | None = None
+    camera_control: CameraControlSection | None = None
     reference: Reference | None = None
     storage: list[Storage] | None = None
 

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.board import BoardSpec
-from rigctl.calib.inputs import Views
+from rigctl.calib.inputs import CalibrationViews
 from rigctl.errors import CalibrationError
 from rigctl.yamlfile import load_yaml
 
@@ -123,7 +123,7 @@ def _chessboard(target: Chessboard) -> Callable[[NDArray[np.uint8]], tuple[NDArr
     return run
 
 
-def detect(views: Views, target: Target, progress: Callable[[int, int], None] | None = None) -> Observations:
+def detect(views: CalibrationViews, target: Target, progress: Callable[[int, int], None] | None = None) -> Observations:
     run = _chessboard(target) if isinstance(target, Chessboard) else _charuco(target)
     items = list(views.items())
     cam, frame, pt, uv = [], [], [], []

@@ -22,7 +22,7 @@ _FLAT = re.compile(r"^(?P<camera>[A-Za-z_][A-Za-z_\-]*?)[_\-]?(?P<frame>\d+)$")
 
 
 @dataclass
-class Views:
+class CalibrationViews:
     """Greyscale images by (camera, frame). ``names`` are grid names (``r{row}c{col}``); ``source_names`` the
     names in the input when they differed (``left`` -> ``r0c0``)."""
 
@@ -72,7 +72,7 @@ def _read_grey(path: Path) -> object:
     return load
 
 
-def _from_take(folder: Path) -> Views:
+def _from_take(folder: Path) -> CalibrationViews:
     reader = TakeReader(folder)
     sets = reader.complete_sets() or reader.frame_sets
     frames = [str(s.number) for s in sets]
@@ -87,7 +87,7 @@ def _from_take(folder: Path) -> Views:
             loads[(cam, str(s.number))] = load
     names = _grid_names(reader.names, folder)
     truth = folder / "truth" / "calibration.yaml"
-    return Views(
+    return CalibrationViews(
         folder,
         [names[n] for n in reader.names],
         frames,
@@ -98,7 +98,7 @@ def _from_take(folder: Path) -> Views:
     )
 
 
-def load_views(path: Path) -> Views:
+def load_views(path: Path) -> CalibrationViews:
     """The images of a take or an image folder; errors name the path and what is wrong."""
     path = Path(path)
     if not path.exists():
@@ -130,7 +130,7 @@ def load_views(path: Path) -> Views:
         raise CalibrationError(f"{next(iter(found.values()))}: cannot read the image")
     size = (int(first.shape[1]), int(first.shape[0]))
     ordered = sorted(raw_names, key=lambda n: names[n])
-    return Views(
+    return CalibrationViews(
         path,
         [names[n] for n in ordered],
         frames,

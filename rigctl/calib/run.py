@@ -15,7 +15,7 @@ import numpy as np
 from rigctl.board import BoardSpec
 from rigctl.calib import metrics
 from rigctl.calib.detect import Observations, Target, describe_target, detect, target_points
-from rigctl.calib.inputs import Views, load_views
+from rigctl.calib.inputs import CalibrationViews, load_views
 from rigctl.calib.report_model import CalibrationReport, CameraReport, RectificationResiduals
 from rigctl.calib.solution import F64
 from rigctl.calib.solve import Fit, solve
@@ -38,7 +38,7 @@ class Result:
     calibration: ArrayCalibration
     report: CalibrationReport
     diagnosis: list[str]
-    views: Views
+    views: CalibrationViews
     obs: Observations
     fit: Fit
     points: Any
@@ -46,7 +46,7 @@ class Result:
     timings: dict[str, float] = field(default_factory=dict)
 
 
-def _nominal(views: Views) -> tuple[dict[str, F64] | None, str]:
+def _nominal(views: CalibrationViews) -> tuple[dict[str, F64] | None, str]:
     """Nominal camera centres (rig coordinates, metres) from the take's rig snapshot, when there is one."""
     if not views.rig:
         return None, ""
@@ -158,7 +158,7 @@ def _board_depths(sol: Any, fit: Fit) -> tuple[float, float]:
 
 
 def _report(
-    views: Views,
+    views: CalibrationViews,
     target: Target,
     obs: Observations,
     fit: Fit,

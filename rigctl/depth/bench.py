@@ -108,7 +108,7 @@ class BenchRow:
 
 
 @dataclass
-class BenchResult:
+class DepthBenchResult:
     rows: list[BenchRow] = field(default_factory=list)
     datasets: list[str] = field(default_factory=list)
     repeats: int = 1
@@ -136,7 +136,7 @@ def run_bench(
     methods: list[str] | None = None,
     repeats: int = 1,
     progress: Callable[[float, str], None] | None = None,
-) -> BenchResult:
+) -> DepthBenchResult:
     """Every method on every dataset: metrics and seconds (the median of ``repeats`` runs)."""
     cv2.setNumThreads(2)
     names = methods or [*PRESETS, *BASELINES]
@@ -164,10 +164,10 @@ def run_bench(
             rows.append(BenchRow(ds.name, m, float(np.median(times)), score(disp, ds.truth, mask)))
     if progress:
         progress(1.0, "done")
-    return BenchResult(rows, [d.name for d in datasets], repeats)
+    return DepthBenchResult(rows, [d.name for d in datasets], repeats)
 
 
-def comparisons(result: BenchResult) -> list[Comparison]:
+def comparisons(result: DepthBenchResult) -> list[Comparison]:
     """Per dataset: the best OpenCV baseline on bad 1.0, and every preset against it (relative improvement,
     time ratio)."""
     out = []
@@ -197,7 +197,7 @@ def better(rel: float) -> str:
     return f"{rel * 100:.0f} % better" if rel >= 0 else f"{-rel * 100:.0f} % worse"
 
 
-def format_table(result: BenchResult) -> str:
+def format_table(result: DepthBenchResult) -> str:
     lines = []
     for ds in result.datasets:
         lines.append(f"{ds}")
@@ -242,7 +242,7 @@ def pareto(rows: list[BenchRow], key: str = "bad_0.2") -> set[str]:
     }
 
 
-def plot(result: BenchResult, path: Path) -> Path:
+def plot(result: DepthBenchResult, path: Path) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")

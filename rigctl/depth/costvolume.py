@@ -38,7 +38,7 @@ FRACTION = 0.25  # step of the fractional sweep, px
 ALPHA, TAU_I, TAU_G = 0.9, 7 / 255, 2 / 255
 
 
-class Views:
+class MatchViews:
     """Normalised reference crop and normalised views at one scale, with warps by a disparity."""
 
     def __init__(
@@ -158,7 +158,7 @@ class Sweep:
     no_view: NDArray[np.bool_]  # no view sees the point at the chosen disparity
 
 
-def sweep(views: Views, candidates: list[float | F32], p: VolumeParams, win: int, radius: int) -> Sweep:
+def sweep(views: MatchViews, candidates: list[float | F32], p: VolumeParams, win: int, radius: int) -> Sweep:
     """Winner-take-all over ``candidates`` (constant disparities or per-pixel maps, in increasing order),
     streamed, with the costs of the best's two neighbours kept for a parabola fit."""
     agg = Aggregator(views.guide, radius, p.eps)
@@ -224,14 +224,14 @@ def volume_disparity(
     d_range: tuple[float, float],
     p: VolumeParams,
     stats: EstimateStats,
-) -> tuple[Sweep, Views]:
+) -> tuple[Sweep, MatchViews]:
     """Integer then fractional sweep for the reference crop ``box``; returns the fractional result and the
     full-resolution views (for the continuous refinement)."""
     lo, hi = d_range
     y0, y1, x0, x1 = box
     t0 = time.perf_counter()
     s = coarse_scale(hi - lo + 1, (y1 - y0, x1 - x0))
-    cv = Views(images, ref, rel, box, s)
+    cv = MatchViews(images, ref, rel, box, s)
     first, last = math.floor(lo * s) - 1, math.ceil(hi * s) + 1
     levels = [float(v) for v in np.arange(first, last + 1, 1.0)]
     levels = levels[: max(1, 4 * max(cv.h, cv.w))]  # a range far beyond the image is capped
@@ -240,7 +240,7 @@ def volume_disparity(
     coarse = sweep(cv, list(levels), p, p.window, max(1, round(p.radius * s)))
     stats["integer_sweep_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    full = cv if s == 1.0 else Views(images, ref, rel, box, 1.0)
+    full = cv if s == 1.0 else MatchViews(images, ref, rel, box, 1.0)
     h, w = full.shape
     d0 = coarse.disparity / np.float32(s)
     if s != 1.0:
@@ -264,7 +264,7 @@ def volume_disparity(
     return fine, full
 
 
-def choose(views: Views, candidates: list[F32], p: VolumeParams) -> NDArray[np.intp]:
+def choose(views: MatchViews, candidates: list[F32], p: VolumeParams) -> NDArray[np.intp]:
     """Per pixel, the index of the candidate disparity map that the kept views agree with best (the same
     aggregated cost as the sweep)."""
     agg = Aggregator(views.guide, p.radius, p.eps)

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.depth.cost import INVALID_COST
-from rigctl.depth.costvolume import TAU_I, Aggregator, Views
+from rigctl.depth.costvolume import TAU_I, Aggregator, MatchViews
 
 F32 = NDArray[np.float32]
 log = logging.getLogger(__name__)
@@ -26,7 +26,7 @@ DAMPING = 2e-5  # squared baseline gradient (grey 0..1 per px) at which a fit is
 
 
 def refine(
-    views: Views, disp: F32, keep: int, radius: int, eps: float, iterations: int = 3, reach: float = 1.0
+    views: MatchViews, disp: F32, keep: int, radius: int, eps: float, iterations: int = 3, reach: float = 1.0
 ) -> tuple[F32, F32]:
     """Gauss-Newton along the baselines, over the ``keep`` views with the smallest residual at each pixel.
     Returns the refined map (within ``reach`` px of ``disp``) and the fit's strength (sum of g^2)."""

@@ -54,7 +54,7 @@ class BenchQuality(TypedDict):
     view_against_truth: Score
 
 
-class BenchResult(TypedDict):
+class RenderBenchResult(TypedDict):
     """``rigctl bench render --json``."""
 
     stereo_pair_ms: float  # median of the warm pairs
@@ -138,7 +138,7 @@ def first_call(frame: FrameViews) -> tuple[float, bool]:
     return _FIRST[0]
 
 
-def bench_render(data: RenderBenchData, size: tuple[int, int], repeats: int = 10) -> BenchResult:
+def bench_render(data: RenderBenchData, size: tuple[int, int], repeats: int = 10) -> RenderBenchResult:
     frame = data.frame
     first_s, compiled = first_call(frame)
     ren = renderer_for(frame)
@@ -190,7 +190,7 @@ def bench_render(data: RenderBenchData, size: tuple[int, int], repeats: int = 10
     }
 
 
-def format_bench(r: BenchResult) -> str:
+def format_bench(r: RenderBenchResult) -> str:
     q = r["quality"]
     loo, view = q["leave_one_out_r1c1"], q["view_against_truth"]
     return "\n".join(

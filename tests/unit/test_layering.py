@@ -153,3 +153,16 @@ def test_the_demo_imports_nothing_from_the_cli() -> None:
     graph = _graph()
     assert "rigctl.demo" in graph
     assert not {m for m in graph["rigctl.demo"] if m.startswith("rigctl.cli")}
+
+
+def test_no_two_public_classes_share_a_name() -> None:
+    """A name says what a thing is: two public classes of one name (a rig file's camera and a device, a
+    captured frame and a bridge frame) make a newcomer read the import to know which is meant."""
+    where: dict[str, list[str]] = {}
+    for name, path in MODULES.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        for node in tree.body:
+            if isinstance(node, ast.ClassDef) and not node.name.startswith("_"):
+                where.setdefault(node.name, []).append(name)
+    clashes = {cls: mods for cls, mods in where.items() if len(mods) > 1}
+    assert not clashes, f"classes defined more than once: {clashes}"
