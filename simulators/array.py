@@ -86,6 +86,7 @@ class SimArray:
         ref = rig.model.reference.source if rig.model.reference else "external"
         self.reference_source: dict[str, str] = dict.fromkeys(self.names, ref)
         self.stream_start_ns: int | None = None
+        self._pictured = False  # the grid's origin was set at the first picture
         self._claimed: set[str] = set()
         self._prime_lock = threading.Lock()
         self._noise_bank: list[NDArray[np.int16]] | None = None
@@ -113,6 +114,16 @@ class SimArray:
         with self._lock:
             if self.stream_start_ns is None:
                 self.stream_start_ns = time.monotonic_ns()
+            return self.stream_start_ns
+
+    def first_picture(self) -> int:
+        """The grid's origin once the first picture is ready: moved to now by the first camera about to
+        deliver its first frame (every camera asks before its first), kept after that."""
+        with self._lock:
+            if not self._pictured:
+                self._pictured = True
+                self.stream_start_ns = time.monotonic_ns()
+            assert self.stream_start_ns is not None
             return self.stream_start_ns
 
     def gain_lut(self, gain: float) -> NDArray[np.uint8]:
@@ -331,8 +342,17 @@ class SimArray:
             self._noise  # noqa: B018  (drawn here, not on the first frame)
 
     def render_in_background(self) -> None:
-        """Start rendering now, in the order frames will need the states (first what streaming needs)."""
-        self.states.start(range(self.distinct_states), first=None if self.up_front else self.prime)
+        """Start rendering now, in the order frames will need the states: first what streaming needs, here;
+        the rest, which is rendered while the cameras stream, in a low-priority process of its own."""
+        if self.up_front or self.distinct_states == 1:
+            self.states.start(range(self.distinct_states), first=None if self.up_front else self.prime)
+            return
+        from rigctl.simulators.render_worker import RenderWorker
+
+        disk = self._disk_cache
+        cold = disk is None or not all(disk.has(k) for k in range(1, self.distinct_states))
+        worker = RenderWorker(self.rig.to_dict(), self.requested.model_dump(mode="json"), self.names, eager=cold)
+        self.states.start(range(self.distinct_states), first=self.prime, render=worker, done=worker.close)
 
     def truth(self, state: int) -> tuple[list[NDArray[np.float32]], list[NDArray[np.bool_]]]:
         """Per camera: disparity in the rectified geometry of the true calibration (+inf off the subject)

@@ -35,6 +35,7 @@ class SimCamera(CameraBase):
         self._timings: Iterator[FrameTiming] | None = None
         self._pending: FrameTiming | None = None
         self.delivering = False  # a frame delivered since the stream started
+        self._t0 = 0  # the grid origin this camera's timings are on
         self.delivered: dict[int, int] = {}  # sequence -> scene frame, for the ground truth
 
     # lifecycle -------------------------------------------------------------------------------------
@@ -55,7 +56,8 @@ class SimCamera(CameraBase):
         else:
             # streams at once: the first frame waits for the first state, the rest render in the background
             self.array.render_in_background()
-        self._timings = self._timings_from_now(self.array.start_stream())
+        self._t0 = self.array.start_stream()
+        self._timings = self._timings_from_now(self._t0)
         self._pending = None
         self.delivering = False
 
@@ -74,21 +76,26 @@ class SimCamera(CameraBase):
     def _do_read(self, timeout_s: float, into: memoryview) -> Frame | None:
         assert self._timings is not None
         deadline = time.monotonic_ns() + int(timeout_s * 1e9)
-        t0 = self.array.stream_start_ns
-        assert t0 is not None
         while True:
             timing = self._pending or next(self._timings)
             self._pending = None
-            if not self.array.states.ready(self.array.state_of(timing.scene_frame)):
+            state = self.array.state_of(timing.scene_frame)
+            if not self.array.states.ready(state):
                 # a state the background has not rendered yet (the first, or a machine slower than the
                 # motion's schedule): the frame comes late, or is lost as a late frame is, never altered
-                left = (deadline - time.monotonic_ns()) / 1e9
-                if not self.array.states.wait(self.array.state_of(timing.scene_frame), left):
-                    self._pending = timing
+                self._pending = timing
+                if not self.array.states.wait(state, (deadline - time.monotonic_ns()) / 1e9):
                     return None
-                if not self.delivering:  # the stream begins with its first picture, at the next grid slot
+                continue
+            if not self.delivering and not self.array.up_front:
+                # the rig's grid begins with its first picture, not when the cameras started: the motion's
+                # schedule counts from there, and every camera restarts its stream on that grid
+                t0 = self.array.first_picture()
+                if t0 != self._t0:
+                    self._t0 = t0
                     self._timings = self._timings_from_now(t0)
                     continue
+            t0 = self._t0
             due = t0 + timing.capture_ns + self.latency_ns
             now = time.monotonic_ns()
             if not timing.delivered:

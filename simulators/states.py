@@ -47,6 +47,9 @@ class DiskCache:
             h.update(source.read_bytes())
         return cls(base / h.hexdigest()[:24], names, nbytes)
 
+    def has(self, state: int) -> bool:
+        return (self.folder / f"state-{state}.npz").is_file()
+
     def load(self, state: int) -> Frames | None:
         try:
             with np.load(self.folder / f"state-{state}.npz") as data:
@@ -84,8 +87,9 @@ class StateStore:
         with self._lock:
             return state in self._frames
 
-    def get(self, state: int) -> Frames:
-        """The state's frames: at once when ready, after the render under way, or rendered here."""
+    def get(self, state: int, render: Callable[[int], Frames] | None = None) -> Frames:
+        """The state's frames: at once when ready, after the render under way, or rendered here (by
+        ``render`` if given: any renderer gives the same bytes)."""
         while True:
             with self._lock:
                 done = self._frames.get(state)
@@ -101,7 +105,7 @@ class StateStore:
                 pending.wait()
                 continue  # ready now, or the render failed and this caller tries itself
             try:
-                out = self._produce(state)
+                out = self._produce(state, render or self._render)
                 with self._lock:
                     self._frames[state] = out
             finally:
@@ -123,17 +127,24 @@ class StateStore:
         pending.wait(max(timeout_s, 0.0))
         return self.ready(state)
 
-    def _produce(self, state: int) -> Frames:
+    def _produce(self, state: int, render: Callable[[int], Frames]) -> Frames:
         out = self.disk.load(state) if self.disk is not None else None
         if out is None:
-            out = self._render(state)
+            out = render(state)
             self.rendered.append(state)
             if self.disk is not None:
                 self.disk.keep(state, out)
         return out
 
-    def start(self, order: Iterable[int], first: Callable[[], object] | None = None) -> None:
-        """Render ``order`` in one background thread (``first`` runs before it: set-up the frames need)."""
+    def start(
+        self,
+        order: Iterable[int],
+        first: Callable[[], object] | None = None,
+        render: Callable[[int], Frames] | None = None,
+        done: Callable[[], object] | None = None,
+    ) -> None:
+        """Render ``order`` from one background thread (``first`` runs before it: set-up the frames need),
+        with ``render`` if given (another process, say), and call ``done`` at the end."""
         if self._thread is not None:
             return
         states = list(order)
@@ -145,10 +156,13 @@ class StateStore:
                 for state in states:
                     if self._cancel.is_set():
                         return
-                    self.get(state)
+                    self.get(state, render)
             except BaseException as exc:  # a camera asking for the state renders it again and raises it
                 self.error = exc
                 log.debug("background rendering stopped: %s", exc)
+            finally:
+                if done is not None:
+                    done()
 
         self._thread = threading.Thread(target=work, name="sim-render", daemon=True)
         self._thread.start()
