@@ -11,6 +11,7 @@ same as a render in this process (tests/integration/test_sim_start.py).
 
 from __future__ import annotations
 
+import atexit
 import logging
 import multiprocessing
 import os
@@ -63,6 +64,7 @@ class RenderWorker:
         self.folder = Path(tempfile.mkdtemp(prefix="rigctl-sim-render-"))
         context = multiprocessing.get_context("spawn")  # never fork a process with running threads
         self._pool = context.Pool(1, initializer=_start, initargs=self._args)
+        atexit.register(self.close)  # a short take ends before the last state: no process or files left
 
     def __call__(self, state: int) -> Frames:
         if self._pool is None:
@@ -74,7 +76,8 @@ class RenderWorker:
         return out
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.terminate()
+        pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.terminate()
         if self.folder is not None:
             shutil.rmtree(self.folder, ignore_errors=True)
