@@ -27,7 +27,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 from rigctl.simulators import scenes
 from rigctl.simulators.raycast import RayCamera, RenderResult, Scene, render
@@ -38,7 +37,6 @@ from rigctl.simulators.states import DiskCache, Frames, StateStore
 from rigctl.board import BoardSpec
 from rigctl.calibration_model import ArrayCalibration, CameraModel
 from rigctl.interfaces import CaptureFormat
-from rigctl.pfm import write_pfm
 from rigctl.pixfmt import from_rgb
 from rigctl.rectgeom import RectifiedGrid, common_plane
 from rigctl.rig import Rig
@@ -434,43 +432,11 @@ class SimArray:
         self.write_truth(folder, scene_sets)
 
     def write_truth(self, folder: Path, frame_sets: list[tuple[int, dict[str, int]]]) -> None:
-        """Write ``truth/``: the true calibration, per frame set and camera the disparity (PFM), the
-        subject matte (PNG) and, for the charuco scene, the board's pose. ``frame_sets`` lists
-        (frame set number, {camera: scene frame on the common grid}). Repeated scene states are hard
-        links, not copies."""
-        folder.mkdir(parents=True, exist_ok=True)
-        self.calibration.save(folder / "calibration.yaml")
-        (folder / "settings.yaml").write_text(yaml.safe_dump(self.requested.model_dump(mode="json"), sort_keys=False))
-        first_file: dict[tuple[int, str, str], Path] = {}
-        poses: dict[int, dict[str, object]] = {}
-        for number, members in frame_sets:
-            out = folder / "disparity" / f"{number:06d}"
-            out.mkdir(parents=True, exist_ok=True)
-            scene_frames = set(members.values())
-            if len(scene_frames) != 1:
-                log.warning("frame set %d mixes scene frames %s; truth follows the first", number, scene_frames)
-            state = self.state_of(min(scene_frames))
-            if self.settings.scene == "charuco":
-                pose = self.board_poses[state]
-                poses[number] = {"R": pose.R.tolist(), "origin": pose.origin.tolist(), "state": state}
-            for name in members:
-                for kind, suffix in (("disparity", ".pfm"), ("matte", ".png")):
-                    target = folder / kind / f"{number:06d}" / f"{name}{suffix}"
-                    target.parent.mkdir(parents=True, exist_ok=True)
-                    key = (state, name, kind)
-                    if key in first_file:
-                        os.link(first_file[key], target)
-                        continue
-                    disp, mattes = self.truth(state)
-                    i = self.index[name]
-                    if kind == "disparity":
-                        write_pfm(target, disp[i])
-                    else:
-                        cv2.imwrite(str(target), mattes[i].astype(np.uint8) * 255)
-                    first_file[key] = target
-        if poses:
-            doc = {"board": self.board.as_dict(), "poses": poses}
-            (folder / "board_poses.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+        """Write ``truth/`` (:func:`rigctl.simulators.truth_files.write_truth`): the true calibration, per
+        frame set and camera the disparity and the subject matte, and the charuco scene's board poses."""
+        from rigctl.simulators.truth_files import write_truth
+
+        write_truth(self, folder, frame_sets)
 
     def near_far(self) -> tuple[float, float]:
         """Where the presenter's surfaces lie: what a plan for this scene would give."""
