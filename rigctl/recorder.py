@@ -155,13 +155,16 @@ class Recorder:
         self.started_utc = dt.datetime.now(dt.UTC).isoformat(timespec="milliseconds")
         write_manifest(self.plan.folder, take_manifest(self._state(), "recording"))
 
-    def _grid_phase(self) -> int:
-        """The rig's frame phase (capture time modulo the period), from the latest frames seen."""
-        deadline = time.monotonic() + 2.0
+    def _grid_phase(self, first_frame_s: float = 15.0) -> int:
+        """The rig's frame phase (capture time modulo the period), from the latest frames seen. A rig still
+        starting up gets ``first_frame_s`` for its first frame, the other cameras a second after it."""
+        deadline = time.monotonic() + first_frame_s
         while time.monotonic() < deadline:
             seen = [s.last_capture_ns for s in self.stats.values() if s.last_capture_ns]
-            if len(seen) == len(self.names) or (seen and time.monotonic() > deadline - 1.0):
+            if len(seen) == len(self.names):
                 break
+            if seen:
+                deadline = min(deadline, time.monotonic() + 1.0)
             time.sleep(0.01)
         seen = [s.last_capture_ns % self.period_ns for s in self.stats.values() if s.last_capture_ns]
         if not seen:
@@ -204,10 +207,13 @@ class Recorder:
                     log.warning("flushing %s: %s", name, exc.strerror)
 
     def stop(self) -> None:
-        """End the take at the next common instant (frames captured before it are kept)."""
-        if self.t0_ns is not None and self.t1_ns is None:
+        """End the take at the next common instant (frames captured before it are kept), also one of a
+        planned length (Ctrl-C during ``rigctl record --seconds``)."""
+        if self.t0_ns is not None:
             now = time.monotonic_ns()
-            self.t1_ns = max(self.t0_ns, now + ((self.t0_ns - now) % self.period_ns))
+            end = max(self.t0_ns, now + ((self.t0_ns - now) % self.period_ns))
+            if self.t1_ns is None or end < self.t1_ns:
+                self.t1_ns = end
         self._stop.set()
 
     def wait(

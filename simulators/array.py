@@ -2,15 +2,18 @@
 
 One :class:`SimArray` serves every ``sim://`` camera of a rig. It draws each camera's true pose and lens
 from the seed (mounting errors, focal spread, principal point, distortion), renders each distinct scene
-state once for all cameras (frames are cached ahead of delivery so they arrive at the rig's rate in real
-time), and knows for every delivered frame which scene state it shows, so the ground truth of a take is
-exact.
+state once for all cameras, and knows for every delivered frame which scene state it shows, so the ground
+truth of a take is exact.
+
+Start-up is fast: the cameras stream as soon as the first state is rendered, and the rest are rendered in
+a background thread (:mod:`.states`). So that no frame depends on how fast that thread is, the presenter's
+motion joins in on a fixed schedule (``motion_ramp_s``): each further pose of its cycle a few seconds
+after the one before, counted in frames on the genlocked grid. Which state a frame shows is a function of
+its frame number alone (:meth:`SimArray.state_of`), and the truth follows the same function.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 import os
 import sys
@@ -21,25 +24,26 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Any
 
 import cv2
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 from rigctl.simulators import scenes
 from rigctl.simulators.raycast import RayCamera, RenderResult, Scene, render
+from rigctl.simulators.rays import rays_for
 from rigctl.simulators.settings import SimSettings
+from rigctl.simulators.states import DiskCache, Frames, StateStore
 
 from rigctl.board import BoardSpec
 from rigctl.calibration_model import ArrayCalibration, CameraModel
 from rigctl.interfaces import CaptureFormat
-from rigctl.pfm import write_pfm
 from rigctl.pixfmt import from_rgb
 from rigctl.rectgeom import RectifiedGrid, common_plane
 from rigctl.rig import Rig
 
 log = logging.getLogger(__name__)
+
+_rays_for = rays_for  # the name the truth views import
 
 F64 = NDArray[np.float64]
 NOISE_BANK = 8
@@ -53,41 +57,6 @@ class FrameTiming:
     capture_ns: int  # relative to the array's stream start
     scene_frame: int  # index on the common (genlocked) frame grid
     delivered: bool  # False: dropped at the source
-
-
-def _rays_for(cam: CameraModel, pixel_grid: tuple[NDArray[np.float32], NDArray[np.float32]]) -> RayCamera:
-    w, h = cam.image_size
-    xs, ys = pixel_grid
-    pts = np.stack([xs.ravel(), ys.ravel()], axis=1).astype(np.float64).reshape(-1, 1, 2)
-    if np.any(cam.dist):
-        # the default 5 iterations leave ~0.01 px at the corners; iterate to convergence
-        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
-        norm = cv2.undistortPoints(pts, cam.K, cam.dist, None, np.eye(3), np.eye(3), crit).reshape(-1, 2)
-    else:
-        norm = cv2.undistortPoints(pts, cam.K, cam.dist).reshape(-1, 2)
-    local = np.column_stack([norm, np.ones(len(norm))])
-    dirs = (local @ cam.R).astype(np.float32).reshape(h, w, 3)  # R^T applied to row vectors
-    centre = cam.centre
-
-    def project_box(corners: F64) -> tuple[int, int, int, int] | None:
-        zc = (corners - centre) @ cam.R[2]
-        if np.all(zc <= 1e-3):
-            return None
-        if np.any(zc <= 1e-3):
-            return 0, 0, w, h
-        uv = cam.project(corners)
-        if not np.all(np.isfinite(uv)):
-            return 0, 0, w, h
-        m = 4 + int(abs(cam.dist[0]) * w) if cam.dist.size else 4  # distortion bends the box's edges
-        x0 = max(0, int(np.floor(uv[:, 0].min())) - m)
-        y0 = max(0, int(np.floor(uv[:, 1].min())) - m)
-        x1 = min(w, int(np.ceil(uv[:, 0].max())) + m + 1)
-        y1 = min(h, int(np.ceil(uv[:, 1].max())) + m + 1)
-        if x0 >= x1 or y0 >= y1:
-            return None
-        return x0, y0, x1, y1
-
-    return RayCamera(origin=centre, dirs=dirs, focal_px=float(cam.K[0, 0]), project_box=project_box)
 
 
 class SimArray:
@@ -104,7 +73,8 @@ class SimArray:
         self.format = CaptureFormat(rig.width_px, rig.height_px, rig.model.format.pixel_format, self.fps)
         self.board = BoardSpec()
         self._lock = threading.Lock()
-        self._frames: dict[int, list[NDArray[np.uint8]]] = {}
+        self._rays: dict[tuple[str, bool], RayCamera] = {}
+        self._effect_maps: dict[str, NDArray[np.float32]] = {}
         self._truth: dict[int, tuple[list[NDArray[np.float32]], list[NDArray[np.bool_]]]] = {}
         self._backgrounds: dict[tuple[str, bool], RenderResult] = {}
         # camera state that camera control changes (the simulated bridge writes it; frames follow it)
@@ -114,8 +84,10 @@ class SimArray:
         ref = rig.model.reference.source if rig.model.reference else "external"
         self.reference_source: dict[str, str] = dict.fromkeys(self.names, ref)
         self.stream_start_ns: int | None = None
+        self._pictured = False  # the grid's origin was set at the first picture
         self._claimed: set[str] = set()
         self._prime_lock = threading.Lock()
+        self._noise_bank: list[NDArray[np.int16]] | None = None
         self._luts: dict[float, NDArray[np.uint8]] = {}
 
     # ---- device bookkeeping ------------------------------------------------------------------------
@@ -130,16 +102,26 @@ class SimArray:
             self._claimed.add(name)
 
     def release(self, name: str) -> None:
+        """The genlocked grid keeps running while cameras are closed (as a reference generator does), so
+        frame numbers and the motion schedule carry on across takes."""
         with self._lock:
             self._claimed.discard(name)
-            if not self._claimed:
-                self.stream_start_ns = None
 
     def start_stream(self) -> int:
         """The genlocked grid's origin: set by the first camera that starts, shared by all."""
         with self._lock:
             if self.stream_start_ns is None:
                 self.stream_start_ns = time.monotonic_ns()
+            return self.stream_start_ns
+
+    def first_picture(self) -> int:
+        """The grid's origin once the first picture is ready: moved to now by the first camera about to
+        deliver its first frame (every camera asks before its first), kept after that."""
+        with self._lock:
+            if not self._pictured:
+                self._pictured = True
+                self.stream_start_ns = time.monotonic_ns()
+            assert self.stream_start_ns is not None
             return self.stream_start_ns
 
     def gain_lut(self, gain: float) -> NDArray[np.uint8]:
@@ -192,38 +174,56 @@ class SimArray:
         ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
         return xs, ys
 
-    @cached_property
-    def _raw_rays(self) -> dict[str, RayCamera]:
-        return {n: _rays_for(self.calibration[n], self._pixel_grid) for n in self.names}
+    def rays(self, name: str, rectified: bool = False) -> RayCamera:
+        """One camera's rays, computed on first use (cameras in parallel threads each compute their own)."""
+        rectified = rectified and not self.settings.ideal  # ideal cameras are rectified already
+        key = (name, rectified)
+        with self._lock:
+            cached = self._rays.get(key)
+        if cached is None:
+            cam = self.rectified.camera(name) if rectified else self.calibration[name]
+            cached = rays_for(cam, self._pixel_grid)
+            with self._lock:
+                cached = self._rays.setdefault(key, cached)
+        return cached
 
     @cached_property
-    def _rect_rays(self) -> dict[str, RayCamera]:
-        if self.settings.ideal:
-            return self._raw_rays
-        return {n: _rays_for(self.rectified.camera(n), self._pixel_grid) for n in self.names}
-
-    @cached_property
-    def _effects(self) -> dict[str, NDArray[np.float32]]:
-        """Per camera: vignetting times per-channel gain (exposure and colour mismatch), H x W x 3."""
+    def _gains(self) -> dict[str, NDArray[np.float32]]:
+        """Per camera: per-channel gain (exposure and colour mismatch), drawn in camera order."""
         s = self.settings
         rng = np.random.default_rng(np.random.SeedSequence([s.seed, 2]))
-        h, w = self.rig.height_px, self.rig.width_px
-        ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
-        r2 = ((xs - w / 2) ** 2 + (ys - h / 2) ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
-        vig = (1.0 - s.vignetting * r2).astype(np.float32)
         out = {}
         for n in self.names:
             d = rng.normal(size=4)
-            gain = (1 + s.exposure_spread * d[0]) * (1 + s.colour_spread * d[1:4])
-            out[n] = np.ascontiguousarray(vig[..., None] * gain.astype(np.float32)[None, None, :])
+            out[n] = ((1 + s.exposure_spread * d[0]) * (1 + s.colour_spread * d[1:4])).astype(np.float32)
         return out
 
     @cached_property
+    def _vignetting(self) -> NDArray[np.float32]:
+        h, w = self.rig.height_px, self.rig.width_px
+        xs, ys = self._pixel_grid
+        r2 = ((xs - w / 2) ** 2 + (ys - h / 2) ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
+        return (1.0 - self.settings.vignetting * r2).astype(np.float32)
+
+    def _effects(self, name: str) -> NDArray[np.float32]:
+        """One camera's vignetting times its gain, H x W x 3 (made in the camera's own render thread)."""
+        with self._lock:
+            cached = self._effect_maps.get(name)
+        if cached is None:
+            cached = np.ascontiguousarray(self._vignetting[..., None] * self._gains[name][None, None, :])
+            with self._lock:
+                self._effect_maps[name] = cached
+        return cached
+
+    @property
     def _noise(self) -> list[NDArray[np.int16]]:
-        s = self.settings
-        rng = np.random.default_rng(np.random.SeedSequence([s.seed, 3]))
-        shape = (self.rig.height_px, self.rig.width_px * 2)
-        return [np.rint(rng.normal(0, s.noise, shape)).astype(np.int16) for _ in range(NOISE_BANK)]
+        with self._prime_lock:  # drawn once, by whichever thread needs it first
+            if self._noise_bank is None:
+                s = self.settings
+                rng = np.random.default_rng(np.random.SeedSequence([s.seed, 3]))
+                shape = (self.rig.height_px, self.rig.width_px * 2)
+                self._noise_bank = [np.rint(rng.normal(0, s.noise, shape)).astype(np.int16) for _ in range(NOISE_BANK)]
+            return self._noise_bank
 
     # ---- scene states -----------------------------------------------------------------------------
     @property
@@ -236,15 +236,28 @@ class SimArray:
             return 1
         return s.motion_states
 
+    @property
+    def ramp_frames(self) -> int:
+        """Frames between one pose of the presenter's motion joining in and the next (0: all from the start,
+        every state rendered before the cameras stream)."""
+        s = self.settings
+        if s.scene == "charuco" or not s.motion or self.distinct_states == 1:
+            return 0
+        return round(s.motion_ramp_s * self.fps)
+
     def state_of(self, scene_frame: int) -> int:
-        """Which distinct scene state a frame on the common grid shows."""
+        """Which distinct scene state a frame on the common grid shows: a function of the frame number
+        alone, never of how far rendering has got."""
         s = self.settings
         if s.scene == "charuco":
             return (scene_frame // s.board_hold_frames) % s.board_poses
         if not s.motion:
             return 0
         per_cycle = max(1, round(scenes.MOTION_PERIOD_S * self.fps))
-        return (scene_frame % per_cycle) * s.motion_states // per_cycle
+        state = (scene_frame % per_cycle) * s.motion_states // per_cycle
+        ramp = self.ramp_frames
+        # pose k joins at frame k * ramp; until then the cycle holds at the latest pose that has joined
+        return min(state, scene_frame // ramp) if ramp else state
 
     @cached_property
     def board_poses(self) -> list[scenes.BoardPose]:
@@ -267,7 +280,7 @@ class SimArray:
         with self._lock:
             cached = self._backgrounds.get(key)
         if cached is None:
-            rays = (self._rect_rays if rectified else self._raw_rays)[name]
+            rays = self.rays(name, rectified)
             static = Scene(scene.primitives[: scene.static], scene.light_dir, scene.ambient, scene.background)
             cached = render(static, rays, colour=not rectified)
             with self._lock:
@@ -276,72 +289,68 @@ class SimArray:
 
     def _render_camera(self, scene: Scene, name: str) -> NDArray[np.uint8]:
         base = self._static(scene, name, rectified=False)
-        res: RenderResult = render(scene, self._raw_rays[name], base=base, skip=scene.static)
-        rgb = np.asarray(cv2.multiply(res.rgb, self._effects[name]), dtype=np.float32)
+        res: RenderResult = render(scene, self.rays(name), base=base, skip=scene.static)
+        rgb = np.asarray(cv2.multiply(res.rgb, self._effects(name)), dtype=np.float32)
         return from_rgb(np.clip(rgb, 0.0, 1.0, out=rgb), self.format.pixel_format)
 
     @cached_property
-    def _disk_cache(self) -> Path | None:
-        """Where rendered states are kept across runs: one folder per rig, settings and simulator source
-        (same inputs, same bytes). ``RIGCTL_SIM_CACHE=off`` disables it."""
-        root = os.environ.get("RIGCTL_SIM_CACHE", "")
-        if root == "off":
-            return None
-        base = Path(root) if root else Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "rigctl-sim"
-        h = hashlib.sha256()
-        h.update(json.dumps([self.rig.to_dict(), self.requested.model_dump(mode="json")], sort_keys=True).encode())
-        for module in (scenes.__file__, __file__, sys.modules[render.__module__].__file__):
-            if module:
-                h.update(Path(module).read_bytes())
-        return base / h.hexdigest()[:24]
+    def _disk_cache(self) -> DiskCache | None:
+        """Rendered states across runs: one folder per rig, settings and simulator source."""
+        inputs = [self.rig.to_dict(), self.requested.model_dump(mode="json")]
+        sources = [
+            scenes.__file__,
+            __file__,
+            sys.modules[render.__module__].__file__,
+            sys.modules[rays_for.__module__].__file__,
+        ]
+        return DiskCache.for_inputs(inputs, [Path(m) for m in sources if m], self.names, self.format.bytes_per_frame)
 
-    def _cached_state(self, state: int) -> list[NDArray[np.uint8]] | None:
-        folder = self._disk_cache
-        if folder is None:
-            return None
-        try:
-            with np.load(folder / f"state-{state}.npz") as data:
-                out = [data[n] for n in self.names]
-        except (OSError, KeyError, ValueError):
-            return None
-        return out if all(a.nbytes == self.format.bytes_per_frame for a in out) else None
-
-    def _keep_state(self, state: int, frames: list[NDArray[np.uint8]]) -> None:
-        folder = self._disk_cache
-        if folder is None:
-            return
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-            tmp = folder / f".state-{state}-{os.getpid()}-{threading.get_ident()}.npz"
-            arrays: dict[str, Any] = dict(zip(self.names, frames, strict=True))  # keywords numpy's stubs mistype
-            np.savez(tmp, **arrays)
-            os.replace(tmp, folder / f"state-{state}.npz")
-        except OSError as exc:  # a cache that cannot be written only costs the next run its time
-            log.debug("render cache not written: %s", exc)
-
-    def frames(self, state: int) -> list[NDArray[np.uint8]]:
-        """Rendered bytes of every camera for one scene state (cached in memory and on disk)."""
-        with self._lock:
-            cached = self._frames.get(state)
-        if cached is not None:
-            return cached
-        out = self._cached_state(state)
-        if out is None:
+    def _render_state(self, state: int) -> Frames:
+        # drawn once, before the cameras' threads use them (each camera's rays are its own thread's work)
+        self._gains, self._vignetting, self.rectified  # noqa: B018
+        with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+            for name in self.names:  # the first time: rays while this thread builds the scene's textures
+                pool.submit(self.rays, name)
             scene = self.scene(state)
-            with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
-                out = list(pool.map(lambda n: self._render_camera(scene, n), self.names))
-            self._keep_state(state, out)
-        with self._lock:
-            self._frames[state] = out
-        return out
+            return list(pool.map(lambda n: self._render_camera(scene, n), self.names))
+
+    @cached_property
+    def states(self) -> StateStore:
+        """Every state's frames, rendered once (in memory, and on disk across runs)."""
+        return StateStore(self._render_state, self._disk_cache)
+
+    def frames(self, state: int) -> Frames:
+        """Rendered bytes of every camera for one scene state (waits for, or does, its render)."""
+        return self.states.get(state)
+
+    @property
+    def up_front(self) -> bool:
+        """Whether every state is rendered before the cameras stream: a stream that needs them all from its
+        first frame (the charuco scene, motion without its ramp) could not be delivered in real time
+        otherwise, and a still scene (one state) starts as it always has, its frames from the stream's
+        first instant. With the motion's ramp, the cameras stream at once and their first frame waits
+        for the first state."""
+        return not self.ramp_frames
 
     def prime(self) -> None:
-        """Render every distinct scene state before streaming starts, so delivery is real time."""
-        with self._prime_lock:
-            for state in range(self.distinct_states):
-                self.frames(state)
-            if self.settings.noise:
-                self._noise  # noqa: B018  (computed here, not on the first frame)
+        """Render what streaming needs before its first frame (:attr:`up_front`) and draw the noise."""
+        for state in range(self.distinct_states if self.up_front else 1):
+            self.states.get(state)
+        if self.settings.noise:
+            self._noise  # noqa: B018  (drawn here, not on the first frame)
+
+    def render_in_background(self) -> None:
+        """Start rendering now, in the order frames will need the states: first what streaming needs, here;
+        the rest, which is rendered while the cameras stream, in a low-priority process of its own."""
+        if self.up_front or self.distinct_states == 1:
+            self.states.start(range(self.distinct_states), first=None if self.up_front else self.prime)
+            return
+        from rigctl.simulators.render_worker import RenderWorker
+
+        disk = self._disk_cache
+        cold = disk is None or not all(disk.has(k) for k in range(1, self.distinct_states))
+        worker = RenderWorker(self.rig.to_dict(), self.requested.model_dump(mode="json"), self.names, eager=cold)
+        self.states.start(range(self.distinct_states), first=self.prime, render=worker, done=worker.close)
 
     def truth(self, state: int) -> tuple[list[NDArray[np.float32]], list[NDArray[np.bool_]]]:
         """Per camera: disparity in the rectified geometry of the true calibration (+inf off the subject)
@@ -354,7 +363,7 @@ class SimArray:
         disp, mattes = [], []
         for n in self.names:
             base = self._static(scene, n, rectified=True)
-            res = render(scene, self._rect_rays[n], colour=False, base=base, skip=scene.static)
+            res = render(scene, self.rays(n, rectified=True), colour=False, base=base, skip=scene.static)
             d = self.rectified.disparity_from_depth(res.depth.astype(np.float64)).astype(np.float32)
             d[~res.subject] = np.inf
             disp.append(d)
@@ -423,43 +432,11 @@ class SimArray:
         self.write_truth(folder, scene_sets)
 
     def write_truth(self, folder: Path, frame_sets: list[tuple[int, dict[str, int]]]) -> None:
-        """Write ``truth/``: the true calibration, per frame set and camera the disparity (PFM), the
-        subject matte (PNG) and, for the charuco scene, the board's pose. ``frame_sets`` lists
-        (frame set number, {camera: scene frame on the common grid}). Repeated scene states are hard
-        links, not copies."""
-        folder.mkdir(parents=True, exist_ok=True)
-        self.calibration.save(folder / "calibration.yaml")
-        (folder / "settings.yaml").write_text(yaml.safe_dump(self.requested.model_dump(mode="json"), sort_keys=False))
-        first_file: dict[tuple[int, str, str], Path] = {}
-        poses: dict[int, dict[str, object]] = {}
-        for number, members in frame_sets:
-            out = folder / "disparity" / f"{number:06d}"
-            out.mkdir(parents=True, exist_ok=True)
-            scene_frames = set(members.values())
-            if len(scene_frames) != 1:
-                log.warning("frame set %d mixes scene frames %s; truth follows the first", number, scene_frames)
-            state = self.state_of(min(scene_frames))
-            if self.settings.scene == "charuco":
-                pose = self.board_poses[state]
-                poses[number] = {"R": pose.R.tolist(), "origin": pose.origin.tolist(), "state": state}
-            for name in members:
-                for kind, suffix in (("disparity", ".pfm"), ("matte", ".png")):
-                    target = folder / kind / f"{number:06d}" / f"{name}{suffix}"
-                    target.parent.mkdir(parents=True, exist_ok=True)
-                    key = (state, name, kind)
-                    if key in first_file:
-                        os.link(first_file[key], target)
-                        continue
-                    disp, mattes = self.truth(state)
-                    i = self.index[name]
-                    if kind == "disparity":
-                        write_pfm(target, disp[i])
-                    else:
-                        cv2.imwrite(str(target), mattes[i].astype(np.uint8) * 255)
-                    first_file[key] = target
-        if poses:
-            doc = {"board": self.board.as_dict(), "poses": poses}
-            (folder / "board_poses.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+        """Write ``truth/`` (:func:`rigctl.simulators.truth_files.write_truth`): the true calibration, per
+        frame set and camera the disparity and the subject matte, and the charuco scene's board poses."""
+        from rigctl.simulators.truth_files import write_truth
+
+        write_truth(self, folder, frame_sets)
 
     def near_far(self) -> tuple[float, float]:
         """Where the presenter's surfaces lie: what a plan for this scene would give."""

@@ -34,6 +34,8 @@ class SimCamera(CameraBase):
         self.latency_ns = int(latency_us * 1e3)
         self._timings: Iterator[FrameTiming] | None = None
         self._pending: FrameTiming | None = None
+        self.delivering = False  # a frame delivered since the stream started
+        self._t0 = 0  # the grid origin this camera's timings are on
         self.delivered: dict[int, int] = {}  # sequence -> scene frame, for the ground truth
 
     # lifecycle -------------------------------------------------------------------------------------
@@ -49,12 +51,19 @@ class SimCamera(CameraBase):
         return have
 
     def _do_start(self) -> None:
-        self.array.prime()
-        t0 = self.array.start_stream()
-        now = time.monotonic_ns()
-        first_grid = max(0, -(-(now - t0) // self.array.period_ns))
-        self._timings = self.array.timing(self.name, first_grid=first_grid)
+        if self.array.up_front:
+            self.array.prime()  # every state is needed in real time from the first frame on
+        else:
+            # streams at once: the first frame waits for the first state, the rest render in the background
+            self.array.render_in_background()
+        self._t0 = self.array.start_stream()
+        self._timings = self._timings_from_now(self._t0)
         self._pending = None
+        self.delivering = False
+
+    def _timings_from_now(self, t0: int) -> Iterator[FrameTiming]:
+        first_grid = max(0, -(-(time.monotonic_ns() - t0) // self.array.period_ns))
+        return self.array.timing(self.name, first_grid=first_grid)
 
     def _do_stop(self) -> None:
         self._timings = None
@@ -67,11 +76,26 @@ class SimCamera(CameraBase):
     def _do_read(self, timeout_s: float, into: memoryview) -> Frame | None:
         assert self._timings is not None
         deadline = time.monotonic_ns() + int(timeout_s * 1e9)
-        t0 = self.array.stream_start_ns
-        assert t0 is not None
         while True:
             timing = self._pending or next(self._timings)
             self._pending = None
+            state = self.array.state_of(timing.scene_frame)
+            if not self.array.states.ready(state):
+                # a state the background has not rendered yet (the first, or a machine slower than the
+                # motion's schedule): the frame comes late, or is lost as a late frame is, never altered
+                self._pending = timing
+                if not self.array.states.wait(state, (deadline - time.monotonic_ns()) / 1e9):
+                    return None
+                continue
+            if not self.delivering and not self.array.up_front:
+                # the rig's grid begins with its first picture, not when the cameras started: the motion's
+                # schedule counts from there, and every camera restarts its stream on that grid
+                t0 = self.array.first_picture()
+                if t0 != self._t0:
+                    self._t0 = t0
+                    self._timings = self._timings_from_now(t0)
+                    continue
+            t0 = self._t0
             due = t0 + timing.capture_ns + self.latency_ns
             now = time.monotonic_ns()
             if not timing.delivered:
@@ -111,6 +135,7 @@ class SimCamera(CameraBase):
             burnin.burn(buf, arr.format.width, arr.index[self.name], timing.sequence, timing.scene_frame)
         capture = t0 + timing.capture_ns
         self.delivered[timing.sequence] = timing.scene_frame
+        self.delivering = True
         flags = FrameFlags.TIMESTAMP_MONOTONIC | FrameFlags.TIMESTAMP_SOE
         data = buf.reshape(-1).data
         return Frame(self.name, timing.sequence, capture, time.monotonic_ns(), flags, data)

@@ -41,6 +41,7 @@ def simulated_cameras(
     """The ``sim://`` cameras named in ``addresses`` on one simulated array, its truth, settings and summary."""
     settings = parse_sim_args(sim_args)
     array = SimArray(rig, settings)
+    array.render_in_background()  # while preflight measures the disk: the cameras stream sooner
     cams: dict[str, SimCamera] = {}
     for name, address in addresses.items():
         if address.target != name:

@@ -170,12 +170,16 @@ class Rectangle(Primitive):
         inside = (np.abs(su) <= self.half[0]) & (np.abs(sv) <= self.half[1]) & (t > 0) & np.isfinite(t)
         return np.where(inside, t, np.float32(np.inf)).astype(np.float32)
 
-    def surface(self, points: F32) -> tuple[F32, F32, F32]:
+    def texcoords(self, points: F32) -> tuple[F32, F32]:
         rel = points - self.centre.astype(np.float32)
         s = 0.5 + (rel @ self.u.astype(np.float32)) / (2 * self.half[0])
         t = 0.5 + (rel @ self.v.astype(np.float32)) / (2 * self.half[1])
+        return s.astype(np.float32), t.astype(np.float32)
+
+    def surface(self, points: F32) -> tuple[F32, F32, F32]:
+        s, t = self.texcoords(points)
         normal = np.broadcast_to(-self.normal.astype(np.float32), points.shape)
-        return s.astype(np.float32), t.astype(np.float32), np.ascontiguousarray(normal)
+        return s, t, np.ascontiguousarray(normal)
 
 
 @dataclass
@@ -252,9 +256,15 @@ def render(
             subject[y0:y1, x0:x1] &= ~mask
         if not colour:
             continue
-        t = depth[y0:y1, x0:x1][mask]
-        pts = cam.origin.astype(np.float32) + t[:, None] * cam.dirs[y0:y1, x0:x1][mask]
-        s, tt, normal = prim.surface(pts)
+        whole = bool(mask.all())  # a background plane filling its box: slices, not boolean gathers
+        t = depth[y0:y1, x0:x1].reshape(-1) if whole else depth[y0:y1, x0:x1][mask]
+        dirs = cam.dirs[y0:y1, x0:x1].reshape(-1, 3) if whole else cam.dirs[y0:y1, x0:x1][mask]
+        pts = cam.origin.astype(np.float32) + t[:, None] * dirs
+        if isinstance(prim, Rectangle):  # one normal for the whole plane
+            s, tt = prim.texcoords(pts)
+            normal = -prim.normal.astype(np.float32)[None, :]
+        else:
+            s, tt, normal = prim.surface(pts)
         # texels per pixel: texture width over the primitive's extent on screen
         distance = float(np.linalg.norm(prim.bounding_sphere()[0] - cam.origin))
         on_screen = cam.focal_px * prim.texture_extent_m / max(distance, 1e-3)
@@ -267,5 +277,8 @@ def render(
         albedo = prim.texture.sample(s, tt, tpp) * np.asarray(prim.tint, dtype=np.float32)
         lambert = np.clip(normal @ light, 0.0, 1.0)
         shade = scene.ambient + (1.0 - scene.ambient) * lambert
-        rgb[y0:y1, x0:x1][mask] = albedo * shade[:, None]
+        if whole:
+            rgb[y0:y1, x0:x1] = (albedo * shade[:, None]).reshape(y1 - y0, x1 - x0, 3)
+        else:
+            rgb[y0:y1, x0:x1][mask] = albedo * shade[:, None]
     return RenderResult(rgb=rgb, depth=depth, subject=subject, ids=ids)

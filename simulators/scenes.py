@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cache, lru_cache
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -24,11 +25,19 @@ PRESENTER_DEPTH_M = 0.9  # hands to the back of the torso
 MOTION_PERIOD_S = 1.6
 
 
+PHOTO_FILES = {"immunohistochemistry": "ihc.png", "rocket": "rocket.jpg"}  # the rest are NAME.png
+
+
 @cache
 def _photo(name: str) -> NDArray[np.float32]:
     import skimage.data  # imported here: only the photo textures need it
 
-    img = np.asarray(getattr(skimage.data, name)(), dtype=np.float32) / 255.0
+    # the files that ship inside scikit-image, decoded by OpenCV: its loader would first import
+    # skimage.io and its plugins, half a second of a cold start
+    path = Path(skimage.data.__file__).parent / PHOTO_FILES.get(name, f"{name}.png")
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    raw = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB) if bgr is not None else getattr(skimage.data, name)()
+    img = np.asarray(raw, dtype=np.float32) / 255.0
     if img.ndim == 2:
         img = np.repeat(img[..., None], 3, axis=2)
     return np.ascontiguousarray(img[..., :3])

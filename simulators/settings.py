@@ -39,6 +39,12 @@ class SimSettings(BaseModel):
     motion_states: Annotated[int, Field(ge=1, le=200)] = Field(
         10, description="distinct poses in one 1.6 s motion cycle (each is rendered once and cached)"
     )
+    motion_ramp_s: Annotated[float, Field(ge=0, le=60, allow_inf_nan=False)] = Field(
+        3.0,
+        description="seconds between one pose of the motion joining in and the next, counted from the first "
+        "frame (the simulator renders them meanwhile, so the cameras stream at once); 0: every pose from the "
+        "first frame, all rendered before the cameras stream",
+    )
     texture: Literal["photo", "flat", "repetitive"] = Field(
         "photo", description="photo: real photographs; flat: uniform colours; repetitive: periodic patterns"
     )

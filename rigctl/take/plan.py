@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import mmap
 import queue
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,7 +13,9 @@ class FramePool:
     """Preallocated frame buffers of one camera; taking one never blocks."""
 
     def __init__(self, count: int, size: int) -> None:
-        self.buffers = [bytearray(size) for _ in range(count)]
+        # anonymous maps: the kernel zeroes a page when a frame first lands on it, not all up front (a
+        # second's pools of nine cameras would otherwise cost arming half a second), and page-aligned
+        self.buffers = [mmap.mmap(-1, size) for _ in range(count)]
         self.views = [memoryview(b) for b in self.buffers]
         self.free: queue.SimpleQueue[int] = queue.SimpleQueue()
         for i in range(count):

@@ -1,9 +1,10 @@
 """Writing a camera's frames: raw essence appended as captured, then its index record.
 
 Nothing is allocated per frame: the frame is written straight from the capture buffer and the index
-record is packed into one reused 64-byte buffer. Data is flushed to the device (fdatasync) at a fixed
-interval, essence before index, so after a power loss every indexed frame is either complete or caught
-by its checksum.
+record is packed into one reused 64-byte buffer. The frame's CRC-32 (zlib's checksum) is computed by ISA-L,
+which at nine 1080p streams costs a few percent of a core where zlib's took most of one. Data is flushed
+to the device (fdatasync) at a fixed interval, essence before index, so after a power loss every indexed
+frame is either complete or caught by its checksum.
 """
 
 from __future__ import annotations
@@ -12,11 +13,15 @@ import contextlib
 import errno
 import os
 import time
-import zlib
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+
+try:  # ISA-L's CRC-32: the same checksum as zlib's, with carry-less multiply, some 40x faster
+    from isal.isal_zlib import crc32
+except ImportError:  # pragma: no cover  (a platform without its wheel: zlib's, same values)
+    from zlib import crc32
 
 from rigctl.errors import DiskFullError, TakeError
 from rigctl.interfaces import Frame, FrameFlags
@@ -68,7 +73,7 @@ class CameraWriter:
     def write(self, frame: Frame, frame_set: int = -1) -> None:
         data = frame.data
         _write_all(self._essence, data, self.essence_path)
-        crc = zlib.crc32(data) if self.checksum else 0
+        crc = crc32(data) if self.checksum else 0
         flags = int(frame.flags) & ~_TC_FLAGS
         tc = 0
         if frame.timecode is not None:  # the count goes in as it came; rate and drop flag are the take's

@@ -1,0 +1,83 @@
+"""Scene states rendered in a separate process, for the background.
+
+Rendering the motion's later poses in this process while the cameras stream and the recorder writes takes
+the interpreter's lock from their threads in many short turns; on a busy two-core machine the capture
+threads then fall behind and whole takes are lost. A child process has no share in that lock: the kernel
+schedules its render threads against the capture threads fairly, and threads that wake for a frame get
+the CPU promptly. (Not at a low priority: beside CPU-bound neighbours it would then starve and miss the
+motion's schedule.) It renders with the same code from the same rig and settings, so its bytes are the
+same as a render in this process (tests/integration/test_sim_start.py).
+"""
+
+from __future__ import annotations
+
+import atexit
+import logging
+import multiprocessing
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rigctl.simulators.states import Frames
+
+log = logging.getLogger(__name__)
+
+_array: Any = None  # the child's own simulated array
+
+
+def _start(rig: dict[str, Any], settings: dict[str, Any]) -> None:
+    from rigctl.simulators.array import SimArray
+    from rigctl.simulators.settings import SimSettings
+
+    from rigctl.rig import rig_from_dict
+
+    global _array
+    _array = SimArray(rig_from_dict(rig), SimSettings.model_validate(settings))
+
+
+def _render(state: int, folder: str) -> str:
+    frames = _array._render_state(state)
+    path = Path(folder) / f"state-{state}.npz"
+    tmp = Path(folder) / f".state-{state}.npz"
+    np.savez(tmp, **dict(zip(_array.names, frames, strict=True)))
+    os.replace(tmp, path)
+    return str(path)
+
+
+class RenderWorker:
+    """One child process that renders states on request; its files pass through a private folder."""
+
+    def __init__(self, rig: dict[str, Any], settings: dict[str, Any], names: list[str], eager: bool = True) -> None:
+        """``eager``: start the process now (its start-up overlaps the first state's render here); else on
+        the first state the disk cache did not have."""
+        self.names = names
+        self._args = (rig, settings)
+        self.folder: Path | None = None
+        self._pool: Any = None
+        if eager:
+            self._begin()
+
+    def _begin(self) -> None:
+        self.folder = Path(tempfile.mkdtemp(prefix="rigctl-sim-render-"))
+        context = multiprocessing.get_context("spawn")  # never fork a process with running threads
+        self._pool = context.Pool(1, initializer=_start, initargs=self._args)
+        atexit.register(self.close)  # a short take ends before the last state: no process or files left
+
+    def __call__(self, state: int) -> Frames:
+        if self._pool is None:
+            self._begin()
+        path = Path(self._pool.apply(_render, (state, str(self.folder))))
+        with np.load(path) as data:
+            out = [data[n] for n in self.names]
+        path.unlink(missing_ok=True)
+        return out
+
+    def close(self) -> None:
+        pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.terminate()
+        if self.folder is not None:
+            shutil.rmtree(self.folder, ignore_errors=True)
