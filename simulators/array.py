@@ -6,7 +6,7 @@ state once for all cameras, and knows for every delivered frame which scene stat
 truth of a take is exact.
 
 Start-up is fast: the cameras stream as soon as the first state is rendered, and the rest are rendered in
-a background thread (:mod:`.states`). So that no frame depends on how fast that thread is, the presenter's
+a child process (:mod:`.states`, :mod:`.render_worker`). So that no frame depends on how fast it is, the presenter's
 motion joins in on a fixed schedule (``motion_ramp_s``): each further pose of its cycle a few seconds
 after the one before, counted in frames on the genlocked grid. Which state a frame shows is a function of
 its frame number alone (:meth:`SimArray.state_of`), and the truth follows the same function.
@@ -14,6 +14,7 @@ its frame number alone (:meth:`SimArray.state_of`), and the truth follows the sa
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import sys
@@ -21,7 +22,6 @@ import threading
 import time
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
@@ -33,13 +33,14 @@ from rigctl.simulators.raycast import RayCamera, RenderResult, Scene, render
 from rigctl.simulators.rays import rays_for
 from rigctl.simulators.settings import SimSettings
 from rigctl.simulators.states import DiskCache, Frames, StateStore
+from rigctl.simulators.timing import FrameTiming, frame_timings, start_offset
 
 from rigctl.board import BoardSpec
 from rigctl.calibration_model import ArrayCalibration, CameraModel
 from rigctl.interfaces import CaptureFormat
 from rigctl.pixfmt import from_rgb
 from rigctl.rectgeom import RectifiedGrid, common_plane
-from rigctl.rig import Rig
+from rigctl.rig import Rig, rig_from_dict
 
 log = logging.getLogger(__name__)
 
@@ -47,16 +48,6 @@ _rays_for = rays_for  # the name the truth views import
 
 F64 = NDArray[np.float64]
 NOISE_BANK = 8
-
-
-@dataclass(frozen=True)
-class FrameTiming:
-    """When a camera's frame was captured, which sequence number it carries and what it shows."""
-
-    sequence: int
-    capture_ns: int  # relative to the array's stream start
-    scene_frame: int  # index on the common (genlocked) frame grid
-    delivered: bool  # False: dropped at the source
 
 
 class SimArray:
@@ -349,7 +340,9 @@ class SimArray:
 
         disk = self._disk_cache
         cold = disk is None or not all(disk.has(k) for k in range(1, self.distinct_states))
-        worker = RenderWorker(self.rig.to_dict(), self.requested.model_dump(mode="json"), self.names, eager=cold)
+        worker = RenderWorker(
+            array_from_json, json.dumps(self.rig.to_dict()), self.requested.model_dump_json(), self.names, eager=cold
+        )
         self.states.start(range(self.distinct_states), first=self.prime, render=worker, done=worker.close)
 
     def truth(self, state: int) -> tuple[list[NDArray[np.float32]], list[NDArray[np.bool_]]]:
@@ -373,33 +366,11 @@ class SimArray:
         return disp, mattes
 
     # ---- timing -----------------------------------------------------------------------------------
-    @cached_property
-    def _start_offsets(self) -> dict[str, int]:
-        """Start-up stagger: each camera's first frame is a whole number of periods after stream start."""
-        s = self.settings
-        rng = np.random.default_rng(np.random.SeedSequence([s.seed, 4]))
-        most = int(s.stagger_ms * 1e6 // self.period_ns)
-        return {n: int(rng.integers(0, most + 1)) if most else 0 for n in self.names}
-
     def timing(self, name: str, first_grid: int = 0) -> Iterator[FrameTiming]:
         """Frame timings of camera ``name`` after it starts streaming at grid slot ``first_grid``
-        (an endless generator). Sequence numbers start at 0, as after a V4L2 STREAMON."""
-        s = self.settings
-        skew_ns = int(s.skew_us.get(name, 0.0) * 1e3)
-        drops = set(s.drops.get(name, []))
-        loss = s.signal_loss.get(name)
-        rng = np.random.default_rng(np.random.SeedSequence([s.seed, 5, self.index[name]]))
-        grid = first_grid + self._start_offsets[name]
-        seq = 0
-        while True:
-            t_grid = grid * self.period_ns
-            jitter = int(rng.normal(0, s.jitter_us * 1e3)) if s.jitter_us else 0
-            if loss is not None and loss[0] * 1e9 <= t_grid < loss[1] * 1e9:
-                grid += 1
-                continue
-            yield FrameTiming(seq, t_grid + skew_ns + jitter, grid, seq not in drops)
-            seq += 1
-            grid += 1
+        (:func:`rigctl.simulators.timing.frame_timings`)."""
+        offset = start_offset(self.settings, self.names, name, self.period_ns)
+        return frame_timings(self.settings, name, self.index[name], self.period_ns, first_grid, offset)
 
     def signal_present(self, name: str, t_rel_ns: int) -> bool:
         loss = self.settings.signal_loss.get(name)
@@ -458,3 +429,8 @@ def nominal_near_far(settings: SimSettings) -> tuple[float, float]:
     """Where the presenter's surfaces lie (for tests and the demo's plan)."""
     near = settings.subject_distance_m
     return near, near + scenes.PRESENTER_DEPTH_M
+
+
+def array_from_json(rig: str, settings: str) -> SimArray:
+    """A simulated array from a rig and settings as JSON (what a render process is started with)."""
+    return SimArray(rig_from_dict(json.loads(rig)), SimSettings.model_validate_json(settings))

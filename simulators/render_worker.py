@@ -17,6 +17,7 @@ import multiprocessing
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -28,14 +29,10 @@ log = logging.getLogger(__name__)
 _array: Any = None  # the child's own simulated array
 
 
-def _start(rig: dict[str, Any], settings: dict[str, Any]) -> None:
-    from rigctl.simulators.array import SimArray
-    from rigctl.simulators.settings import SimSettings
-
-    from rigctl.rig import rig_from_dict
-
+def _start(build: Callable[[str, str], Any], rig: str, settings: str) -> None:
+    """The child's initializer: ``build`` (a module-level function, pickled by name) makes its own array."""
     global _array
-    _array = SimArray(rig_from_dict(rig), SimSettings.model_validate(settings))
+    _array = build(rig, settings)
 
 
 def _render(state: int, folder: str) -> str:
@@ -50,11 +47,19 @@ def _render(state: int, folder: str) -> str:
 class RenderWorker:
     """One child process that renders states on request; its files pass through a private folder."""
 
-    def __init__(self, rig: dict[str, Any], settings: dict[str, Any], names: list[str], eager: bool = True) -> None:
-        """``eager``: start the process now (its start-up overlaps the first state's render here); else on
-        the first state the disk cache did not have."""
+    def __init__(
+        self,
+        build: Callable[[str, str], Any],
+        rig: str,
+        settings: str,
+        names: list[str],
+        eager: bool = True,
+    ) -> None:
+        """``build(rig, settings)`` makes the child's array from their JSON (a module-level function: the
+        child imports it by name, so this module needs no import of the array's). ``eager``: start the process now (its start-up
+        overlaps the first state's render here); else on the first state the disk cache did not have."""
         self.names = names
-        self._args = (rig, settings)
+        self._args = (build, rig, settings)
         self.folder: Path | None = None
         self._pool: Any = None
         if eager:
