@@ -56,8 +56,9 @@ class RenderWorker:
         eager: bool = True,
     ) -> None:
         """``build(rig, settings)`` makes the child's array from their JSON (a module-level function: the
-        child imports it by name, so this module needs no import of the array's). ``eager``: start the process now (its start-up
-        overlaps the first state's render here); else on the first state the disk cache did not have."""
+        child imports it by name, so this module needs no import of the array's). ``eager``: start the
+        process now (its start-up overlaps the first state's render here); else on the first state the disk
+        cache did not have."""
         self.names = names
         self._args = (build, rig, settings)
         self.folder: Path | None = None
