@@ -15,38 +15,27 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
+import importlib
 import logging
 import sys
 
 from rigctl import __version__
-from rigctl.cli import (
-    args,
-    bench,
-    board,
-    calibrate,
-    control,
-    demo,
-    depth,
-    devices,
-    plan,
-    process,
-    record,
-    rectify,
-    render,
-    take,
-    tally,
-    tui,
-)
+from rigctl.cli import args
 from rigctl.errors import EXIT_INTERRUPTED, EXIT_USAGE, RigctlError
 
 log = logging.getLogger(__name__)
 
+# one module per verb under rigctl.cli, each with register(sub); a command line that names its verb imports
+# only that module (and what it needs), not every verb's libraries: start-up is part of a take's start
 VERBS = (
-    plan, devices, record, take, tally, control, board, calibrate, rectify, depth, process, render, bench, demo, tui
-)
+    "plan", "devices", "record", "take", "tally", "control", "board", "calibrate", "rectify", "depth", "process",
+    "render", "bench", "demo", "tui",
+)  # fmt: skip
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The whole command line, or with ``only`` just that verb's part (usage and errors still name
+    ``rigctl VERB``)."""
     parser = args.OneLineParser(
         prog="rigctl",
         description="Run a planar camera array on set and turn its takes into colour + per-pixel depth.",
@@ -54,9 +43,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"rigctl {__version__}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks and debug logging")
     sub = parser.add_subparsers(dest="verb", metavar="COMMAND", parser_class=args.OneLineParser)
-    for verb in VERBS:
-        verb.register(sub)
+    for verb in VERBS if only is None else (only,):
+        importlib.import_module(f"rigctl.cli.{verb}").register(sub)
     return parser
+
+
+def _verb(argv: list[str]) -> str | None:
+    """The verb a command line names (the first word that is not an option), when it is one of ours."""
+    word = next((a for a in argv if not a.startswith("-")), None)
+    return word if word in VERBS else None
 
 
 def _take_debug(argv: list[str]) -> tuple[list[str], bool]:
@@ -76,8 +71,8 @@ def _quiet_closed_pipe() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
     argv, debug = _take_debug(list(sys.argv[1:] if argv is None else argv))
+    parser = build_parser(_verb(argv))
     ns = parser.parse_args(argv)
     ns.debug = debug
     logging.basicConfig(

@@ -1,0 +1,36 @@
+"""The command line loads only the verb it runs: `rigctl record` does not import depth, rendering or the
+farm, and `rigctl --help` still lists every verb."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from rigctl.cli.main import VERBS, _verb, build_parser
+
+
+def test_the_verb_is_the_first_word_that_is_not_an_option() -> None:
+    assert _verb(["--debug", "record", "--take", "t"]) == "record"
+    assert _verb(["plan", "rigs/x.yaml"]) == "plan"
+    assert _verb(["--version"]) is None
+    assert _verb(["nosuch", "plan"]) is None  # not a verb: the whole parser, which names the choices
+
+
+def test_help_lists_every_verb() -> None:
+    text = build_parser().format_help()
+    assert all(v in text for v in VERBS)
+
+
+def test_running_one_verb_imports_only_what_it_needs() -> None:
+    code = (
+        "import json, sys; from rigctl.cli.main import build_parser; build_parser('record'); "
+        "print(json.dumps(sorted(m for m in sys.modules if m.startswith(('rigctl.cli.', 'rigctl.depth', 'rigctl.render', "
+        "'rigctl.farm', 'rigctl.calib', 'textual', 'distributed', 'numba')))))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    loaded = json.loads(out)
+    assert "rigctl.cli.record" in loaded
+    assert not [m for m in loaded if m.startswith(("rigctl.depth", "rigctl.render", "rigctl.farm", "rigctl.calib"))]
+    assert not [m for m in loaded if m.split(".")[0] in ("textual", "distributed", "numba")]
+    assert not {f"rigctl.cli.{v}" for v in VERBS if v != "record"} & set(loaded)
