@@ -25,7 +25,8 @@ def test_help_lists_every_verb() -> None:
 def test_running_one_verb_imports_only_what_it_needs() -> None:
     code = (
         "import json, sys; from rigctl.cli.main import build_parser; build_parser('record'); "
-        "print(json.dumps(sorted(m for m in sys.modules if m.startswith(('rigctl.cli.', 'rigctl.depth', 'rigctl.render', "
+        "print(json.dumps(sorted("
+        "m for m in sys.modules if m.startswith(('rigctl.cli.', 'rigctl.depth', 'rigctl.render', "
         "'rigctl.farm', 'rigctl.calib', 'textual', 'distributed', 'numba')))))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
