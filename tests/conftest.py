@@ -12,7 +12,29 @@ import pytest
 from hypothesis import settings
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
+
+
+def _shared() -> Path:
+    """Where the workplace's shared data live: ``$RIGCTL_SHARED``, else ``shared/`` beside this checkout,
+    else beside the checkout this one was cloned from (a throw-away clone in a temporary folder). A test
+    that needs data fails on a missing folder, naming it; it is never skipped."""
+    if os.environ.get("RIGCTL_SHARED"):
+        return Path(os.environ["RIGCTL_SHARED"])
+    beside = REPO.parent / "shared"
+    if beside.is_dir():
+        return beside
+    try:
+        origin = subprocess.run(
+            ["git", "-C", str(REPO), "config", "--get", "remote.origin.url"], capture_output=True, text=True, timeout=10
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        origin = ""
+    if origin and Path(origin).is_dir():
+        return Path(origin).resolve().parent / "shared"
+    return beside
+
+
+SHARED = _shared()
 
 settings.register_profile("ci", deadline=None, max_examples=200, derandomize=True)
 settings.register_profile("dev", deadline=None, max_examples=100)
