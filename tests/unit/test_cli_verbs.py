@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 from rigctl.cli.main import VERBS, _verb, build_parser
 
@@ -22,14 +23,15 @@ def test_help_lists_every_verb() -> None:
     assert all(v in text for v in VERBS)
 
 
-def test_running_one_verb_imports_only_what_it_needs() -> None:
+def test_running_one_verb_imports_only_what_it_needs(tmp_path: Path) -> None:
     code = (
         "import json, sys; from rigctl.cli.main import build_parser; build_parser('record'); "
         "print(json.dumps(sorted("
         "m for m in sys.modules if m.startswith(('rigctl.cli.', 'rigctl.depth', 'rigctl.render', "
         "'rigctl.farm', 'rigctl.calib', 'textual', 'distributed', 'numba')))))"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    # outside the repository: from its root, ``-c`` would import the source folder, not the installed package
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=tmp_path).stdout
     loaded = json.loads(out)
     assert "rigctl.cli.record" in loaded
     assert not [m for m in loaded if m.startswith(("rigctl.depth", "rigctl.render", "rigctl.farm", "rigctl.calib"))]
