@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from typing import TypedDict
 
 import cv2
-import numba
 import numpy as np
 
 from rigctl.render import kernels
@@ -167,7 +166,7 @@ def bench_render(data: RenderBenchData, size: tuple[int, int], repeats: int = 10
         "sources": t.names,
         "taps": big.taps,
         "repeats": repeats,
-        "threads": numba.get_num_threads(),
+        "threads": big.threads,
         "counts": COUNTS,
         "pair_ms_min": round(min(t.total_ms), 2),
         "pair_ms_max": round(max(t.total_ms), 2),

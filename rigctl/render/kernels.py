@@ -13,7 +13,10 @@ Three passes per view, each written as a GPU would run it:
 - ``shade`` -- per full-resolution pixel, a fixed number of taps: for each of up to ``MAX_TAPS`` sources one
   bilinear RGBA sample (7-bit weights, all four channels per integer multiply) and one nearest disparity
   sample where the target's disparity puts the point, the weight (closeness in the array plane times
-  agreement of the two disparities) and the normalised sum, written as 8-bit RGBA.
+  agreement of the two disparities) and the normalised sum, written as 8-bit RGBA. Serial and without the
+  GIL over a stride of block rows: an eye pair runs each eye, target and shade, on its own thread (no
+  hand-over between the passes, and no parallel region to wake: on two cores that was a third of a pair's
+  time); a single view gives interleaved rows to every core.
 
 ``cache=True`` keeps the machine code next to this file (or in Numba's user cache when that is read-only):
 only the first call on a machine compiles (a few seconds, reported by ``rigctl bench render``).
@@ -42,6 +45,8 @@ MAX_TAPS = 4  # sources per pixel: fixed, as in a pixel shader
 F32 = NDArray[np.float32]
 U8 = NDArray[np.uint8]
 I64 = NDArray[np.int64]
+# a block row's scratch of ``shade``: patch, seen, filter weights x and y, target disparity, valid
+Rows = tuple[I64, F32, I64, I64, F32, I64]
 
 
 @njit(parallel=True, cache=True, fastmath=False)
@@ -140,14 +145,6 @@ def _lerp(a: int, b: int, q: int) -> int:
 
 
 @njit(inline="always")
-def _row(img: I64, y: int, x: int, qx: int) -> tuple[int, int]:
-    """The horizontal half of the bilinear filter for the two pixels of a block on row ``y``: taps x, x + 1
-    (left pixel) and x + 1, x + 2 (right pixel)."""
-    p1 = img[y, x + 1]
-    return _lerp(img[y, x], p1, qx), _lerp(p1, img[y, x + 2], qx)
-
-
-@njit(inline="always")
 def _tap(img: I64, y: int, x: int) -> int:
     """A texel, or zero outside the image (a constant border)."""
     h, w = img.shape
@@ -155,17 +152,91 @@ def _tap(img: I64, y: int, x: int) -> int:
 
 
 @njit(inline="always")
-def _add(cell: I64, wk: float, t: int) -> None:
-    """Add texel ``t`` with weight ``wk`` (at most ``WEIGHT``) to a pixel's sums: R and G 32 bits apart in
-    ``cell[0]``, B and A in ``cell[1]``, the weight in ``cell[2]`` (integers: no float conversion per
-    channel; four sources sum to under 2^30 per lane)."""
-    q = int(wk + np.float32(0.5))
-    cell[0] += q * (t & 0xFF | (t & 0xFF0000) << 16)
-    cell[1] += q * (t >> 32 & 0xFF | (t >> 48) << 32)
-    cell[2] += q
+def _seen(dsrc: F32, y: int, x: int) -> np.float32:
+    """A source's disparity, or none outside the image."""
+    h, w = dsrc.shape
+    return dsrc[y, x] if 0 <= y < h and 0 <= x < w else NONE
 
 
-@njit(parallel=True, cache=True, fastmath=False)
+@njit(nogil=True, cache=True, error_model="numpy")
+def _fetch(low: F32, by: int, first: int, m: int, img: I64, dsrc: F32, a: float, b: float, rows: Rows) -> None:
+    """Pass 1 for one source and the ``m`` blocks of block row ``by`` from column ``first`` (scalar: the
+    texture fetches): where the target's disparity puts each block in the source, its 3 x 3 texel patch (zero
+    outside the image), the four nearest disparities (none outside) and the 7-bit filter weights."""
+    patch, seen, qx_, qy_, dd, valid = rows
+    h, w = img.shape
+    y = 2 * by
+    for i in range(m):
+        d = low[by, first + i]
+        if d <= NONE:
+            valid[i], dd[i] = 0, 0.0
+            seen[0, i] = seen[1, i] = seen[2, i] = seen[3, i] = 0.0
+            continue
+        valid[i], dd[i] = 1, d
+        mx = np.float32(2 * (first + i)) - d * a
+        my = np.float32(y) - d * b
+        fx, fy = np.floor(mx), np.floor(my)
+        ix, iy = int(fx), int(fy)
+        qx = int((mx - fx) * np.float32(Q) + np.float32(0.5))
+        qy = int((my - fy) * np.float32(Q) + np.float32(0.5))
+        qx_[i], qy_[i] = qx, qy
+        rx, ry = ix + (1 if 2 * qx >= Q else 0), iy + (1 if 2 * qy >= Q else 0)
+        if ix >= 0 and ix + 2 < w and iy >= 0 and iy + 2 < h:
+            for r in range(3):
+                row = img[iy + r]
+                patch[3 * r, i], patch[3 * r + 1, i], patch[3 * r + 2, i] = row[ix], row[ix + 1], row[ix + 2]
+            s0, s1 = dsrc[ry], dsrc[ry + 1]
+            seen[0, i], seen[1, i], seen[2, i], seen[3, i] = s0[rx], s0[rx + 1], s1[rx], s1[rx + 1]
+        else:  # at the image's edge
+            for r in range(3):
+                for c in range(3):
+                    patch[3 * r + c, i] = _tap(img, iy + r, ix + c)
+            seen[0, i], seen[1, i] = _seen(dsrc, ry, rx), _seen(dsrc, ry, rx + 1)
+            seen[2, i], seen[3, i] = _seen(dsrc, ry + 1, rx), _seen(dsrc, ry + 1, rx + 1)
+
+
+@njit(nogil=True, cache=True, error_model="numpy")
+def _add(
+    taps: tuple[I64, I64, I64, I64], seen: F32, rows: Rows, k: tuple[float, float, float], sums: I64, m: int
+) -> None:
+    """Pass 2 for one pixel of each of the ``m`` blocks (no branches, contiguous rows: the compiler turns it
+    into SIMD): its bilinear texel from its four taps of the patch, its weight (closeness x agreement of the
+    source's disparity ``seen`` with the target's, floored) and both added to its sums: R | G << 32,
+    B | A << 32 and the weight (integers: 2^20 for the nearest source's full weight; four sources stay below
+    2^30 per lane)."""
+    pa, pb, pc, pd = taps
+    _, _, qx_, qy_, dd, valid = rows
+    cl, cla, floor_k = k
+    rg, ba, wt = sums[0], sums[1], sums[2]
+    for i in range(m):
+        qx, d = qx_[i], dd[i]
+        t = _lerp(_lerp(pa[i], pb[i], qx), _lerp(pc[i], pd[i], qx), qy_[i])
+        q = int(max(cl - abs(seen[i] - d) * cla, floor_k) + np.float32(0.5)) * valid[i]
+        rg[i] += q * (t & 0xFF | (t & 0xFF0000) << 16)
+        ba[i] += q * (t >> 32 & 0xFF | (t >> 48) << 32)
+        wt[i] += q
+
+
+@njit(nogil=True, cache=True, error_model="numpy")
+def _normalise(sums: I64, out: NDArray[np.uint32], x0: int, m: int) -> None:
+    """Pass 3: each pixel's sums over its weight, as 8-bit RGBA into ``out[x0]``, ``out[x0 + 2]``, ...;
+    transparent black without weight."""
+    rg, ba, wt = sums[0], sums[1], sums[2]
+    w = out.shape[0]
+    top, half = np.float32(255.0), np.float32(0.5)
+    for i in range(min(m, (w - x0 + 1) // 2)):
+        if wt[i] > 0:
+            inv = np.float32(1.0) / np.float32(wt[i])
+            r = np.uint32(min(np.float32(rg[i] & 0xFFFFFFFF) * inv + half, top))
+            g = np.uint32(min(np.float32(rg[i] >> 32) * inv + half, top))
+            b = np.uint32(min(np.float32(ba[i] & 0xFFFFFFFF) * inv + half, top))
+            a = np.uint32(min(np.float32(ba[i] >> 32) * inv + half, top))
+            out[x0 + 2 * i] = r | g << 8 | b << 16 | a << 24
+        else:
+            out[x0 + 2 * i] = 0
+
+
+@njit(nogil=True, cache=True, error_model="numpy")
 def shade(
     low: F32,
     ring: F32,
@@ -177,24 +248,36 @@ def shade(
     closeness: F32,
     inv_agree: float,
     out: NDArray[np.uint32],
+    start: int = 0,
+    step: int = 1,
 ) -> None:
     """Write the view's RGBA (packed: R in the low byte) into ``out`` (H x W) from the half-resolution
     target disparity (``low``, or ``ring`` -- the key's soft edge -- where ``low`` has none; ``low`` is
     completed in place) and the first ``n`` sources (texels as ``prepare_source`` makes them, H x W). Per
     pixel and source: one bilinear RGBA sample (7-bit weights; zero outside the image) and one nearest
-    disparity sample where the target's
-    disparity puts the point, weighted by closeness x agreement (floored at 1e-3 of the closeness); pixels
-    with no target disparity are transparent black.
+    disparity sample where the target's disparity puts the point, weighted by closeness x agreement (floored
+    at 1e-3 of the closeness); pixels with no target disparity are transparent black.
 
-    One iteration is a 2x2 block of pixels, which share the target disparity (read at nearest) and so the
-    bilinear weights; each pixel still takes its own four taps per source, as a pixel shader would."""
-    h, w = out.shape
+    The pixels of a 2x2 block share the target disparity (read at nearest) and so the bilinear weights; each
+    pixel still takes its own four taps per source, as a pixel shader would. A block row is shaded in three
+    passes over its span (fetch the patches, add each pixel's sample, normalise), so that the arithmetic runs
+    in SIMD lanes. Serial and without the GIL: it shades the block rows ``start``, ``start + step``, ..., so
+    that the caller can give one view's interleaved rows to several threads, or each eye its own thread."""
+    h = out.shape[0]
     hl, wl = low.shape
-    one = np.float32(1.0)
-    floor_w = np.float32(1e-3)
     agree = np.float32(inv_agree)
     scale = np.float32(WEIGHT) / closeness[:n].max()
-    for by in prange(hl):
+    rows = (
+        np.zeros((9, wl), np.int64),  # the 3 x 3 texel patch of each block
+        np.zeros((4, wl), np.float32),  # the source's disparity at each pixel's nearest tap
+        np.zeros(wl, np.int64),  # horizontal filter weight (of 128)
+        np.zeros(wl, np.int64),  # vertical filter weight
+        np.zeros(wl, np.float32),  # the target's disparity
+        np.zeros(wl, np.int64),  # 1 where the block has one
+    )
+    patch, seen = rows[0], rows[1]
+    sums = np.zeros((4, 3, wl), np.int64)  # per pixel of a block (top left, top right, ...): RG, BA, weight
+    for by in range(start, hl, step):
         first, last = wl, -1
         for bx in range(wl):
             if low[by, bx] <= NONE:
@@ -202,65 +285,23 @@ def shade(
             if low[by, bx] > NONE:
                 first, last = min(first, bx), bx
         y = 2 * by
-        rows = min(2, h - y)
+        n_rows = min(2, h - y)
         if last < 0:
-            out[y : y + rows, :] = 0
+            out[y : y + n_rows, :] = 0
             continue
-        # per pixel: weighted R | G << 32, B | A << 32 and the weight, summed over the sources
-        acc = np.zeros((2, 2 * (last + 1 - first), 3), np.int64)
+        m = last + 1 - first
+        sums[:, :, :m] = 0
         for k in range(n):
-            img, dsrc = texs[k], disps[k]
-            a, b, cl = du[k], dv[k], closeness[k] * scale
-            cla = cl * agree
-            for bx in range(first, last + 1):
-                d = low[by, bx]
-                if d <= NONE:
-                    continue
-                mx = np.float32(2 * bx) - d * a
-                my = np.float32(y) - d * b
-                fx, fy = np.floor(mx), np.floor(my)
-                ix, iy = int(fx), int(fy)
-                qx = int((mx - fx) * np.float32(Q) + np.float32(0.5))
-                qy = int((my - fy) * np.float32(Q) + np.float32(0.5))
-                rx, ry = (1 if 2 * qx >= Q else 0), (1 if 2 * qy >= Q else 0)
-                ax = 2 * bx
-                c = ax - 2 * first
-                floor_k = cl * floor_w
-                if ix >= 0 and ix + 2 < w and iy >= 0 and iy + 2 < h and ax + 1 < w and y + 1 < h:
-                    # the block's four pixels take their taps from one 3 x 3 patch (3 x 2 when qy is 0)
-                    t00, t01 = _row(img, iy, ix, qx)
-                    t10, t11 = _row(img, iy + 1, ix, qx)
-                    if qy:
-                        t20, t21 = _row(img, iy + 2, ix, qx)
-                        t00, t01 = _lerp(t00, t10, qy), _lerp(t01, t11, qy)
-                        t10, t11 = _lerp(t10, t20, qy), _lerp(t11, t21, qy)
-                    s0, s1 = dsrc[iy + ry], dsrc[iy + 1 + ry]
-                    _add(acc[0, c], max(cl - abs(s0[ix + rx] - d) * cla, floor_k), t00)
-                    _add(acc[0, c + 1], max(cl - abs(s0[ix + 1 + rx] - d) * cla, floor_k), t01)
-                    _add(acc[1, c], max(cl - abs(s1[ix + rx] - d) * cla, floor_k), t10)
-                    _add(acc[1, c + 1], max(cl - abs(s1[ix + 1 + rx] - d) * cla, floor_k), t11)
-                    continue
-                # at the image's edge: the same filter, taps outside reading zero (a constant border)
-                for py in range(rows):
-                    for px in range(min(2, w - ax)):
-                        x0, y0 = ix + px, iy + py
-                        top = _lerp(_tap(img, y0, x0), _tap(img, y0, x0 + 1), qx)
-                        t = _lerp(top, _lerp(_tap(img, y0 + 1, x0), _tap(img, y0 + 1, x0 + 1), qx), qy)
-                        ny, nx = y0 + ry, x0 + rx
-                        seen = dsrc[ny, nx] if 0 <= nx < w and 0 <= ny < h else NONE
-                        _add(acc[py, c + px], max(cl - abs(seen - d) * cla, floor_k), t)
-        for py in range(rows):
+            cl = closeness[k] * scale
+            _fetch(low, by, first, m, texs[k], disps[k], du[k], dv[k], rows)
+            for py in range(n_rows):
+                for px in range(2):
+                    j = 3 * py + px
+                    taps = (patch[j], patch[j + 1], patch[j + 3], patch[j + 4])
+                    _add(taps, seen[2 * py + px], rows, (cl, cl * agree, cl * np.float32(1e-3)), sums[2 * py + px], m)
+        for py in range(n_rows):
             orow = out[y + py]
             orow[: 2 * first] = 0
             orow[2 * (last + 1) :] = 0
-            for x in range(2 * first, min(w, 2 * (last + 1))):
-                cell = acc[py, x - 2 * first]
-                if cell[2] > 0:
-                    inv = one / np.float32(cell[2])
-                    v = np.uint32(0)
-                    for ch in range(4):
-                        total = cell[ch >> 1] >> (32 * (ch & 1)) & 0xFFFFFFFF
-                        v |= np.uint32(min(np.float32(total) * inv + np.float32(0.5), np.float32(255.0))) << (8 * ch)
-                    orow[x] = v
-                else:
-                    orow[x] = 0
+            for px in range(2):
+                _normalise(sums[2 * py + px], orow, 2 * first + px, m)

@@ -30,13 +30,13 @@ shader.
 from __future__ import annotations
 
 import logging
+import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TypeVar
 
 import cv2
-import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -49,9 +49,6 @@ F32 = NDArray[np.float32]
 U8 = NDArray[np.uint8]
 A = TypeVar("A", bound=NDArray[np.generic])
 TAPS = 4
-# block rows handed to a thread at a time: the subject fills some rows and not others, and a thread that the
-# machine's other work holds back should not hold up the view (static halves would)
-CHUNK_ROWS = 8
 _K3 = np.ones((3, 3), np.uint8)
 _KRING = np.ones((2 * RING + 1, 2 * RING + 1), np.uint8)
 __all__ = ["MAX_TAPS", "NONE", "RING", "TAPS", "Rendered", "Renderer", "Source", "prepare"]
@@ -136,7 +133,9 @@ class Renderer:
         self.hl, self.wl = (h + 1) // 2, (w + 1) // 2
         spread = [s.span[1] - s.span[0] for s in sources if s.span[1] >= s.span[0]]
         self.max_gap = int(max(spread, default=0.0) * 1.5 / 2) + 4  # in half-resolution pixels
-        self._plans: ThreadPoolExecutor | None = None  # the second eye's target, beside the first
+        self.threads = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+        self._pool: ThreadPoolExecutor | None = None  # the other threads: a second eye, or a view's other rows
+        self._spaces = [_Workspace(self.hl, self.wl) for _ in range(2)]  # one per eye of a pair
 
     def nearest(self, u: float, v: float, exclude: tuple[str, ...] = ()) -> list[Source]:
         pool = [s for s in self.sources if s.name not in exclude]
@@ -162,58 +161,77 @@ class Renderer:
         return tuple(arrays + [arrays[0]] * (MAX_TAPS - len(arrays)))
 
     # ---- step 1: the target's disparity --------------------------------------------------------------
-    def _target(self, n: int, du: F32, dv: F32, sources: list[Source]) -> tuple[F32, F32]:
-        """(splatted disparity with cracks closed and disocclusions filled, its ring): half resolution."""
+    def _target(self, n: int, du: F32, dv: F32, sources: list[Source], ws: _Workspace) -> tuple[F32, F32]:
+        """(splatted disparity with cracks closed and disocclusions filled, its ring): half resolution. The
+        first is the view's own; the ring lives in ``ws`` until that workspace's next view."""
         low = np.empty((self.hl, self.wl), np.float32)
         halves, spans = self._padded([s.half for s in sources]), self._padded([s.spans for s in sources])
         kernels.splat(halves, spans, n, du, dv, low)
-        closed = np.asarray(cv2.erode(cv2.dilate(low, _K3), _K3), np.float32)
-        kernels.close_and_fill(low, closed, self.max_gap, np.empty(self.wl, np.int64))
-        ring = np.asarray(cv2.dilate(low, _KRING), np.float32)
-        return low, ring
+        cv2.erode(cv2.dilate(low, _K3, dst=ws.dilated), _K3, dst=ws.closed)
+        kernels.close_and_fill(low, ws.closed, self.max_gap, ws.last)
+        cv2.dilate(low, _KRING, dst=ws.ring)
+        return low, ws.ring
 
     def splat(self, u: float, v: float, sources: list[Source]) -> F32:
         """Half-resolution target disparity (NONE where no source lands), depth-tested, cracks closed,
         disocclusions filled from the background side and the ring of the key's soft edge added."""
         n, du, dv, _ = self._taps(u, v, sources)
-        low, ring = self._target(n, du, dv, sources)
+        low, ring = self._target(n, du, dv, sources, self._spaces[0])
         return np.where(low > NONE, low, ring)
 
-    def _plan(self, u: float, v: float, exclude: tuple[str, ...]) -> _Plan:
+    def _plan(self, u: float, v: float, exclude: tuple[str, ...], ws: _Workspace) -> _Plan:
         t0 = time.perf_counter()
         sources = self.nearest(u, v, exclude)
         if not sources:
             raise ValueError("no source cameras left")
         n, du, dv, closeness = self._taps(u, v, sources)
-        low, ring = self._target(n, du, dv, sources)
+        low, ring = self._target(n, du, dv, sources, ws)
         return _Plan(sources, n, du, dv, closeness, low, ring, (time.perf_counter() - t0) * 1e3)
 
     # ---- steps 2 and 3: sample and blend --------------------------------------------------------------
-    def _shade(self, p: _Plan) -> Rendered:
-        t0 = time.perf_counter()
-        out = np.empty((*self.shape, 4), np.uint8)
+    def _shade(self, p: _Plan, out: U8, start: int = 0, step: int = 1) -> None:
         texs = self._padded([s.texture for s in p.sources])
         disps = self._padded([s.disparity for s in p.sources])
-        with numba.parallel_chunksize(CHUNK_ROWS):
-            kernels.shade(p.low, p.ring, texs, disps, p.n, p.du, p.dv, p.closeness, 1.0 / self.agree_px, _packed(out))
-        shade_ms = (time.perf_counter() - t0) * 1e3
-        return Rendered(out, p.low, [s.name for s in p.sources], p.target_ms, shade_ms)
+        kernels.shade(
+            p.low, p.ring, texs, disps, p.n, p.du, p.dv, p.closeness, 1.0 / self.agree_px, _packed(out), start, step
+        )
+
+    def _others(self) -> ThreadPoolExecutor:
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(max_workers=max(1, self.threads - 1), thread_name_prefix="render")
+        return self._pool
+
+    def _eye(self, u: float, v: float, exclude: tuple[str, ...], ws: _Workspace) -> Rendered:
+        """A view on the calling thread alone: its target, then its shade."""
+        p = self._plan(u, v, exclude, ws)
+        t0 = time.perf_counter()
+        out = np.empty((*self.shape, 4), np.uint8)
+        self._shade(p, out)
+        return Rendered(out, p.low, [s.name for s in p.sources], p.target_ms, (time.perf_counter() - t0) * 1e3)
 
     def render(self, u: float, v: float, exclude: tuple[str, ...] = ()) -> Rendered:
         """The view at (u, v) (horizontal spacings, relative to the grid's origin) from the ``taps`` nearest
-        sources not in ``exclude``."""
-        return self._shade(self._plan(u, v, exclude))
+        sources not in ``exclude``: its target on this thread, its shade in interleaved block rows on all."""
+        p = self._plan(u, v, exclude, self._spaces[0])
+        t0 = time.perf_counter()
+        out = np.empty((*self.shape, 4), np.uint8)
+        k = self.threads
+        rest = [self._others().submit(self._shade, p, out, i, k) for i in range(1, k)]
+        self._shade(p, out, 0, k)
+        for f in rest:
+            f.result()
+        return Rendered(out, p.low, [s.name for s in p.sources], p.target_ms, (time.perf_counter() - t0) * 1e3)
 
     def render_pair(
         self, left: tuple[float, float], right: tuple[float, float], exclude: tuple[str, ...] = ()
     ) -> tuple[Rendered, Rendered]:
-        """Two views (an eye pair): their target disparities are made side by side on two threads (each of
-        those passes is serial and releases the GIL), then each view is shaded on all threads."""
-        if self._plans is None:
-            self._plans = ThreadPoolExecutor(max_workers=1, thread_name_prefix="render-eye")
-        second = self._plans.submit(self._plan, *right, exclude)
-        first = self._plan(*left, exclude)
-        return self._shade(first), self._shade(second.result())
+        """Two views (an eye pair), each rendered whole on its own thread (every pass is serial and releases
+        the GIL): on two cores, the pair takes about one view's time."""
+        if self.threads < 2:
+            return self._eye(*left, exclude, self._spaces[0]), self._eye(*right, exclude, self._spaces[1])
+        second = self._others().submit(self._eye, *right, exclude, self._spaces[1])
+        first = self._eye(*left, exclude, self._spaces[0])
+        return first, second.result()
 
 
 @dataclass
@@ -229,3 +247,14 @@ class _Plan:
     low: F32
     ring: F32
     target_ms: float
+
+
+class _Workspace:
+    """The half-resolution scratch images of one view's target, kept from view to view (fresh ones cost page
+    faults: about as much as the passes that fill them)."""
+
+    def __init__(self, hl: int, wl: int) -> None:
+        self.dilated = np.empty((hl, wl), np.float32)
+        self.closed = np.empty((hl, wl), np.float32)
+        self.ring = np.empty((hl, wl), np.float32)
+        self.last = np.empty(wl, np.int64)

@@ -131,3 +131,22 @@ def test_an_eye_pair_is_the_two_views_rendered_alone() -> None:
         assert np.array_equal(got.rgba8, alone.rgba8) and np.array_equal(got.low, alone.low)
         assert got.sources == alone.sources
     assert not np.array_equal(left.rgba8, right.rgba8)  # two positions, two views
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+def test_a_view_shaded_in_interleaved_rows_is_the_view_shaded_whole(threads: int) -> None:
+    """One view's block rows go to every core, and each eye of a pair to its own: the image must not
+    depend on how the rows were shared out (nor on which eye's scratch images a view used)."""
+    views = layered_scene(77, 101)
+    srcs = [prepare(n, o, rgb, a, d) for n, (o, rgb, a, d) in views.items()]
+    whole = Renderer(srcs)
+    whole.threads = 1
+    shared = Renderer(srcs)
+    shared.threads = threads
+    for u, v in [(0.37, -0.2), (-0.9, 0.75)]:
+        want = whole.render(u, v)
+        got = shared.render(u, v)
+        assert np.array_equal(got.rgba8, want.rgba8) and np.array_equal(got.low, want.low)
+        left, right = shared.render_pair((u, v), (u + 0.1, v))
+        assert np.array_equal(left.rgba8, want.rgba8)
+        assert np.array_equal(right.rgba8, whole.render(u + 0.1, v).rgba8)
