@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NotRequired, TypedDict
@@ -17,7 +17,7 @@ from rigctl.errors import ParameterError
 from rigctl.exr import picture, picture_attributes, write_exr
 from rigctl.render.inputs import F32, FrameViews, RenderInput
 from rigctl.render.score import Score, score
-from rigctl.render.warp import Renderer, prepare
+from rigctl.render.warp import Rendered, Renderer, prepare
 
 log = logging.getLogger(__name__)
 
@@ -118,11 +118,7 @@ def render_views(
     for n in numbers:
         frame = inp.frame(n)
         ren = renderer_for(frame)
-        for eye in eyes(frame):
-            u, v = frame.position(eye.col, eye.row)
-            t0 = time.perf_counter()
-            res = ren.render(u, v)
-            ms = (time.perf_counter() - t0) * 1e3
+        for eye, res, ms in _rendered(ren, frame, eyes(frame)):
             attrs: dict[str, object] = {
                 "rigctl_position": f"{eye.col:g},{eye.row:g}",
                 "rigctl_sources": ",".join(res.sources),
@@ -143,6 +139,25 @@ def render_views(
                 row["against_truth"] = score(res.rgba[..., :3], rgb, alpha, ignore)
             rows.append(row)
     return rows
+
+
+def _rendered(ren: Renderer, frame: FrameViews, eyes: list[Eye]) -> Iterator[tuple[Eye, Rendered, float]]:
+    """Each eye's view and its milliseconds: the two eyes of a stereo pair (``_L`` then ``_R``) rendered
+    together, each on its own thread, as a headset preview would."""
+    i = 0
+    while i < len(eyes):
+        eye = eyes[i]
+        pair = eyes[i + 1] if i + 1 < len(eyes) else None
+        if pair is not None and eye.stem.endswith("_L") and pair.stem == eye.stem[:-2] + "_R":
+            left, right = ren.render_pair(frame.position(eye.col, eye.row), frame.position(pair.col, pair.row))
+            for e, res in ((eye, left), (pair, right)):
+                yield e, res, res.target_ms + res.shade_ms
+            i += 2
+            continue
+        t0 = time.perf_counter()
+        res = ren.render(*frame.position(eye.col, eye.row))
+        yield eye, res, (time.perf_counter() - t0) * 1e3
+        i += 1
 
 
 def leave_one_out(

@@ -150,3 +150,27 @@ def test_a_view_shaded_in_interleaved_rows_is_the_view_shaded_whole(threads: int
         left, right = shared.render_pair((u, v), (u + 0.1, v))
         assert np.array_equal(left.rgba8, want.rgba8)
         assert np.array_equal(right.rgba8, whole.render(u + 0.1, v).rgba8)
+
+
+def test_a_stereo_eye_pair_is_rendered_as_a_pair() -> None:
+    """``rigctl render --stereo``: the _L and _R eyes of a position go through ``render_pair`` (each eye on
+    its own thread), a single position through ``render``; both give the views rendered alone."""
+    from rigctl.render.bench import frame_from_arrays
+    from rigctl.render.views import _rendered, eyes_for
+
+    views = layered_scene(64, 96)
+    frame = frame_from_arrays(views, focal=100.0, spacing=0.12)
+    ren = Renderer([prepare(n, o, rgb, a, d) for n, (o, rgb, a, d) in views.items()])
+    pairs: list[tuple[tuple[float, float], tuple[float, float]]] = []
+    render_pair = ren.render_pair
+
+    def counted(left: tuple[float, float], right: tuple[float, float], exclude: tuple[str, ...] = ()) -> object:
+        pairs.append((left, right))
+        return render_pair(left, right, exclude)
+
+    ren.render_pair = counted  # type: ignore[method-assign]
+    eyes = eyes_for(frame, 1.0, 1.0, 0.06) + eyes_for(frame, 0.5, 1.0, None)
+    got = list(_rendered(ren, frame, eyes))
+    assert [e.stem for e, _, _ in got] == ["c1r1_L", "c1r1_R", "c0.5r1"] and len(pairs) == 1
+    for eye, res, ms in got:
+        assert np.array_equal(res.rgba8, ren.render(*frame.position(eye.col, eye.row)).rgba8) and ms > 0
