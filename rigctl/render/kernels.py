@@ -217,23 +217,28 @@ def _add(
         wt[i] += q
 
 
-@njit(nogil=True, cache=True, error_model="numpy")
-def _normalise(sums: I64, out: NDArray[np.uint32], x0: int, m: int) -> None:
-    """Pass 3: each pixel's sums over its weight, as 8-bit RGBA into ``out[x0]``, ``out[x0 + 2]``, ...;
-    transparent black without weight."""
-    rg, ba, wt = sums[0], sums[1], sums[2]
-    w = out.shape[0]
+@njit(inline="always")
+def _rgba8(rg: int, ba: int, wt: int) -> np.uint32:
+    """A pixel's sums over its weight as packed 8-bit RGBA; all zero (transparent black) without weight."""
+    inv = np.float32(1.0) / np.float32(max(wt, 1))
     top, half = np.float32(255.0), np.float32(0.5)
-    for i in range(min(m, (w - x0 + 1) // 2)):
-        if wt[i] > 0:
-            inv = np.float32(1.0) / np.float32(wt[i])
-            r = np.uint32(min(np.float32(rg[i] & 0xFFFFFFFF) * inv + half, top))
-            g = np.uint32(min(np.float32(rg[i] >> 32) * inv + half, top))
-            b = np.uint32(min(np.float32(ba[i] & 0xFFFFFFFF) * inv + half, top))
-            a = np.uint32(min(np.float32(ba[i] >> 32) * inv + half, top))
-            out[x0 + 2 * i] = r | g << 8 | b << 16 | a << 24
-        else:
-            out[x0 + 2 * i] = 0
+    r = np.uint32(min(np.float32(rg & 0xFFFFFFFF) * inv + half, top))
+    g = np.uint32(min(np.float32(rg >> 32) * inv + half, top))
+    b = np.uint32(min(np.float32(ba & 0xFFFFFFFF) * inv + half, top))
+    a = np.uint32(min(np.float32(ba >> 32) * inv + half, top))
+    return r | g << 8 | b << 16 | a << 24
+
+
+@njit(nogil=True, cache=True, error_model="numpy")
+def _normalise(left: I64, right: I64, out: NDArray[np.uint32], x0: int, m: int) -> None:
+    """Pass 3: the sums of the blocks' left and right pixels as 8-bit RGBA into ``out[x0]``, ``out[x0 + 1]``,
+    ... (no branches: a pixel without weight has all sums zero)."""
+    pairs = min(m, (out.shape[0] - x0) // 2)
+    for i in range(pairs):
+        out[x0 + 2 * i] = _rgba8(left[0, i], left[1, i], left[2, i])
+        out[x0 + 2 * i + 1] = _rgba8(right[0, i], right[1, i], right[2, i])
+    if pairs < m:  # an odd width: the last block has no right pixel
+        out[x0 + 2 * pairs] = _rgba8(left[0, pairs], left[1, pairs], left[2, pairs])
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
@@ -303,5 +308,4 @@ def shade(
             orow = out[y + py]
             orow[: 2 * first] = 0
             orow[2 * (last + 1) :] = 0
-            for px in range(2):
-                _normalise(sums[2 * py + px], orow, 2 * first + px, m)
+            _normalise(sums[2 * py], sums[2 * py + 1], orow, 2 * first, m)
