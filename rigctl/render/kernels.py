@@ -1,4 +1,5 @@
-"""The renderer's compiled kernels (Numba, parallel over rows; no Python objects inside).
+"""The renderer's compiled kernels (Numba, no Python objects inside): the per-frame preparation parallel
+over rows, the per-view passes serial and free of the GIL, run on as many threads as the caller has.
 
 Three passes per view, each written as a GPU would run it:
 
@@ -13,8 +14,9 @@ Three passes per view, each written as a GPU would run it:
 - ``shade`` -- per full-resolution pixel, a fixed number of taps: for each of up to ``MAX_TAPS`` sources one
   bilinear RGBA sample (7-bit weights, all four channels per integer multiply) and one nearest disparity
   sample where the target's disparity puts the point, the weight (closeness in the array plane times
-  agreement of the two disparities) and the normalised sum, written as 8-bit RGBA. Serial and without the
-  GIL over a stride of block rows: an eye pair runs each eye, target and shade, on its own thread (no
+  agreement of the two disparities) and the normalised sum, written as 8-bit RGBA; per block row a scalar
+  fetch of the texel patches, then a branch-free pass per pixel that the compiler turns into SIMD. Serial
+  and without the GIL over a stride of block rows: an eye pair runs each eye, target and shade, on its own thread (no
   hand-over between the passes, and no parallel region to wake: on two cores that was a third of a pair's
   time); a single view gives interleaved rows to every core.
 
