@@ -50,9 +50,14 @@ class LeaveOneOutRow(TypedDict):
     ms: float
 
 
-def renderer_for(frame: FrameViews, taps: int = 4) -> Renderer:
+def renderer_for(frame: FrameViews, taps: int = 4, previous: Renderer | None = None) -> Renderer:
+    """A renderer of ``frame``'s cameras that have a disparity; with ``previous`` (the last frame's), its
+    sources' images are written over rather than made afresh."""
+    old = {s.name: s for s in previous.sources} if previous is not None else {}
     srcs = [
-        prepare(v.name, v.offset, v.rgb, v.alpha, v.disparity) for v in frame.views.values() if v.disparity is not None
+        prepare(v.name, v.offset, v.rgb, v.alpha, v.disparity, into=old.get(v.name))
+        for v in frame.views.values()
+        if v.disparity is not None
     ]
     if not srcs:
         raise ParameterError(f"frame {frame.number}: no camera has a disparity: nothing to render from")
@@ -115,9 +120,10 @@ def render_views(
 ) -> list[ViewRow]:
     """Render and write every eye of every frame; score against ``truth`` where the simulator gives one."""
     rows: list[ViewRow] = []
+    ren: Renderer | None = None
     for n in numbers:
         frame = inp.frame(n)
-        ren = renderer_for(frame)
+        ren = renderer_for(frame, previous=ren)
         for eye, res, ms in _rendered(ren, frame, eyes(frame)):
             attrs: dict[str, object] = {
                 "rigctl_position": f"{eye.col:g},{eye.row:g}",
@@ -165,13 +171,14 @@ def leave_one_out(
 ) -> list[LeaveOneOutRow]:
     """Every named camera rendered from the others (never from itself) and scored against its own image."""
     rows: list[LeaveOneOutRow] = []
+    ren: Renderer | None = None
     for n in numbers:
         frame = inp.frame(n)
         names = cameras or sorted(frame.views)
         unknown = [c for c in names if c not in frame.views]
         if unknown:
             raise ParameterError(f"{inp.source}: no camera {', '.join(unknown)} (cameras: {', '.join(frame.views)})")
-        ren = renderer_for(frame)
+        ren = renderer_for(frame, previous=ren)
         for cam in names:
             view = frame.views[cam]
             if not [s for s in ren.sources if s.name != cam]:

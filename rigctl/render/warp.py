@@ -72,13 +72,20 @@ class Source:
         return (float(valid.min()), float(valid.max())) if valid.size else (np.inf, -np.inf)
 
 
-def prepare(name: str, offset: tuple[float, float], rgb: F32, alpha: F32, disparity: F32) -> Source:
-    """A source from RGB in [0, 1], alpha in [0, 1] and disparity (+inf or NaN where there is none)."""
+def prepare(
+    name: str, offset: tuple[float, float], rgb: F32, alpha: F32, disparity: F32, into: Source | None = None
+) -> Source:
+    """A source from RGB in [0, 1], alpha in [0, 1] and disparity (+inf or NaN where there is none); written
+    over ``into``'s images when it is given and of the same size (a preview's next frame: as a GPU updates a
+    texture, without fresh memory, whose first touch costs more than the preparation itself)."""
     h, w = alpha.shape
-    texture = np.empty((h, w), np.int64)
-    disp = np.empty((h, w), np.float32)
-    half = np.empty(((h + 1) // 2, (w + 1) // 2), np.float32)
-    spans = np.empty((half.shape[0], 2), np.int64)
+    if into is not None and into.texture.shape == (h, w):
+        texture, disp, half, spans = into.texture, into.disparity, into.half, into.spans
+    else:
+        texture = np.empty((h, w), np.int64)
+        disp = np.empty((h, w), np.float32)
+        half = np.empty(((h + 1) // 2, (w + 1) // 2), np.float32)
+        spans = np.empty((half.shape[0], 2), np.int64)
     kernels.prepare_source(_c32(rgb), _c32(alpha), _c32(disparity), texture, disp, half, spans)
     return Source(name, (float(offset[0]), float(offset[1])), texture, disp, half, spans)
 

@@ -174,3 +174,28 @@ def test_a_stereo_eye_pair_is_rendered_as_a_pair() -> None:
     assert [e.stem for e, _, _ in got] == ["c1r1_L", "c1r1_R", "c0.5r1"] and len(pairs) == 1
     for eye, res, ms in got:
         assert np.array_equal(res.rgba8, ren.render(*frame.position(eye.col, eye.row)).rgba8) and ms > 0
+
+
+def test_a_source_prepared_over_the_last_frames_is_the_source_prepared_afresh() -> None:
+    """A preview's next frame writes over the last frame's images (no fresh memory): the same source, and
+    the views rendered from it those of a fresh renderer; another size gets images of its own."""
+    from rigctl.render.bench import frame_from_arrays
+    from rigctl.render.views import renderer_for
+
+    first = frame_from_arrays(layered_scene(64, 96), focal=100.0, spacing=0.12)
+    later = {n: (o, rgb[:, ::-1].copy(), a[:, ::-1].copy(), d[:, ::-1].copy()) for n, (o, rgb, a, d) in
+             layered_scene(64, 96).items()}  # fmt: skip
+    second = frame_from_arrays(later, focal=100.0, spacing=0.12)
+    ren1 = renderer_for(first)
+    was = {s.name: s.texture for s in ren1.sources}
+    before = ren1.render(0.3, 0.2).rgba8.copy()
+    ren2 = renderer_for(second, previous=ren1)
+    fresh = renderer_for(second)
+    for s, f in zip(ren2.sources, fresh.sources, strict=True):
+        assert s.texture is was[s.name]  # written over, not made afresh
+        for a, b in ((s.texture, f.texture), (s.disparity, f.disparity), (s.half, f.half), (s.spans, f.spans)):
+            assert np.array_equal(a, b)
+    assert np.array_equal(ren2.render(0.3, 0.2).rgba8, fresh.render(0.3, 0.2).rgba8)
+    assert not np.array_equal(before, fresh.render(0.3, 0.2).rgba8)  # the frames differ
+    small = frame_from_arrays(layered_scene(32, 48), focal=100.0, spacing=0.12)
+    assert all(s.texture.shape == (32, 48) for s in renderer_for(small, previous=ren2).sources)
