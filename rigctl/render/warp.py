@@ -125,7 +125,8 @@ class Rendered:
 
 
 class Renderer:
-    """Renders novel views of one frame from its prepared sources."""
+    """Renders novel views of one frame from its prepared sources, on as many threads as the process may use
+    (``threads``). One caller at a time: the scratch images of its two eyes are its own."""
 
     def __init__(self, sources: list[Source], taps: int = TAPS, agree_px: float = 1.5) -> None:
         if not sources:
