@@ -74,3 +74,25 @@ def test_burnt_id_damage_is_detected() -> None:
     burnin.burn(packed, 960, 4, 1234, 99)
     packed[:3, 1 + 2 * 3 * 9 : 2 * 3 * 10] ^= 0xFF  # flip one block
     assert burnin.read(packed, 960) is None
+
+
+def test_a_pfm_that_is_a_device_or_lies_about_its_size_is_refused_before_reading(tmp_path: Path) -> None:
+    """A disparity file linked to /dev/zero once read until the machine ran out of memory: only a regular
+    file whose size matches its header is read."""
+    zero = tmp_path / "zero.pfm"
+    zero.symlink_to("/dev/zero")
+    with pytest.raises(TakeError, match=r"zero\.pfm: not a regular file"):
+        read_pfm(zero)
+    huge = tmp_path / "huge.pfm"
+    huge.write_bytes(b"Pf\n100000 100000\n-1.0\n" + bytes(64))
+    with pytest.raises(TakeError, match=r"huge\.pfm: PFM header: size 100000x100000"):
+        read_pfm(huge)
+    for scale in (b"0", b"nan"):
+        bad = tmp_path / "scale.pfm"
+        bad.write_bytes(b"Pf\n2 1\n" + scale + b"\n" + bytes(8))
+        with pytest.raises(TakeError, match=r"scale\.pfm: PFM header: scale"):
+            read_pfm(bad)
+    negative = tmp_path / "negative.pfm"
+    negative.write_bytes(b"Pf\n-2 1\n-1.0\n" + bytes(8))
+    with pytest.raises(TakeError, match=r"negative\.pfm: PFM header: size -2x1"):
+        read_pfm(negative)
