@@ -108,6 +108,11 @@ def run(ns: argparse.Namespace) -> int:
         raise ParameterError("--out OUT is required to write views")
     if ns.stereo is not None and ns.leave_one_out:
         raise ParameterError("--stereo applies to --at and --path, not --leave-one-out")
+    if ns.out is not None and not ns.leave_one_out:
+        try:
+            ns.out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ParameterError(f"{ns.out}: cannot make the output folder: {exc.strerror}") from None
     inp = RenderInput(ns.input, ns.disparity)
     numbers = inp.select(parse_range(ns.frames, max(inp.numbers) + 1) if ns.frames else None)
     first = inp.frame(numbers[0])

@@ -63,6 +63,12 @@ def grid_position(views: dict[str, View], col: float, row: float) -> tuple[float
     off = np.array([views[n].offset for n in names], float)
     design = np.column_stack([np.ones(len(names)), rc[:, 1], rc[:, 0]])
     coef, *_ = np.linalg.lstsq(design, off, rcond=None)
+    cols, rows = rc[:, 1], rc[:, 0]
+    if not (cols.min() - 1 <= col <= cols.max() + 1 and rows.min() - 1 <= row <= rows.max() + 1):
+        raise ParameterError(
+            f"position {col:g},{row:g}: outside the array (columns {cols.min():g}..{cols.max():g}, rows "
+            f"{rows.min():g}..{rows.max():g}); more than one camera spacing beyond it, no camera sees the view"
+        )
     x, y = np.array([1.0, col, row]) @ coef
     if len({r for r, _c in rc.tolist()}) == 1 and row != rc[0, 0]:
         raise ParameterError(f"position {col},{row}: the grid has one row ({int(rc[0, 0])}); row must be that")
@@ -131,6 +137,8 @@ class RenderInput:
             disp = None
             if n in found:
                 disp = read_pfm(found[n])
+                if disp.ndim != 2:
+                    raise TakeError(f"{found[n]}: a disparity is one channel (Pf), this file has three (PF)")
                 if disp.shape != (h, w):
                     raise TakeError(
                         f"{found[n]}: disparity is {disp.shape[1]}x{disp.shape[0]} but {self.source} has "
@@ -138,6 +146,13 @@ class RenderInput:
                     )
                 if np.isnan(disp).any():
                     raise TakeError(f"{found[n]}: disparity holds NaN (only +inf may mark a missing estimate)")
+                beyond = (disp != np.inf) & (np.abs(disp) > w)
+                if beyond.any():
+                    y, x = np.argwhere(beyond)[0]
+                    raise TakeError(
+                        f"{found[n]}: disparity {disp[y, x]:g} at x={x}, y={y} is beyond the image's width ({w} px): "
+                        "no camera could see that point (only +inf may mark a missing estimate)"
+                    )
             rgb = grid.images[n]
             screen = self.keyer.screen_excess(rgb) > 0
             alpha = self.keyer.matte(rgb) if screen else np.ones((h, w), np.float32)

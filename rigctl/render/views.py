@@ -84,7 +84,16 @@ def eyes_for(frame: FrameViews, col: float, row: float, ipd_m: float | None, ste
     if ipd_m is None:
         return [Eye(col, row, stem)]
     half = ipd_m / frame.spacing / 2
-    return [Eye(col - half, row, stem + "_L"), Eye(col + half, row, stem + "_R")]
+    eyes = [Eye(col - half, row, stem + "_L"), Eye(col + half, row, stem + "_R")]
+    for eye in eyes:
+        try:
+            frame.position(eye.col, eye.row)
+        except ParameterError as exc:
+            raise ParameterError(
+                f"--stereo {ipd_m:g} m puts the eyes {2 * half:g} camera spacings apart ({frame.spacing:g} m "
+                f"each): {exc}"
+            ) from None
+    return eyes
 
 
 def path_positions(points: list[tuple[float, float]], steps: int) -> list[tuple[float, float]]:
@@ -103,7 +112,10 @@ def path_positions(points: list[tuple[float, float]], steps: int) -> list[tuple[
 def write_view(folder: Path, stem: str, rgba: F32, attrs: dict[str, object]) -> None:
     """``stem.png`` (8-bit RGBA, the cameras' BT.709 picture) and ``stem.exr`` (scene-linear Rec. 709 RGB
     premultiplied by ``A`` from the key, with ``chromaticities``: as take export and depth write pictures)."""
-    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ParameterError(f"{folder}: cannot make the output folder: {exc.strerror}") from None
     png = np.clip(rgba * 255.0 + 0.5, 0, 255).astype(np.uint8)
     if not cv2.imwrite(str(folder / f"{stem}.png"), cv2.cvtColor(png, cv2.COLOR_RGBA2BGRA)):
         raise ParameterError(f"{folder / stem}.png: cannot write")
@@ -124,11 +136,16 @@ def render_views(
     for n in numbers:
         frame = inp.frame(n)
         ren = renderer_for(frame, previous=ren)
-        for eye, res, ms in _rendered(ren, frame, eyes(frame)):
+        wanted = eyes(frame)
+        for eye in wanted:  # every position checked before the frame's first view is written
+            frame.position(eye.col, eye.row)
+        for eye, res, ms in _rendered(ren, frame, wanted):
             attrs: dict[str, object] = {
                 "rigctl_position": f"{eye.col:g},{eye.row:g}",
                 "rigctl_sources": ",".join(res.sources),
             }
+            if not res.rgba8[..., 3].any():
+                log.warning("frame %06d: view %s is empty: no source camera sees anything there", n, eye.stem)
             write_view(out / f"{n:06d}", eye.stem, res.rgba, attrs)
             row: ViewRow = {
                 "frame": f"{n:06d}",

@@ -167,6 +167,50 @@ def test_bad_positions_and_modes_are_refused(take: Path, tmp_path: Path) -> None
     assert res.returncode == 2 and "--leave-one-out" in res.stderr
 
 
+def one_line(res: object, *words: str) -> None:
+    """A non-zero exit with one line on stderr holding every one of ``words``, and no traceback."""
+    assert res.returncode != 0  # type: ignore[attr-defined]
+    lines = res.stderr.strip().splitlines()  # type: ignore[attr-defined]
+    assert len(lines) == 1 and all(w in lines[0] for w in words), lines
+
+
+def test_views_no_camera_can_see_are_refused(take: Path, tmp_path: Path) -> None:
+    """Positions beyond the array and eye pairs metres apart (an IPD typed in millimetres) once wrote empty
+    images with exit 0, or ended in a traceback (1e308): now one line each, and nothing is written."""
+    truth = str(take / "truth" / "disparity")
+    out = tmp_path / "out"
+    for at in ("5,5", "-1.5,1", "1e308,0", "1,1e20"):
+        res = run_rigctl("render", str(take), "--disparity", truth, f"--at={at}", "--out", str(out))
+        one_line(res, "outside the array", "columns 0..2")
+    res = run_rigctl("render", str(take), "--disparity", truth, "--at", "1,1", "--stereo", "10", "--out", str(out))
+    one_line(res, "--stereo 10 m", "outside the array")
+    res = run_rigctl("render", str(take), "--disparity", truth, "--path", "0,0", "9,0", "--out", str(out))
+    one_line(res, "position 3.375,0", "outside the array")  # the first of the 9 steps beyond it
+    assert not list(out.rglob("*.png"))
+    res = run_rigctl("render", str(take), "--disparity", truth, "--at=-0.5,2.5", "--out", str(out))
+    assert res.returncode == 0, res.stderr  # half a spacing beyond the corner: the nearest cameras see it
+
+
+def test_hostile_disparity_values_and_output_folders_are_one_line(take: Path, tmp_path: Path) -> None:
+    """FLT_MAX as a 'no estimate' mark (some tools write it) once overflowed the renderer's fill in a
+    traceback; an --out that is a file, or cannot be made, ended in a traceback too."""
+    from rigctl.pfm import read_pfm, write_pfm
+
+    disp = tmp_path / "disp"
+    shutil.copytree(take / "truth" / "disparity", disp)
+    d = read_pfm(disp / "000000" / "r1c0.pfm")
+    d[:, : d.shape[1] // 2] = np.finfo(np.float32).max
+    write_pfm(disp / "000000" / "r1c0.pfm", d)
+    res = run_rigctl("render", str(take), "--disparity", str(disp), "--leave-one-out")
+    one_line(res, "r1c0.pfm", "beyond the image's width (960 px)", "+inf")
+    truth = str(take / "truth" / "disparity")
+    afile = tmp_path / "afile"
+    afile.write_text("not a folder")
+    for out in (afile, afile / "sub", Path("/proc/nope")):
+        res = run_rigctl("render", str(take), "--disparity", truth, "--at", "1,1", "--out", str(out))
+        one_line(res, str(out), "cannot make the output folder")
+
+
 def test_depth_check_adds_leave_one_out_to_the_report(take: Path, tmp_path: Path) -> None:
     out = tmp_path / "depth"
     res = run_rigctl(
