@@ -8,6 +8,7 @@ import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 from numpy.typing import NDArray
@@ -107,12 +108,42 @@ class RenderInput:
             raise ParameterError(f"{source}: the take has no complete frame set")
 
     def select(self, frames: range | None) -> list[int]:
+        """The frames to render: those asked for (each a complete frame set with a disparity), or by default
+        every complete frame set the disparity folder has. Checked before anything is written."""
         if frames is None:
-            return list(self.numbers)
+            chosen = [n for n in self.numbers if self._has_disparity(n)]
+            if not chosen:
+                self._no_disparity(self.numbers[0])
+            if len(chosen) < len(self.numbers):
+                log.warning(
+                    "%s has disparities for %d of the %d complete frame sets of %s: rendering those (%s)",
+                    self.disparity_dir, len(chosen), len(self.numbers), self.source, _ranges(chosen),
+                )  # fmt: skip
+            return chosen
         missing = [f for f in frames if f not in self.numbers]
         if missing:
             raise ParameterError(f"{self.source}: frame set(s) {missing} are not complete frame sets of the take")
+        for f in frames:
+            if not self._has_disparity(f):
+                self._no_disparity(f)
         return list(frames)
+
+    def _names(self) -> list[str]:
+        if self.take is not None:
+            return list(self.take.names)
+        assert self.grid0 is not None
+        return list(self.grid0.names)
+
+    def _has_disparity(self, number: int) -> bool:
+        return any(self._disparity_file(number, n).exists() for n in self._names())
+
+    def _no_disparity(self, number: int) -> NoReturn:
+        names = self._names()
+        folder = self._disparity_file(number, names[0]).parent
+        raise TakeError(
+            f"{self.disparity_dir}: no disparity for frame {number} of {self.source} "
+            f"(expected {folder}/<camera>.pfm for cameras {', '.join(names)})"
+        )
 
     def _disparity_file(self, number: int, name: str) -> Path:
         folder = self.disparity_dir / f"{number:06d}"
@@ -127,11 +158,7 @@ class RenderInput:
         files = {n: self._disparity_file(number, n) for n in grid.names}
         found = {n: p for n, p in files.items() if p.exists()}
         if not found:
-            folder = files[grid.names[0]].parent
-            raise TakeError(
-                f"{self.disparity_dir}: no disparity for frame {number} of {self.source} "
-                f"(expected {folder}/<camera>.pfm for cameras {', '.join(grid.names)})"
-            )
+            self._no_disparity(number)
         views = {}
         for n in grid.names:
             disp = None
@@ -161,3 +188,17 @@ class RenderInput:
         if missing:
             log.warning("frame %d: no disparity for %s: not used as sources", number, ", ".join(missing))
         return FrameViews(number, views, grid.focal_px, grid.spacing)
+
+
+def _ranges(numbers: list[int]) -> str:
+    """1, 2, 3, 7 -> '1-3, 7'."""
+    out: list[str] = []
+    start = prev = numbers[0]
+    for n in [*numbers[1:], None]:
+        if n is not None and n == prev + 1:
+            prev = n
+            continue
+        out.append(f"{start}" if start == prev else f"{start}-{prev}")
+        if n is not None:
+            start = prev = n
+    return ", ".join(out)

@@ -244,3 +244,28 @@ def test_demo_section_has_every_camera_and_a_strip(take: Path, our_depth: Path, 
     assert len(rows) == 9 and "true disparity" in lines[4] and "our depth" in lines[4]
     strip = cv2.imread(str(tmp_path / "novel-views.png"))
     assert strip.shape == (180, 3 * 320, 3)
+
+
+def test_frames_without_disparity_are_left_out_by_default_and_refused_when_asked_for(tmp_path: Path) -> None:
+    """A depth run over part of a take (rigctl depth --frames 0-0) once made a default render write frame 0
+    and then fail on frame 1: by default the frames the disparity folder has are rendered (with a warning
+    naming them), and asked-for frames without a disparity are refused before anything is written."""
+    res = run_rigctl(
+        "record", "--take", "two", "--frames", "2", "--out", str(tmp_path),
+        "--sim", "ideal=true", "--sim", "motion=false", "--force",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    take = tmp_path / "two"
+    part = tmp_path / "part"
+    shutil.copytree(take / "truth" / "disparity" / "000000", part / "000000")
+    out = tmp_path / "out"
+    res = run_rigctl("render", str(take), "--disparity", str(part), "--at", "1,1", "--out", str(out), "--json")
+    assert res.returncode == 0, res.stderr
+    assert [v["frame"] for v in json.loads(res.stdout)["views"]] == ["000000"]
+    assert "disparities for 1 of the 2 complete frame sets" in res.stderr and "rendering those (0)" in res.stderr
+    out2 = tmp_path / "out2"
+    res = run_rigctl(
+        "render", str(take), "--disparity", str(part), "--at", "1,1", "--frames", "0-1", "--out", str(out2)
+    )
+    one_line(res, "no disparity for frame 1")
+    assert not list(out2.rglob("*.png"))
