@@ -50,9 +50,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--at", type=position, action="append", metavar="COL,ROW", help="view position (grid units)")
     p.add_argument("--stereo", type=distance, metavar="IPD_M", help="an eye pair this far apart (metres)")
     p.add_argument("--path", type=position, nargs="+", metavar="COL,ROW", help="a sequence along these positions")
-    p.add_argument("--steps", type=int, default=9, help="views along --path (default 9)")
+    p.add_argument("--steps", type=int, help="views along --path (default 9)")
     p.add_argument("--leave-one-out", action="store_true", help="score each camera rendered from the others")
-    p.add_argument("--cameras", nargs="+", metavar="CAM", help="cameras for --leave-one-out (default: all)")
+    p.add_argument(
+        "--cameras", nargs="+", action="extend", metavar="CAM", help="cameras for --leave-one-out (default: all)"
+    )
     p.add_argument("--frames", metavar="A-B", help="frame sets (default: all complete ones)")
     p.add_argument("--out", type=Path, metavar="OUT")
     p.add_argument("--json", action="store_true")
@@ -108,6 +110,15 @@ def run(ns: argparse.Namespace) -> int:
         raise ParameterError("--out OUT is required to write views")
     if ns.stereo is not None and ns.leave_one_out:
         raise ParameterError("--stereo applies to --at and --path, not --leave-one-out")
+    if ns.cameras and not ns.leave_one_out:
+        raise ParameterError("--cameras applies to --leave-one-out (a view's sources are its nearest cameras)")
+    if ns.cameras and len(set(ns.cameras)) < len(ns.cameras):
+        twice = sorted({c for c in ns.cameras if ns.cameras.count(c) > 1})
+        raise ParameterError(f"--cameras names {', '.join(twice)} more than once")
+    if ns.steps is not None and not ns.path:
+        raise ParameterError("--steps applies to --path")
+    if ns.out is not None and ns.leave_one_out:
+        raise ParameterError("--leave-one-out writes no images, only scores: leave out --out (--json for a file)")
     if ns.out is not None and not ns.leave_one_out:
         try:
             ns.out.mkdir(parents=True, exist_ok=True)
@@ -122,7 +133,7 @@ def run(ns: argparse.Namespace) -> int:
         print(json.dumps({"leave_one_out": rows}) if ns.json else format_table(rows))
         return 0
     if ns.path:
-        points = path_positions(ns.path, ns.steps)
+        points = path_positions(ns.path, 9 if ns.steps is None else ns.steps)
 
         def eyes(frame: Any) -> list[Any]:
             return [e for i, (c, r) in enumerate(points) for e in eyes_for(frame, c, r, ns.stereo, f"path_{i:04d}")]

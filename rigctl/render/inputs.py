@@ -96,6 +96,7 @@ class RenderInput:
             raise ParameterError(f"{disparity_dir}: disparity folder does not exist")
         self.take: TakeGrid | None = None
         self.grid0: Grid | None = None
+        self._last: FrameViews | None = None
         if (source / "take.yaml").exists():
             self.take = TakeGrid(source)
             self.numbers = self.take.frame_numbers()
@@ -152,6 +153,14 @@ class RenderInput:
         return folder / f"{name}.pfm"
 
     def frame(self, number: int) -> FrameViews:
+        """Frame ``number``'s colour, key and disparity (the last one asked for is kept: the CLI reads the
+        first frame's size before rendering it, and should neither read it nor warn about it twice)."""
+        if self._last is not None and self._last.number == number:
+            return self._last
+        self._last = self._read(number)
+        return self._last
+
+    def _read(self, number: int) -> FrameViews:
         grid = self.take.grid(number) if self.take is not None else self.grid0
         assert grid is not None
         h, w = grid.shape

@@ -137,8 +137,15 @@ def render_views(
         frame = inp.frame(n)
         ren = renderer_for(frame, previous=ren)
         wanted = eyes(frame)
+        stems: dict[str, Eye] = {}
         for eye in wanted:  # every position checked before the frame's first view is written
             frame.position(eye.col, eye.row)
+            same = stems.setdefault(eye.stem, eye)
+            if same is not eye:
+                raise ParameterError(
+                    f"positions {same.col!r},{same.row!r} and {eye.col!r},{eye.row!r} would both be written as "
+                    f"{eye.stem}: give each position once (names keep 6 significant digits)"
+                )
         for eye, res, ms in _rendered(ren, frame, wanted):
             attrs: dict[str, object] = {
                 "rigctl_position": f"{eye.col:g},{eye.row:g}",

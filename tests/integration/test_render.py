@@ -191,6 +191,23 @@ def test_views_no_camera_can_see_are_refused(take: Path, tmp_path: Path) -> None
     assert res.returncode == 0, res.stderr  # half a spacing beyond the corner: the nearest cameras see it
 
 
+def test_options_that_do_not_apply_and_positions_that_share_a_name_are_refused(take: Path, tmp_path: Path) -> None:
+    """Options once ignored without a word (--cameras with --at, --steps with --at, --out with
+    --leave-one-out, a camera named twice) and positions written to one file are one line each."""
+    truth = str(take / "truth" / "disparity")
+    out = str(tmp_path / "out")
+    cases = [
+        (["--at", "1,1", "--cameras", "r1c1", "--out", out], "--cameras applies to --leave-one-out"),
+        (["--at", "1,1", "--steps", "3", "--out", out], "--steps applies to --path"),
+        (["--leave-one-out", "--out", out], "--leave-one-out writes no images"),
+        (["--leave-one-out", "--cameras", "r1c1", "--cameras", "r0c1", "r1c1"], "names r1c1 more than once"),
+        (["--at", "1,1", "--at", "1.0000001,1", "--out", out], "would both be written as c1r1"),
+    ]
+    for args, words in cases:
+        one_line(run_rigctl("render", str(take), "--disparity", truth, *args), words)
+    assert not list((tmp_path / "out").rglob("*.png"))
+
+
 def test_hostile_disparity_values_and_output_folders_are_one_line(take: Path, tmp_path: Path) -> None:
     """FLT_MAX as a 'no estimate' mark (some tools write it) once overflowed the renderer's fill in a
     traceback; an --out that is a file, or cannot be made, ended in a traceback too."""
