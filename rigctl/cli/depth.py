@@ -12,6 +12,7 @@ from rigctl.cli.progress import Progress
 from rigctl.cli.take import damaged_exit
 from rigctl.depth.presets import PRESETS
 from rigctl.depth.run import DepthOptions, run_depth
+from rigctl.errors import ParameterError
 from rigctl.take.export import parse_range
 
 
@@ -56,6 +57,10 @@ def run(ns: argparse.Namespace) -> int:
         key=not ns.no_key,
         cameras=tuple(ns.cameras) if ns.cameras else None,
     )
+    if ns.check and ns.cameras is not None and len(set(ns.cameras)) < 2:
+        raise ParameterError(
+            "--check renders each computed camera from the others: give at least two --cameras, or none for all"
+        )
     bar = Progress(f"depth {ns.input.name}")
     try:
         report = run_depth(

@@ -228,6 +228,12 @@ def test_hostile_disparity_values_and_output_folders_are_one_line(take: Path, tm
         one_line(res, str(out), "cannot make the output folder")
 
 
+def test_depth_check_of_one_camera_is_refused_before_computing(take: Path, tmp_path: Path) -> None:
+    res = run_rigctl("depth", str(take), "--out", str(tmp_path / "d"), "--cameras", "r1c1", "--check")
+    one_line(res, "--check", "at least two --cameras")
+    assert not (tmp_path / "d").exists()
+
+
 def test_depth_check_adds_leave_one_out_to_the_report(take: Path, tmp_path: Path) -> None:
     out = tmp_path / "depth"
     res = run_rigctl(
