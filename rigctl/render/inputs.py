@@ -4,6 +4,7 @@ or a take's ``truth/disparity``). Nothing here depends on how the disparities we
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 from dataclasses import dataclass
@@ -93,7 +94,8 @@ class RenderInput:
         self.disparity_dir = disparity_dir
         self.keyer = keyer or Keyer()
         if not disparity_dir.is_dir():
-            raise ParameterError(f"{disparity_dir}: disparity folder does not exist")
+            what = "is not a folder" if disparity_dir.exists() else "does not exist"
+            raise ParameterError(f"{disparity_dir}: disparity folder {what}")
         self.take: TakeGrid | None = None
         self.grid0: Grid | None = None
         self._last: FrameViews | None = None
@@ -107,6 +109,12 @@ class RenderInput:
             raise ParameterError(f"{source}: not a take (take.yaml) or a grid folder (grid.yaml)")
         if not self.numbers:
             raise ParameterError(f"{source}: the take has no complete frame set")
+        made_from = _made_from(disparity_dir)
+        if made_from is not None and not _same_folder(made_from, source):
+            log.warning(
+                "%s was made from %s, not from %s: unless those are the same pictures, the views will be wrong",
+                disparity_dir, made_from, source,
+            )  # fmt: skip
 
     def select(self, frames: range | None) -> list[int]:
         """The frames to render: those asked for (each a complete frame set with a disparity), or by default
@@ -211,3 +219,26 @@ def _ranges(numbers: list[int]) -> str:
         if n is not None:
             start = prev = n
     return ", ".join(out)
+
+
+def _made_from(disparity_dir: Path) -> Path | None:
+    """The folder a disparity folder was made from: a take's own ``truth/disparity``, or the ``source`` in a
+    depth output's ``report.json`` (None when it does not say, or says it unreadably)."""
+    d = disparity_dir.resolve()
+    if d.name == "disparity" and d.parent.name == "truth" and (d.parent.parent / "take.yaml").exists():
+        return d.parent.parent
+    report = disparity_dir / "report.json"
+    try:
+        if not report.is_file() or report.stat().st_size > 1 << 24:
+            return None
+        source = json.loads(report.read_text()).get("source")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return Path(source) if isinstance(source, str) and source else None
+
+
+def _same_folder(a: Path, b: Path) -> bool:
+    """Whether two paths name one folder; a relative path written by another run is compared by its name."""
+    if a.is_absolute():
+        return a.resolve() == b.resolve()
+    return a.resolve() == b.resolve() or a.name == b.resolve().name

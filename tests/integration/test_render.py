@@ -292,3 +292,17 @@ def test_frames_without_disparity_are_left_out_by_default_and_refused_when_asked
     )
     one_line(res, "no disparity for frame 1")
     assert not list(out2.rglob("*.png"))
+
+
+def test_a_disparity_made_from_another_take_is_named_in_a_warning(take: Path, tmp_path: Path) -> None:
+    """A depth output of another take renders wrong views without an error: its report.json says where it
+    came from, and a take's own truth folder says so by where it is."""
+    truth = take / "truth" / "disparity"
+    res = run_rigctl("render", str(take), "--disparity", str(truth), "--at", "1,1", "--out", str(tmp_path / "a"))
+    assert res.returncode == 0 and "was made from" not in res.stderr, res.stderr
+    other = tmp_path / "other-depth"
+    shutil.copytree(truth, other)
+    (other / "report.json").write_text(json.dumps({"source": str(tmp_path / "far-take"), "frames": {}}))
+    res = run_rigctl("render", str(take), "--disparity", str(other), "--at", "1,1", "--out", str(tmp_path / "b"))
+    assert res.returncode == 0
+    assert f"{other} was made from {tmp_path / 'far-take'}, not from {take}" in res.stderr, res.stderr
