@@ -146,6 +146,14 @@ def render_views(
                     f"positions {same.col!r},{same.row!r} and {eye.col!r},{eye.row!r} would both be written as "
                     f"{eye.stem}: give each position once (names keep 6 significant digits)"
                 )
+        folder = out / f"{n:06d}"
+        earlier = sorted({f.stem for f in folder.glob("*.png")} - set(stems)) if folder.is_dir() else []
+        if earlier:
+            names = ", ".join(earlier[:4]) + (", ..." if len(earlier) > 4 else "")
+            log.warning(
+                "%s holds %d view(s) from an earlier run that this one does not write over (%s): a sequence read "
+                "from the folder would mix the two", folder, len(earlier), names,
+            )  # fmt: skip
         for eye, res, ms in _rendered(ren, frame, wanted):
             attrs: dict[str, object] = {
                 "rigctl_position": f"{eye.col:g},{eye.row:g}",

@@ -125,6 +125,13 @@ def test_path_writes_a_numbered_sequence(take: Path, tmp_path: Path) -> None:
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
     assert sorted(p.name for p in (out / "000000").glob("*.png")) == [f"path_000{i}.png" for i in range(3)]
+    assert "earlier run" not in res.stderr
+    res = run_rigctl(
+        "render", str(take), "--disparity", str(take / "truth" / "disparity"), "--path", "0,1", "2,1",
+        "--steps", "2", "--out", str(out),
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "holds 1 view(s) from an earlier run that this one does not write over (path_0002)" in res.stderr
 
 
 def test_a_missing_source_camera_is_left_out(take: Path, tmp_path: Path) -> None:
