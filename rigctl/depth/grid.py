@@ -187,6 +187,14 @@ def load_grid_folder(folder: Path) -> Grid:
     for key in ("spacing_x", "focal_px"):
         if key not in spec:
             raise RigFileError(f"{path}: {key} is required")
+    for key in ("focal_px", "spacing_x", "spacing_y", "doffs"):
+        v = spec.get(key)
+        if v is None and key in ("spacing_y", "doffs"):
+            continue
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise RigFileError(f"{path}: {key}: must be a finite number, got {v!r}")
+        if (key in ("focal_px", "spacing_x") and v <= 0) or (key == "spacing_y" and v < 0):
+            raise RigFileError(f"{path}: {key}: must be positive, got {v!r}")
     images = {}
     for p in sorted(folder.glob("r*c*.png")):
         img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)

@@ -8,6 +8,7 @@ changed reaches far deeper into a reader than random bytes do).
 
 from __future__ import annotations
 
+import re
 import tracemalloc
 import zlib
 from collections.abc import Callable
@@ -307,3 +308,26 @@ def test_take_with_any_timecodes(tmp_path_factory: pytest.TempPathFactory, timec
         records += bytes(buf)
     (folder / "cameras" / "r0c0.index").write_bytes(records)
     bounded(lambda: read_whole_take(folder))
+
+
+@pytest.mark.parametrize(
+    ("line", "says"),
+    [
+        ("spacing_x: 0", "spacing_x: must be positive, got 0"),
+        ("spacing_x: -0.12", "spacing_x: must be positive, got -0.12"),
+        ("spacing_x: .nan", "spacing_x: must be a finite number, got nan"),
+        ("spacing_x: '0.12'", "spacing_x: must be a finite number, got '0.12'"),
+        ("spacing_x: 0.12\nspacing_y: -1", "spacing_y: must be positive, got -1"),
+    ],
+)
+def test_a_grid_yaml_value_out_of_range_is_named(tmp_path: Path, line: str, says: str) -> None:
+    """A zero or negative spacing was reported as 'must be numbers' (it is a number)."""
+    import cv2
+
+    from rigctl.errors import RigFileError
+
+    focal = "" if "focal_px" in line else "\nfocal_px: 1000"
+    (tmp_path / "grid.yaml").write_text(line + focal + "\n")
+    cv2.imwrite(str(tmp_path / "r0c0.png"), np.zeros((4, 6, 3), np.uint8))
+    with pytest.raises(RigFileError, match=re.escape(says)):
+        load_grid_folder(tmp_path)
