@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -49,6 +50,8 @@ F32 = NDArray[np.float32]
 U8 = NDArray[np.uint8]
 A = TypeVar("A", bound=NDArray[np.generic])
 TAPS = 4
+_POOL: list[ThreadPoolExecutor] = []
+_POOL_LOCK = threading.Lock()
 _K3 = np.ones((3, 3), np.uint8)
 _KRING = np.ones((2 * RING + 1, 2 * RING + 1), np.uint8)
 __all__ = ["MAX_TAPS", "NONE", "RING", "TAPS", "Rendered", "Renderer", "Source", "prepare"]
@@ -141,8 +144,7 @@ class Renderer:
         self.hl, self.wl = (h + 1) // 2, (w + 1) // 2
         spread = [s.span[1] - s.span[0] for s in sources if s.span[1] >= s.span[0]]
         self.max_gap = int(max(spread, default=0.0) * 1.5 / 2) + 4  # in half-resolution pixels
-        self.threads = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
-        self._pool: ThreadPoolExecutor | None = None  # the other threads: a second eye, or a view's other rows
+        self.threads = _cores()
         self._spaces = [_Workspace(self.hl, self.wl) for _ in range(2)]  # one per eye of a pair
 
     def nearest(self, u: float, v: float, exclude: tuple[str, ...] = ()) -> list[Source]:
@@ -204,10 +206,14 @@ class Renderer:
             p.low, p.ring, texs, disps, p.n, p.du, p.dv, p.closeness, 1.0 / self.agree_px, _packed(out), start, step
         )
 
-    def _others(self) -> ThreadPoolExecutor:
-        if self._pool is None:
-            self._pool = ThreadPoolExecutor(max_workers=max(1, self.threads - 1), thread_name_prefix="render")
-        return self._pool
+    @staticmethod
+    def _others() -> ThreadPoolExecutor:
+        """The process's render threads beside the caller's (a second eye, or a view's other rows): one pool
+        for every renderer, so that a take rendered frame by frame does not start threads per frame."""
+        with _POOL_LOCK:
+            if not _POOL:
+                _POOL.append(ThreadPoolExecutor(max_workers=max(1, _cores() - 1), thread_name_prefix="render"))
+            return _POOL[0]
 
     def _eye(self, u: float, v: float, exclude: tuple[str, ...], ws: _Workspace) -> Rendered:
         """A view on the calling thread alone: its target, then its shade."""
@@ -266,3 +272,8 @@ class _Workspace:
         self.closed = np.empty((hl, wl), np.float32)
         self.ring = np.empty((hl, wl), np.float32)
         self.last = np.empty(wl, np.int64)
+
+
+def _cores() -> int:
+    """The cores this process may run on."""
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
