@@ -39,7 +39,8 @@ def read_pfm(path: Path) -> NDArray[np.float32]:
     read, and only after its header says how many bytes of pixels follow and the file holds exactly those: a
     device, a pipe or a junk file never costs more memory than the image it claims to be."""
     try:
-        with open(path, "rb") as f:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)  # a FIFO would block an open without it
+        with open(fd, "rb") as f:
             st = os.fstat(f.fileno())
             if not stat.S_ISREG(st.st_mode):
                 raise TakeError(f"{path}: not a regular file")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -83,6 +84,10 @@ def test_a_pfm_that_is_a_device_or_lies_about_its_size_is_refused_before_reading
     zero.symlink_to("/dev/zero")
     with pytest.raises(TakeError, match=r"zero\.pfm: not a regular file"):
         read_pfm(zero)
+    fifo = tmp_path / "fifo.pfm"
+    os.mkfifo(fifo)  # nobody writes: an open that waits for a writer would hang the test
+    with pytest.raises(TakeError, match=r"fifo\.pfm: not a regular file"):
+        read_pfm(fifo)
     huge = tmp_path / "huge.pfm"
     huge.write_bytes(b"Pf\n100000 100000\n-1.0\n" + bytes(64))
     with pytest.raises(TakeError, match=r"huge\.pfm: PFM header: size 100000x100000"):
