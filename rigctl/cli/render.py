@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -98,6 +99,20 @@ def leave_one_out_report(
     return leave_one_out(inp, numbers, cameras, box)
 
 
+def _check_out(out: Path) -> None:
+    """Refuse an output folder that cannot be made, before any input is read (without making it yet: a run
+    that then fails on its input leaves nothing behind)."""
+    if out.exists():
+        if not out.is_dir():
+            raise ParameterError(f"{out}: cannot make the output folder: a file of that name exists")
+        return
+    parent = out.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise ParameterError(f"{out}: cannot make the output folder: {parent} is not a writable folder")
+
+
 def run(ns: argparse.Namespace) -> int:
     from rigctl.render.inputs import RenderInput
     from rigctl.render.views import eyes_for, format_table, leave_one_out, path_positions, render_views
@@ -120,10 +135,8 @@ def run(ns: argparse.Namespace) -> int:
     if ns.out is not None and ns.leave_one_out:
         raise ParameterError("--leave-one-out writes no images, only scores: leave out --out (--json for a file)")
     if ns.out is not None and not ns.leave_one_out:
-        try:
-            ns.out.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise ParameterError(f"{ns.out}: cannot make the output folder: {exc.strerror}") from None
+        _check_out(ns.out)
+    points = path_positions(ns.path, 9 if ns.steps is None else ns.steps) if ns.path else []
     inp = RenderInput(ns.input, ns.disparity)
     numbers = inp.select(parse_range(ns.frames, max(inp.numbers) + 1) if ns.frames else None)
     first = inp.frame(numbers[0])
@@ -133,7 +146,6 @@ def run(ns: argparse.Namespace) -> int:
         print(json.dumps({"leave_one_out": rows}) if ns.json else format_table(rows))
         return 0
     if ns.path:
-        points = path_positions(ns.path, 9 if ns.steps is None else ns.steps)
 
         def eyes(frame: Any) -> list[Any]:
             return [e for i, (c, r) in enumerate(points) for e in eyes_for(frame, c, r, ns.stereo, f"path_{i:04d}")]

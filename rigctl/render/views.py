@@ -22,6 +22,7 @@ from rigctl.render.warp import Rendered, Renderer, prepare
 log = logging.getLogger(__name__)
 
 Box = tuple[int, int, int, int]
+MAX_STEPS = 10_000  # views along one --path (a 400 s sequence at 25 fps)
 # (col, row) -> (RGB, subject mask) of the truth at that grid position, or None
 TruthFn = Callable[[float, float], tuple[F32, NDArray[np.bool_]] | None]
 
@@ -100,6 +101,8 @@ def path_positions(points: list[tuple[float, float]], steps: int) -> list[tuple[
     """``steps`` positions evenly spaced (by length) along the polyline through ``points``."""
     if steps < 2 or len(points) < 2:
         raise ParameterError("--path needs at least two positions and --steps of at least 2")
+    if steps > MAX_STEPS:
+        raise ParameterError(f"--steps {steps}: at most {MAX_STEPS} views along a path")
     pts = np.array(points, float)
     seg = np.hypot(*np.diff(pts, axis=0).T)
     if seg.sum() == 0:
