@@ -172,6 +172,31 @@ def run_bench(ns: argparse.Namespace) -> int:
 
     if ns.repeats < 1:
         raise ParameterError(f"--repeats must be at least 1, got {ns.repeats}")
+    w, h = ns.size
+    need = BENCH_BYTES_PER_PIXEL * w * h + (1 << 29)
+    free = _available_memory()
+    if free is not None and need > free:
+        raise ParameterError(
+            f"--size {w}x{h}: needs about {need / 2**30:.1f} GB (nine cameras in float and as texels), "
+            f"{free / 2**30:.1f} GB available"
+        )
     result = bench_render(presenter_render(), ns.size, ns.repeats)
     print(json.dumps(result) if ns.json else format_bench(result))
     return 0
+
+
+# nine cameras resampled to float RGB, key and disparity (20 bytes a pixel each), their texels, disparity and
+# samples (13), two eyes' output and scratch: about 320 bytes per pixel of the size asked for (measured: 0.8 GB
+# in all at 1920x1080)
+BENCH_BYTES_PER_PIXEL = 320
+
+
+def _available_memory() -> int | None:
+    """MemAvailable from /proc/meminfo in bytes (None where there is none)."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None

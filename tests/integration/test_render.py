@@ -316,3 +316,8 @@ def test_a_disparity_made_from_another_take_is_named_in_a_warning(take: Path, tm
     res = run_rigctl("render", str(take), "--disparity", str(other), "--at", "1,1", "--out", str(tmp_path / "b"))
     assert res.returncode == 0
     assert f"{other} was made from {tmp_path / 'far-take'}, not from {take}" in res.stderr, res.stderr
+
+
+def test_bench_render_refuses_a_size_the_memory_cannot_hold() -> None:
+    """16384x16384 once ended in OpenCV's out-of-memory traceback (or took the machine's memory)."""
+    one_line(run_rigctl("bench", "render", "--size", "16384x16384"), "--size 16384x16384: needs about", "available")
