@@ -172,14 +172,7 @@ def run_bench(ns: argparse.Namespace) -> int:
 
     if ns.repeats < 1:
         raise ParameterError(f"--repeats must be at least 1, got {ns.repeats}")
-    w, h = ns.size
-    need = BENCH_BYTES_PER_PIXEL * w * h + (1 << 29)
-    free = _available_memory()
-    if free is not None and need > free:
-        raise ParameterError(
-            f"--size {w}x{h}: needs about {need / 2**30:.1f} GB (nine cameras in float and as texels), "
-            f"{free / 2**30:.1f} GB available"
-        )
+    check_bench_memory(ns.size, _available_memory())
     result = bench_render(presenter_render(), ns.size, ns.repeats)
     print(json.dumps(result) if ns.json else format_bench(result))
     return 0
@@ -189,6 +182,17 @@ def run_bench(ns: argparse.Namespace) -> int:
 # samples (13), two eyes' output and scratch: about 320 bytes per pixel of the size asked for (measured: 0.8 GB
 # in all at 1920x1080)
 BENCH_BYTES_PER_PIXEL = 320
+
+
+def check_bench_memory(size: tuple[int, int], free: int | None) -> None:
+    """Refuse a benchmark size whose nine cameras would not fit in ``free`` bytes (no check without it)."""
+    w, h = size
+    need = BENCH_BYTES_PER_PIXEL * w * h + (1 << 29)
+    if free is not None and need > free:
+        raise ParameterError(
+            f"--size {w}x{h}: needs about {need / 2**30:.1f} GB (nine cameras in float and as texels), "
+            f"{free / 2**30:.1f} GB available"
+        )
 
 
 def _available_memory() -> int | None:
