@@ -51,12 +51,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--at", type=position, action="append", metavar="COL,ROW", help="view position (grid units)")
     p.add_argument("--stereo", type=distance, metavar="IPD_M", help="an eye pair this far apart (metres)")
     p.add_argument("--path", type=position, nargs="+", metavar="COL,ROW", help="a sequence along these positions")
-    p.add_argument("--steps", type=int, help="views along --path (default 9)")
+    p.add_argument("--steps", type=int, help="views along --path (default 9, at most 10000)")
     p.add_argument("--leave-one-out", action="store_true", help="score each camera rendered from the others")
     p.add_argument(
         "--cameras", nargs="+", action="extend", metavar="CAM", help="cameras for --leave-one-out (default: all)"
     )
-    p.add_argument("--frames", metavar="A-B", help="frame sets (default: all complete ones)")
+    p.add_argument("--frames", metavar="A-B", help="frame sets (default: every complete one with a disparity)")
     p.add_argument("--out", type=Path, metavar="OUT")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run)
