@@ -217,19 +217,18 @@ class Renderer:
 
     def _eye(self, u: float, v: float, exclude: tuple[str, ...], ws: _Workspace) -> Rendered:
         """A view on the calling thread alone: its target, then its shade."""
-        p = self._plan(u, v, exclude, ws)
-        t0 = time.perf_counter()
-        out = np.empty((*self.shape, 4), np.uint8)
-        self._shade(p, out)
-        return Rendered(out, p.low, [s.name for s in p.sources], p.target_ms, (time.perf_counter() - t0) * 1e3)
+        return self._view(self._plan(u, v, exclude, ws), 1)
 
     def render(self, u: float, v: float, exclude: tuple[str, ...] = ()) -> Rendered:
         """The view at (u, v) (horizontal spacings, relative to the grid's origin) from the ``taps`` nearest
         sources not in ``exclude``: its target on this thread, its shade in interleaved block rows on all."""
-        p = self._plan(u, v, exclude, self._spaces[0])
+        return self._view(self._plan(u, v, exclude, self._spaces[0]), self.threads)
+
+    def _view(self, p: _Plan, k: int) -> Rendered:
+        """The shaded view of a plan, its block rows interleaved over ``k`` threads (this one and k - 1 of the
+        pool)."""
         t0 = time.perf_counter()
         out = np.empty((*self.shape, 4), np.uint8)
-        k = self.threads
         rest = [self._others().submit(self._shade, p, out, i, k) for i in range(1, k)]
         self._shade(p, out, 0, k)
         for f in rest:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -77,27 +78,22 @@ def test_burnt_id_damage_is_detected() -> None:
     assert burnin.read(packed, 960) is None
 
 
-def test_a_pfm_that_is_a_device_or_lies_about_its_size_is_refused_before_reading(tmp_path: Path) -> None:
+BAD_PFMS = {  # file name: (how it is made, what the one-line error says)
+    "zero": (lambda p: p.symlink_to("/dev/zero"), "not a regular file"),
+    "fifo": (os.mkfifo, "not a regular file"),  # nobody writes: an open waiting for a writer would hang
+    "huge": (lambda p: p.write_bytes(b"Pf\n100000 100000\n-1.0\n" + bytes(64)), "PFM header: size 100000x100000"),
+    "scale0": (lambda p: p.write_bytes(b"Pf\n2 1\n0\n" + bytes(8)), "PFM header: scale"),
+    "scalenan": (lambda p: p.write_bytes(b"Pf\n2 1\nnan\n" + bytes(8)), "PFM header: scale"),
+    "negative": (lambda p: p.write_bytes(b"Pf\n-2 1\n-1.0\n" + bytes(8)), "PFM header: size -2x1"),
+}
+
+
+@pytest.mark.parametrize("name", list(BAD_PFMS))
+def test_a_pfm_that_is_a_device_or_lies_about_its_size_is_refused_before_reading(tmp_path: Path, name: str) -> None:
     """A disparity file linked to /dev/zero once read until the machine ran out of memory: only a regular
     file whose size matches its header is read."""
-    zero = tmp_path / "zero.pfm"
-    zero.symlink_to("/dev/zero")
-    with pytest.raises(TakeError, match=r"zero\.pfm: not a regular file"):
-        read_pfm(zero)
-    fifo = tmp_path / "fifo.pfm"
-    os.mkfifo(fifo)  # nobody writes: an open that waits for a writer would hang the test
-    with pytest.raises(TakeError, match=r"fifo\.pfm: not a regular file"):
-        read_pfm(fifo)
-    huge = tmp_path / "huge.pfm"
-    huge.write_bytes(b"Pf\n100000 100000\n-1.0\n" + bytes(64))
-    with pytest.raises(TakeError, match=r"huge\.pfm: PFM header: size 100000x100000"):
-        read_pfm(huge)
-    for scale in (b"0", b"nan"):
-        bad = tmp_path / "scale.pfm"
-        bad.write_bytes(b"Pf\n2 1\n" + scale + b"\n" + bytes(8))
-        with pytest.raises(TakeError, match=r"scale\.pfm: PFM header: scale"):
-            read_pfm(bad)
-    negative = tmp_path / "negative.pfm"
-    negative.write_bytes(b"Pf\n-2 1\n-1.0\n" + bytes(8))
-    with pytest.raises(TakeError, match=r"negative\.pfm: PFM header: size -2x1"):
-        read_pfm(negative)
+    make, says = BAD_PFMS[name]
+    path = tmp_path / f"{name}.pfm"
+    make(path)
+    with pytest.raises(TakeError, match=re.escape(f"{name}.pfm: {says}")):
+        read_pfm(path)
