@@ -27,13 +27,16 @@ log = logging.getLogger(__name__)
 @dataclass
 class DeviceSet:
     """The devices of a rig. ``simulation`` is the simulated array behind ``sim://`` cameras (None on a
-    real rig): simulated serial devices (the SDI bridge) act on it, so it is handed to them explicitly."""
+    real rig): simulated serial devices (the SDI bridge) act on it, so it is handed to them explicitly.
+    ``paced``: the cameras deliver every frame when read, on a simulated clock (``--sim deterministic=true``),
+    so the recorder waits for them instead of keeping pace with them."""
 
     cameras: dict[str, Camera]
     truth: TruthProvider | None = None
     settings: dict[str, object] = field(default_factory=dict)  # the simulator's, recorded in the take's manifest
     description: str = ""
     simulation: Any = None
+    paced: bool = False
 
     def close(self) -> None:
         for cam in self.cameras.values():
@@ -52,7 +55,8 @@ def _sim_cameras(rig: Rig, addresses: dict[str, Address], sim: list[str]) -> Dev
     from rigctl.simulators.device_set import simulated_cameras
 
     cams, truth, settings, description = simulated_cameras(rig, sim, addresses)
-    return DeviceSet(cams, truth, settings, description, simulation=truth.array)
+    paced = bool(settings.get("deterministic"))
+    return DeviceSet(cams, truth, settings, description, simulation=truth.array, paced=paced)
 
 
 def _v4l2_cameras(rig: Rig, addresses: dict[str, Address], sim: list[str]) -> DeviceSet:
@@ -92,6 +96,9 @@ def open_cameras(rig: Rig, sim: list[str] | None = None, cameras: list[str] | No
                 part.description,
                 part.simulation,
             )
+            out.paced = part.paced
+    if out.paced and len(by_scheme) > 1:
+        raise DeviceError(f"--sim deterministic=true: rig {rig.name} has cameras that are not simulated")
     # keep the rig's camera order whatever the schemes
     out.cameras = {n: out.cameras[n] for n in rig.camera_names if n in out.cameras}
     return out

@@ -33,7 +33,7 @@ from rigctl.simulators.raycast import RayCamera, RenderResult, Scene, render
 from rigctl.simulators.rays import rays_for
 from rigctl.simulators.settings import SimSettings
 from rigctl.simulators.states import DiskCache, Frames, StateStore
-from rigctl.simulators.timing import FrameTiming, frame_timings, start_offset
+from rigctl.simulators.timing import SIMULATED_ORIGIN_NS, FrameTiming, frame_timings, start_offset
 
 from rigctl.board import BoardSpec
 from rigctl.calibration_model import ArrayCalibration, CameraModel
@@ -75,6 +75,7 @@ class SimArray:
         ref = rig.model.reference.source if rig.model.reference else "external"
         self.reference_source: dict[str, str] = dict.fromkeys(self.names, ref)
         self.stream_start_ns: int | None = None
+        self.resume_grid = 0  # deterministic: the grid slot a stream (re)starts at, after the last one's frames
         self._pictured = False  # the grid's origin was set at the first picture
         self._claimed: set[str] = set()
         self._prime_lock = threading.Lock()
@@ -99,10 +100,11 @@ class SimArray:
             self._claimed.discard(name)
 
     def start_stream(self) -> int:
-        """The genlocked grid's origin: set by the first camera that starts, shared by all."""
+        """The genlocked grid's origin: set by the first camera that starts, shared by all (deterministic:
+        a fixed origin on the simulated clock)."""
         with self._lock:
             if self.stream_start_ns is None:
-                self.stream_start_ns = time.monotonic_ns()
+                self.stream_start_ns = SIMULATED_ORIGIN_NS if self.settings.deterministic else time.monotonic_ns()
             return self.stream_start_ns
 
     def first_picture(self) -> int:
@@ -287,7 +289,7 @@ class SimArray:
     @cached_property
     def _disk_cache(self) -> DiskCache | None:
         """Rendered states across runs: one folder per rig, settings and simulator source."""
-        inputs = [self.rig.to_dict(), self.requested.model_dump(mode="json")]
+        inputs = [self.rig.to_dict(), self.requested.model_dump(mode="json", exclude={"deterministic"})]
         sources = [
             scenes.__file__,
             __file__,

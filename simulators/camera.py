@@ -4,6 +4,11 @@ It behaves like a V4L2 capture device: sequence numbers restart at 0 on every st
 real time on the array's genlocked grid (plus the configured skew and jitter), a reader that falls more
 than ``buffers`` frames behind loses frames at the source (sequence gaps), and a signal loss stops
 delivery without advancing the sequence. Every frame carries its ids burnt into the top-left corner.
+
+With ``deterministic=true`` the grid runs on a simulated clock instead: its origin is fixed, each frame is
+delivered when the reader asks for it (no real-time pacing, so a slow reader loses nothing), its capture
+and host times are the grid's (plus the seed's skew and jitter, and the latency), and configured drops and
+signal losses still happen where they are set: the same frames, bytes and timestamps on any machine.
 """
 
 from __future__ import annotations
@@ -36,6 +41,8 @@ class SimCamera(CameraBase):
         self._pending: FrameTiming | None = None
         self.delivering = False  # a frame delivered since the stream started
         self._t0 = 0  # the grid origin this camera's timings are on
+        self._next_grid = 0  # deterministic: the grid slot after the last frame delivered
+        self._last_rel = 0  # deterministic: the last frame's capture time from the origin (the simulated now)
         self.delivered: dict[int, int] = {}  # sequence -> scene frame, for the ground truth
 
     # lifecycle -------------------------------------------------------------------------------------
@@ -62,10 +69,14 @@ class SimCamera(CameraBase):
         self.delivering = False
 
     def _timings_from_now(self, t0: int) -> Iterator[FrameTiming]:
-        first_grid = max(0, -(-(time.monotonic_ns() - t0) // self.array.period_ns))
+        if self.array.settings.deterministic:  # where the last stream left the simulated clock
+            first_grid = self.array.resume_grid
+        else:
+            first_grid = max(0, -(-(time.monotonic_ns() - t0) // self.array.period_ns))
         return self.array.timing(self.name, first_grid=first_grid)
 
     def _do_stop(self) -> None:
+        self.array.resume_grid = max(self.array.resume_grid, self._next_grid)
         self._timings = None
         self._pending = None
 
@@ -75,6 +86,8 @@ class SimCamera(CameraBase):
     # frames ----------------------------------------------------------------------------------------
     def _do_read(self, timeout_s: float, into: memoryview) -> Frame | None:
         assert self._timings is not None
+        if self.array.settings.deterministic:
+            return self._read_paced(timeout_s, into)
         deadline = time.monotonic_ns() + int(timeout_s * 1e9)
         while True:
             timing = self._pending or next(self._timings)
@@ -114,6 +127,21 @@ class SimCamera(CameraBase):
                 time.sleep((due - now) / 1e9)
             return self._deliver(timing, t0, into)
 
+    def _read_paced(self, timeout_s: float, into: memoryview) -> Frame | None:
+        """Deterministic: the next frame on the simulated clock, at once, however late the reader asks; only
+        its scene state's render is waited for (up to ``timeout_s``; the frame stays next)."""
+        assert self._timings is not None
+        while True:
+            timing = self._pending or next(self._timings)
+            self._pending = None
+            if not timing.delivered:
+                self._count_source_drops()
+                continue
+            if not self.array.states.wait(self.array.state_of(timing.scene_frame), timeout_s):
+                self._pending = timing
+                return None
+            return self._deliver(timing, self._t0, into)
+
     def _deliver(self, timing: FrameTiming, t0: int, into: memoryview) -> Frame:
         arr = self.array
         state = arr.state_of(timing.scene_frame)
@@ -138,11 +166,19 @@ class SimCamera(CameraBase):
         self.delivering = True
         flags = FrameFlags.TIMESTAMP_MONOTONIC | FrameFlags.TIMESTAMP_SOE
         data = buf.reshape(-1).data
-        return Frame(self.name, timing.sequence, capture, time.monotonic_ns(), flags, data)
+        if arr.settings.deterministic:
+            self._next_grid, self._last_rel = timing.scene_frame + 1, timing.capture_ns
+            host = capture + self.latency_ns
+        else:
+            host = time.monotonic_ns()
+        return Frame(self.name, timing.sequence, capture, host, flags, data)
 
     def _signal_report(self) -> SignalReport:
         t0 = self.array.stream_start_ns
-        now_rel = time.monotonic_ns() - t0 if t0 is not None else 0
+        if self.array.settings.deterministic:
+            now_rel = self._last_rel
+        else:
+            now_rel = time.monotonic_ns() - t0 if t0 is not None else 0
         locked, reference = self.array.reference_locked(self.name)
         return SignalReport(
             present=self.array.signal_present(self.name, now_rel),

@@ -65,6 +65,12 @@ class SimSettings(BaseModel):
     colour_spread: NonNeg = Field(0.02, description="relative sigma of per-channel gains")
     vignetting: NonNeg = Field(0.15, description="relative fall-off at the image corners")
     # timing
+    deterministic: bool = Field(
+        False,
+        description="frames paced by the reader on a simulated clock (a fixed origin, one frame period a "
+        "frame): every frame delivered, same bytes and timestamps on any machine, for tests, CI and "
+        "benchmarks; false: real time, a reader more than 8 frames behind loses frames at the source",
+    )
     fps: Annotated[float, Field(gt=0, le=240)] | None = Field(None, description="frame rate (default: rig's)")
     jitter_us: NonNeg = Field(50.0, description="sigma of capture timestamp jitter")
     skew_us: dict[str, float] = Field(default_factory=dict, description="fixed per-camera timestamp skew")

@@ -10,6 +10,9 @@ from dataclasses import dataclass
 import numpy as np
 from rigctl.simulators.settings import SimSettings
 
+# deterministic capture: the simulated clock's origin (the genlocked grid's frame 0), the same on every machine
+SIMULATED_ORIGIN_NS = 1_000_000_000_000
+
 
 @dataclass(frozen=True)
 class FrameTiming:

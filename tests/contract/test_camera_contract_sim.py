@@ -124,21 +124,53 @@ def test_signal_loss_over_its_interval() -> None:
     assert [g[0] for g in lost] == list(range(len(lost)))
 
 
-def test_slow_reader_loses_frames_at_the_source_as_sequence_gaps() -> None:
+def read_twice(settings: list[str], pause_s: float):  # type: ignore[no-untyped-def]
+    """One camera's first frame, the one it gives when read again ``pause_s`` later, and its source drops."""
     import time
 
-    ds = open_cameras(RIG, FAST, ["r0c0"])
+    ds = open_cameras(RIG, FAST + settings, ["r0c0"])
     cam = ds.cameras["r0c0"]
     try:
         cam.open()
         cam.configure(FMT)
         cam.start()
         first = cam.read(2.0)
-        time.sleep(0.8)  # 20 frame periods with 8 driver buffers: about 12 frames lost
+        time.sleep(pause_s)
         after = cam.read(2.0)
         assert first is not None and after is not None
-        gap = after.sequence - first.sequence - 1
-        assert 9 <= gap <= 14
-        assert cam.status().source_drops == gap
+        return first, after, cam.status().source_drops
     finally:
         ds.close()
+
+
+def test_slow_reader_loses_frames_at_the_source_as_sequence_gaps() -> None:
+    first, after, drops = read_twice([], 0.8)  # 20 frame periods with 8 driver buffers: about 12 frames lost
+    gap = after.sequence - first.sequence - 1
+    assert 9 <= gap <= 14
+    assert drops == gap
+
+
+def test_deterministic_frames_sit_on_the_simulated_grid_with_the_faults_as_set() -> None:
+    """``deterministic=true``: capture times are the grid's from a fixed origin (plus the set skew), host times
+    the capture plus the latency, and drops and signal losses fall where they are set."""
+    from rigctl.simulators.timing import SIMULATED_ORIGIN_NS
+
+    settings = ["deterministic=true", "jitter_us=0", "drops.r0c1=[3,4]", "signal_loss.r1c0=[0.2,0.6]"]
+    got = record([*settings, "skew_us.r2c2=3000"], 12, cameras=["r0c0", "r0c1", "r1c0", "r2c2"])
+    period = round(1e9 / FMT.fps)
+    assert [g[0] for g in got["r0c0"]] == list(range(12))
+    assert [g[1] for g in got["r0c0"]] == [SIMULATED_ORIGIN_NS + k * period for k in range(12)]
+    assert [g[1] - SIMULATED_ORIGIN_NS for g in got["r2c2"]] == [k * period + 3_000_000 for k in range(12)]
+    assert [g[0] for g in got["r0c1"]] == [0, 1, 2, *range(5, 14)]
+    # no signal from 0.2 s to 0.6 s (grid slots 5 to 14): nothing captured, the sequence carries on
+    slots = [(g[1] - SIMULATED_ORIGIN_NS) // period for g in got["r1c0"]]
+    assert slots == [0, 1, 2, 3, 4, *range(15, 22)] and [g[0] for g in got["r1c0"]] == list(range(12))
+    assert got == record([*settings, "skew_us.r2c2=3000"], 12, cameras=["r0c0", "r0c1", "r1c0", "r2c2"])
+
+
+def test_deterministic_slow_reader_loses_nothing() -> None:
+    """The live behaviour above, paced by the reader instead: however late it reads, the next frame comes."""
+    first, after, drops = read_twice(["deterministic=true", "jitter_us=0"], 0.4)  # live: two frames lost
+    assert after.sequence == first.sequence + 1 and drops == 0
+    assert after.capture_ns - first.capture_ns == round(1e9 / FMT.fps)
+    assert after.host_ns - after.capture_ns == 800_000  # the simulated latency, not this machine's
