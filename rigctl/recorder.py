@@ -6,7 +6,7 @@ or the UI: when no buffer is free the frame is still taken from the device (so t
 flowing) and counted as a writer drop with its sequence number. Sequence gaps are source drops; frames
 the device flags as corrupted are error frames. Recording starts at one instant T0 for all cameras and
 ends at T1; frame sets are assembled by capture time afterwards (see :mod:`rigctl.take.framesets`).
-"""
+A paced source (``--sim deterministic=true``) is waited for instead: :mod:`rigctl.pacing`."""
 
 from __future__ import annotations
 
@@ -18,10 +18,9 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
-
 from rigctl.errors import DeviceError, RigctlError, TakeError
 from rigctl.interfaces import Camera, CaptureFormat, Frame, FrameFlags
+from rigctl.pacing import Pacing
 from rigctl.registry import DeviceSet
 from rigctl.rig import Rig
 from rigctl.take.accounting import CameraStats
@@ -59,6 +58,7 @@ class Recorder:
         self.names = sorted(self.cameras, key=lambda n: rig.camera_names.index(n))
         self.format = self.capture_format(rig)
         self.period_ns = round(1e9 / rig.fps)
+        self.pace = Pacing(devices.paced)
         self.checksum = checksum
         self.buffers = buffers_per_camera or self.default_buffers(self.format)
         self.stop_timeout_s = stop_timeout_s
@@ -145,8 +145,8 @@ class Recorder:
         if not self._armed:
             raise TakeError("recorder not armed")
         self._create_take()
-        phase = self._grid_phase()  # waits until every camera delivers (staggered start-up)
-        now = time.monotonic_ns()
+        phase = self.pace.grid_phase(list(self.stats.values()), self.period_ns)  # every camera delivers
+        now = self.pace.now(self.stats.values())
         first_slot = now + lead_periods * self.period_ns
         # T0 half a period before a grid instant: every camera's first stored frame is then in one slot
         grid = first_slot + ((phase - first_slot) % self.period_ns)
@@ -154,25 +154,7 @@ class Recorder:
         self.t1_ns = self.t0_ns + frames * self.period_ns if frames else None
         self.started_utc = dt.datetime.now(dt.UTC).isoformat(timespec="milliseconds")
         write_manifest(self.plan.folder, take_manifest(self._state(), "recording"))
-
-    def _grid_phase(self, first_frame_s: float = 15.0) -> int:
-        """The rig's frame phase (capture time modulo the period), from the latest frames seen. A rig still
-        starting up gets ``first_frame_s`` for its first frame, the other cameras a second after it."""
-        deadline = time.monotonic() + first_frame_s
-        while time.monotonic() < deadline:
-            seen = [s.last_capture_ns for s in self.stats.values() if s.last_capture_ns]
-            if len(seen) == len(self.names):
-                break
-            if seen:
-                deadline = min(deadline, time.monotonic() + 1.0)
-            time.sleep(0.01)
-        seen = [s.last_capture_ns % self.period_ns for s in self.stats.values() if s.last_capture_ns]
-        if not seen:
-            raise DeviceError("no camera delivers frames: check signal and cabling before recording")
-        # circular median: rotate so the phases do not straddle the wrap-around
-        ref = seen[0]
-        offsets = [((p - ref + self.period_ns // 2) % self.period_ns) - self.period_ns // 2 for p in seen]
-        return int(ref + np.median(offsets)) % self.period_ns
+        self.pace.place()
 
     def _create_take(self) -> None:
         folder = self.plan.folder
@@ -210,7 +192,7 @@ class Recorder:
         """End the take at the next common instant (frames captured before it are kept), also one of a
         planned length (Ctrl-C during ``rigctl record --seconds``)."""
         if self.t0_ns is not None:
-            now = time.monotonic_ns()
+            now = self.pace.now(self.stats.values())
             end = max(self.t0_ns, now + ((self.t0_ns - now) % self.period_ns))
             if self.t1_ns is None or end < self.t1_ns:
                 self.t1_ns = end
@@ -234,7 +216,7 @@ class Recorder:
             if self.error is not None:
                 return True
             if self.t1_ns is not None:
-                now = time.monotonic_ns()
+                now = self.pace.now(self.stats.values())
                 if all(s.done or s.ended or self._given_up(s, now) for s in self.stats.values()):
                     return True
                 if progress and self.t0_ns is not None:
@@ -244,8 +226,10 @@ class Recorder:
             time.sleep(0.02)
 
     def _given_up(self, st: CameraStats, now: int) -> bool:
-        """Past T1, stop waiting for a camera that has gone quiet (lost signal) or lags far behind."""
+        """Past T1, stop waiting for a camera gone quiet (lost signal) or far behind (paced: silent a while)."""
         assert self.t1_ns is not None
+        if self.pace.paced:
+            return self.pace.stale(st.name)
         past = now - self.t1_ns
         quiet = now - st.last_host_ns > 500_000_000 if st.last_host_ns else True
         return (past > 4 * self.period_ns and quiet) or past > 10_000_000_000
@@ -260,7 +244,7 @@ class Recorder:
                 trend.add(now, self.stats[name].queued)
                 self.stats[name].drop_in_s = trend.seconds_to_full()
         left = [s.drop_in_s for s in self.stats.values() if s.drop_in_s is not None]
-        return min(left) if left else None
+        return min(left) if left and not self.pace.paced else None  # paced, a full queue drops nothing
 
     # ---- threads ----------------------------------------------------------------------------------
     def _in_window(self, t: int) -> int:
@@ -278,7 +262,7 @@ class Recorder:
         q = self._queues[name]
         st = self.stats[name]
         while self._capturing.is_set():
-            slot = pool.take()
+            slot = self.pace.slot(pool, self._capturing)
             into = pool.scratch if slot is None else pool.views[slot]
             try:
                 frame = cam.read(0.2, into)
@@ -292,19 +276,22 @@ class Recorder:
                 if slot is not None:
                     pool.give(slot)
                 continue
-            where = self._in_window(frame.capture_ns)
             self._account_gap(st, frame)
             st.last_capture_ns, st.last_host_ns, st.last_sequence = frame.capture_ns, frame.host_ns, frame.sequence
             if self.preview_every_ns and frame.host_ns - st.preview_ns >= self.preview_every_ns:
-                st.thumbnail = thumbnail(
-                    frame.data, self.format
-                )  # a few hundred bytes, copied before the buffer is reused
+                # a few hundred bytes, copied before the buffer is reused
+                st.thumbnail = thumbnail(frame.data, self.format)
                 st.preview_ns = frame.host_ns
+            self.pace.seen(name)
+            self.pace.hold(self._capturing)  # paced: the first frame waits for T0 to be decided
+            where = self._in_window(frame.capture_ns)
             if where != 0:
                 if slot is not None:
                     pool.give(slot)
                 if where > 0:
                     st.done = True
+                    if self.pace.paced:
+                        return  # nothing more is needed, and a paced camera would deliver at once
                 continue
             st.seen_in_window = True
             if frame.flags & FrameFlags.FORMAT_CHANGED:
@@ -443,4 +430,5 @@ class Recorder:
             self.started_utc,
             self.t0_ns,
             self.t1_ns,
+            self.pace.clock,
         )

@@ -60,6 +60,7 @@ class TakeState:
     started_utc: str = ""
     t0_ns: int | None = None
     t1_ns: int | None = None
+    clock: str = "CLOCK_MONOTONIC"  # "simulated": a deterministic simulation's times
 
 
 def camera_entry(state: TakeState, name: str) -> CameraEntry:
@@ -121,7 +122,7 @@ def take_manifest(
             bytes_per_frame=fmt.bytes_per_frame,
         ),
         timing=Timing(
-            clock="CLOCK_MONOTONIC",
+            clock=state.clock,
             t0_ns=state.t0_ns,
             t1_ns=state.t1_ns,
             frame_period_ns=state.period_ns,
