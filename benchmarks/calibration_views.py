@@ -56,6 +56,8 @@ def main() -> None:
                 tmp,
                 "--sim",
                 f"board_poses={top}",
+                "--sim",
+                "deterministic=true",  # every pose recorded, on a busy machine too
             ],
             check=True,
             capture_output=True,

@@ -30,7 +30,8 @@ def record(folder: Path, size: str, frames: int) -> Path:
     (folder / "rig.yaml").write_text(rig)
     rigctl = str(Path(sys.executable).with_name("rigctl"))
     argv = [rigctl, "record", str(folder / "rig.yaml"), "--take", "bench", "--frames", str(frames)]
-    subprocess.run([*argv, "--out", str(folder), "--sim", "ideal=true", "--force"], check=True, capture_output=True)
+    sim = ["--sim", "ideal=true", "--sim", "deterministic=true"]  # every frame, the same bytes on any machine
+    subprocess.run([*argv, "--out", str(folder), *sim, "--force"], check=True, capture_output=True)
     return folder / "bench"
 
 

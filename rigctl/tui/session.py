@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from rigctl.camera_control import check_settings
-from rigctl.errors import PreflightError, RigctlError
+from rigctl.errors import ParameterError, PreflightError, RigctlError
 from rigctl.interfaces import SettingResult, SettingState, TallyState
 from rigctl.plan_report import plan_rig
 from rigctl.preflight import LOW_TIME_S, PreflightReport, WriteSpeed, measure_write
@@ -97,6 +97,9 @@ class Session:
         self.shot = shot
         self.take_number = next_take_number([self.out], scene, shot)  # on from the takes already there
         self.devices: DeviceSet = open_cameras(rig, sim or [])
+        if self.devices.paced:
+            self.devices.close()
+            raise ParameterError("--sim deterministic=true paces frames by a recorder; the shoot UI shows the rig live")
         self.names = sorted(self.devices.cameras, key=rig.camera_names.index)
         self.period_s = 1.0 / rig.fps
         self.recorder: Recorder | None = None
