@@ -47,3 +47,17 @@ def test_help_lists_every_setting() -> None:
     text = describe_settings()
     for key in ("scene=", "seed=", "ideal=", "drops=", "skew_us=", "signal_loss=", "stagger_ms=", "jitter_us="):
         assert key in text
+
+
+def test_deterministic_capture_needs_every_camera_simulated() -> None:
+    from rigctl.errors import DeviceError
+    from rigctl.registry import open_cameras
+    from rigctl.rig import load_rig, rig_from_dict
+
+    data = load_rig("sim-3x3").to_dict()
+    data["cameras"][0]["device"] = "v4l2:///dev/video0"
+    rig = rig_from_dict(data)
+    assert not open_cameras(rig, ["motion=false"]).paced
+    with pytest.raises(DeviceError, match="deterministic=true: rig .* has cameras that are not simulated"):
+        open_cameras(rig, ["deterministic=true", "motion=false"])
+    assert open_cameras(load_rig("sim-3x3"), ["deterministic=true", "motion=false"]).paced
