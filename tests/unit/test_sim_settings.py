@@ -58,6 +58,6 @@ def test_deterministic_capture_needs_every_camera_simulated() -> None:
     data["cameras"][0]["device"] = "v4l2:///dev/video0"
     rig = rig_from_dict(data)
     assert not open_cameras(rig, ["motion=false"]).paced
-    with pytest.raises(DeviceError, match="deterministic=true: rig .* has cameras that are not simulated"):
+    with pytest.raises(DeviceError, match=r"deterministic=true: rig \S+ has cameras that are not simulated"):
         open_cameras(rig, ["deterministic=true", "motion=false"])
     assert open_cameras(load_rig("sim-3x3"), ["deterministic=true", "motion=false"]).paced
