@@ -160,7 +160,12 @@ def run(ns: argparse.Namespace) -> int:
         return 0
     for r in views:
         t = r.get("against_truth")
-        vs = f", against the simulator's view: PSNR {t['psnr_db']:.2f} dB, SSIM {t['ssim']:.4f}" if t else ""
+        vs = (
+            f", against the simulator's view: PSNR {t['psnr_db']:.2f} dB, SSIM {t['ssim']:.4f}, "
+            f"IV-PSNR {t['ivpsnr_db']:.2f} dB"
+            if t
+            else ""
+        )
         print(f"{r['frame']}/{r['view']} at {r['col']:g},{r['row']:g} from {' '.join(r['sources'])}{vs}")
     print(f"wrote {len(views)} view(s) to {ns.out}")
     return 0

@@ -212,9 +212,10 @@ def format_bench(r: RenderBenchResult) -> str:
             f"kernels' first call {r['first_call_s']:.2f} s "
             f"({'compiled' if r['compiled'] else 'loaded from the cache'})",
             f"quality on the {q['take']}:",
-            f"  leave-one-out r1c1: PSNR {loo['psnr_db']:.2f} dB, SSIM {loo['ssim']:.4f}",
+            f"  leave-one-out r1c1: PSNR {loo['psnr_db']:.2f} dB, SSIM {loo['ssim']:.4f}, "
+            f"IV-PSNR {loo['ivpsnr_db']:.2f} dB",
             f"  view at {q['view']} against the simulator's view: PSNR {view['psnr_db']:.2f} dB, "
-            f"SSIM {view['ssim']:.4f}",
+            f"SSIM {view['ssim']:.4f}, IV-PSNR {view['ivpsnr_db']:.2f} dB",
         ]
     )
 

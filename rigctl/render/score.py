@@ -1,5 +1,6 @@
-"""Image quality of a rendered view against a reference image: PSNR and SSIM on the reference's keyed
-subject (the whole image when it shows no screen)."""
+"""Image quality of a rendered view against a reference image: PSNR, SSIM and IV-PSNR (MPEG's metric for
+immersive video, ``rigctl.interop.ivpsnr``) on the reference's keyed subject (the whole image when it shows
+no screen)."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ PSNR_CAP_DB = 99.0  # identical images: a finite figure, never infinity
 class Score(TypedDict):
     psnr_db: float
     ssim: float
+    ivpsnr_db: float  # tolerates a shift of up to 2 px and a colour offset a viewer does not notice
     pixels: int  # the subject's pixels scored
 
 
@@ -67,8 +69,11 @@ def score(
     if ignore is not None:
         y0, y1, x0, x1 = ignore
         mask[y0:y1, x0:x1] = False
+    from rigctl.interop.ivpsnr import ivpsnr_rgb
+
     return {
         "psnr_db": round(psnr_db(rendered, reference, mask), 3),
         "ssim": round(ssim(rendered, reference, mask), 4),
+        "ivpsnr_db": round(ivpsnr_rgb(rendered, reference, mask), 3),
         "pixels": int(mask.sum()),
     }

@@ -46,6 +46,7 @@ class LeaveOneOutRow(TypedDict):
     camera: str
     psnr_db: float
     ssim: float
+    ivpsnr_db: float
     pixels: int
     sources: list[str]
     ms: float
@@ -224,16 +225,16 @@ def leave_one_out(
             sc = score(res.rgba[..., :3], view.rgb, view.alpha if view.keyed else np.ones_like(view.alpha), ignore)
             rows.append(
                 {"frame": f"{n:06d}", "camera": cam, "psnr_db": sc["psnr_db"], "ssim": sc["ssim"],
-                 "pixels": sc["pixels"], "sources": res.sources, "ms": round(ms, 2)}
+                 "ivpsnr_db": sc["ivpsnr_db"], "pixels": sc["pixels"], "sources": res.sources, "ms": round(ms, 2)}
             )  # fmt: skip
     return rows
 
 
 def format_table(rows: list[LeaveOneOutRow]) -> str:
-    lines = [f"{'frame':<8} {'camera':<7} {'PSNR dB':>8} {'SSIM':>7} {'pixels':>8}  sources"]
+    lines = [f"{'frame':<8} {'camera':<7} {'PSNR dB':>8} {'SSIM':>7} {'IV-PSNR':>8} {'pixels':>8}  sources"]
     for r in rows:
         lines.append(
-            f"{r['frame']:<8} {r['camera']:<7} {r['psnr_db']:>8.2f} {r['ssim']:>7.4f} {r['pixels']:>8}  "
-            + " ".join(r["sources"])
+            f"{r['frame']:<8} {r['camera']:<7} {r['psnr_db']:>8.2f} {r['ssim']:>7.4f} {r['ivpsnr_db']:>8.2f} "
+            f"{r['pixels']:>8}  " + " ".join(r["sources"])
         )
     return "\n".join(lines)
