@@ -1,4 +1,6 @@
-"""``rigctl miv``: MPEG immersive-video interchange. ``miv ivpsnr`` scores raw YUV pictures with IV-PSNR."""
+"""``rigctl miv``: MPEG immersive-video interchange. ``miv ivpsnr`` scores raw YUV pictures with IV-PSNR;
+``miv export`` writes a rectified take and its disparity as MIV content (camera JSON + YUV files);
+``miv import`` reads MIV content into grid folders that ``depth`` and ``render`` take."""
 
 from __future__ import annotations
 
@@ -22,14 +24,14 @@ def _size(text: str) -> tuple[int, int]:
     return int(m[1]), int(m[2])
 
 
-def _frames(text: str) -> range:  # for export and import
+def _frames(text: str) -> range:
     m = re.fullmatch(r"(\d+)(?:-(\d+))?", text)
     if m is None or (m[2] is not None and int(m[2]) < int(m[1])):
         raise argparse.ArgumentTypeError(f"frames must be A or A-B with A <= B, got {text!r}")
     return range(int(m[1]), int(m[2] or m[1]) + 1)
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("miv", help="MPEG immersive video: IV-PSNR, export and import of MIV content")
     verbs = p.add_subparsers(dest="miv_verb", metavar="ACTION")
 
@@ -48,6 +50,24 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     iv.add_argument("--json", action="store_true")
     iv.set_defaults(func=cmd_ivpsnr)
 
+    ex = verbs.add_parser(
+        "export",
+        help="a rectified take and its disparity as MIV content: camera JSON, YUV 4:2:0 10-bit colour, 16-bit depth",
+    )
+    ex.add_argument("take", type=Path, help="a rectified take (or an ideal=true simulated take)")
+    ex.add_argument("disparity", type=Path, help="disparity folder: <frame>/<camera>.pfm (a depth output, truth)")
+    ex.add_argument("--out", type=Path, required=True, help="new folder for the content")
+    ex.add_argument("--frames", type=_frames, help="frame sets A-B (default: every one with a disparity)")
+    ex.set_defaults(func=cmd_export)
+
+    im = verbs.add_parser(
+        "import",
+        help="MIV content (camera JSON + YUV) as grid folders for rigctl depth and render, one per frame",
+    )
+    im.add_argument("cameras", type=Path, help="the content's camera JSON")
+    im.add_argument("--out", type=Path, required=True, help="new folder: <frame>/grid.yaml, images, disparity")
+    im.add_argument("--frames", type=_frames, help="frames A-B (default: every frame of the content)")
+    im.set_defaults(func=cmd_import)
     p.set_defaults(func=lambda ns: p.print_help() or 2)
 
 
@@ -76,4 +96,20 @@ def cmd_ivpsnr(ns: argparse.Namespace) -> int:
     else:
         print(f"IV-PSNR {r.ivpsnr_db:.4f} dB  PSNR Y {r.psnr_db[0]:.4f} Cb {r.psnr_db[1]:.4f} Cr {r.psnr_db[2]:.4f} dB"
               f"  colour offset {r.offset[0]} {r.offset[1]} {r.offset[2]}")  # fmt: skip
+    return 0
+
+
+def cmd_export(ns: argparse.Namespace) -> int:
+    from rigctl.interop.miv import export_miv
+
+    files = export_miv(ns.take, ns.disparity, ns.out, ns.frames)
+    print(f"wrote {len(files)} files of MIV content to {ns.out} (listed in {ns.out / 'README.txt'})")
+    return 0
+
+
+def cmd_import(ns: argparse.Namespace) -> int:
+    from rigctl.interop.miv_import import import_miv
+
+    folders = import_miv(ns.cameras, ns.out, ns.frames)
+    print(f"wrote {len(folders)} grid folder(s) to {ns.out}")
     return 0

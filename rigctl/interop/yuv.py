@@ -93,15 +93,35 @@ def write_frame(f: object, planes: list[U16], bits: int) -> None:
         f.write(np.ascontiguousarray(p, dtype=dtype).tobytes())  # type: ignore[attr-defined]
 
 
-def rgb_to_ycbcr(rgb: F32, bits: int) -> U16:
-    """(3, H, W) BT.709 limited-range YCbCr at ``bits`` from non-linear R'G'B' float in [0, 1] (H, W, 3)."""
+def _ycbcr(rgb: F32, bits: int) -> NDArray[np.float64]:
+    """(3, H, W) BT.709 limited-range YCbCr at ``bits``, unrounded, from R'G'B' float in [0, 1] (H, W, 3)."""
     r, g, b = (np.clip(rgb[..., i].astype(np.float64), 0.0, 1.0) for i in range(3))
     y = KR * r + KG * g + KB * b
     cb = (b - y) / (2 * (1 - KB))
     cr = (r - y) / (2 * (1 - KR))
     scale = float(1 << (bits - 8))
-    out = np.stack([(16 + 219 * y) * scale, (128 + 224 * cb) * scale, (128 + 224 * cr) * scale])
-    return np.clip(np.rint(out), 0, (1 << bits) - 1).astype(np.uint16)
+    return np.stack([(16 + 219 * y) * scale, (128 + 224 * cb) * scale, (128 + 224 * cr) * scale])
+
+
+def _quantise(x: NDArray[np.float64], bits: int) -> U16:
+    return np.clip(np.rint(x), 0, (1 << bits) - 1).astype(np.uint16)
+
+
+def rgb_to_ycbcr(rgb: F32, bits: int) -> U16:
+    """(3, H, W) BT.709 limited-range YCbCr at ``bits`` from non-linear R'G'B' float in [0, 1] (H, W, 3)."""
+    return _quantise(_ycbcr(rgb, bits), bits)
+
+
+def rgb_to_yuv420(rgb: F32, bits: int) -> list[U16]:
+    """Y, Cb, Cr planes of 4:2:0 YCbCr at ``bits``: chroma the mean of each 2x2 block, rounded once (edges
+    repeated when a size is odd)."""
+    ycc = _ycbcr(rgb, bits)
+    h, w = ycc.shape[1:]
+    chroma = []
+    for c in ycc[1:]:
+        p = np.pad(c, ((0, h % 2), (0, w % 2)), mode="edge")
+        chroma.append(_quantise((p[0::2, 0::2] + p[1::2, 0::2] + p[0::2, 1::2] + p[1::2, 1::2]) / 4, bits))
+    return [_quantise(ycc[0], bits), *chroma]
 
 
 def ycbcr_to_rgb(ycc: U16, bits: int) -> F32:

@@ -1,0 +1,242 @@
+"""MIV content in: a camera JSON (the common test conditions' ``cameras`` list) and its YUV files, turned into
+one grid folder per frame (``grid.yaml``, 16-bit PNG colour, the content's own depth as disparity PFMs) that
+``rigctl depth`` and ``rigctl render`` read.
+
+Only a planar grid can be a grid: every camera perspective, with one resolution, one square-pixel focal length,
+one principal point and one orientation, their centres in one plane facing the way they look, on a lattice of
+rows and columns. Anything else is refused in one line naming what breaks it. Cameras are renamed by their
+place in the grid, ``r{row}c{col}`` (row 0 at the top, column 0 at the left, seen from behind), and the names
+they had are kept in ``import.json``. Axes and depth coding are those of :mod:`rigctl.interop.miv`.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from rigctl.errors import ParameterError, RigFileError
+from rigctl.interop import yuv
+from rigctl.interop.miv import levels_disparity, omaf_to_cv
+
+log = logging.getLogger(__name__)
+
+F64 = NDArray[np.float64]
+MAX_JSON = 16 << 20
+PLANE_TOLERANCE = 0.02  # of the grid's spacing: out of plane or off the lattice by more is refused
+
+
+@dataclass(frozen=True)
+class MivCamera:
+    name: str  # the content's own name
+    grid_name: str  # r{row}c{col}
+    position_cv: F64  # centre in our axes (x right, y down, z forward) of the common orientation, metres
+    depth_range: tuple[float, float]
+    colour_bits: int
+    depth_bits: int
+    depth_chroma: bool
+
+
+@dataclass(frozen=True)
+class MivContent:
+    """The cameras of a MIV content, placed on a grid."""
+
+    folder: Path
+    cameras: list[MivCamera]
+    size: tuple[int, int]
+    focal_px: float
+    principal_cv: tuple[float, float]
+    spacing_x: float
+    spacing_y: float
+
+    def texture(self, cam: MivCamera) -> Path:
+        return self.folder / f"{cam.name}_texture_{self.size[0]}x{self.size[1]}_yuv420p10le.yuv"
+
+    def depth(self, cam: MivCamera) -> Path:
+        fmt = "yuv420p16le" if cam.depth_chroma else "gray16le"
+        return self.folder / f"{cam.name}_depth_{self.size[0]}x{self.size[1]}_{fmt}.yuv"
+
+    def frame_count(self) -> int:
+        w, h = self.size
+        return min(yuv.frame_count(self.texture(c), w, h, c.colour_bits) for c in self.cameras)
+
+    def colour(self, cam: MivCamera, frame: int) -> tuple[NDArray[np.uint16], NDArray[np.uint16], NDArray[np.uint16]]:
+        y, cb, cr = yuv.read_frame(self.texture(cam), self.size[0], self.size[1], cam.colour_bits, frame)
+        assert cb is not None and cr is not None
+        return y, cb, cr
+
+    def disparity(self, cam: MivCamera, frame: int) -> NDArray[np.float32]:
+        """The content's depth of ``cam`` as our disparity (px for the horizontal spacing; +inf: none)."""
+        levels = yuv.read_frame(self.depth(cam), self.size[0], self.size[1], cam.depth_bits, frame, cam.depth_chroma)[0]
+        top = (1 << cam.depth_bits) - 1
+        levels16 = np.rint(levels.astype(np.float64) * (65535.0 / top)).astype(np.uint16)
+        return levels_disparity(levels16, self.focal_px, self.spacing_x, *cam.depth_range)
+
+
+def rotation(yaw: float, pitch: float, roll: float) -> F64:
+    """MIV's R = Rz(yaw) Ry(pitch) Rx(roll), degrees."""
+    a, b, c = (math.radians(v) for v in (yaw, pitch, roll))
+    rz = np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
+    ry = np.array([[math.cos(b), 0, math.sin(b)], [0, 1, 0], [-math.sin(b), 0, math.cos(b)]])
+    rx = np.array([[1, 0, 0], [0, math.cos(c), -math.sin(c)], [0, math.sin(c), math.cos(c)]])
+    return np.asarray(rz @ ry @ rx, np.float64)
+
+
+def _field(path: Path, cam: dict[str, Any], key: str, n: int | None = None) -> Any:
+    name = cam.get("Name", "?")
+    if key not in cam:
+        raise RigFileError(f"{path}: camera {name}: {key} is missing")
+    v = cam[key]
+    if n is not None:
+        ok = isinstance(v, list) and len(v) == n
+        ok = ok and all(isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in v)
+        if not ok:
+            raise RigFileError(f"{path}: camera {name}: {key} must be {n} finite numbers, got {v!r}")
+    return v
+
+
+def read_content(path: Path) -> MivContent:
+    """The camera JSON at ``path`` (its YUV files beside it), checked to be a planar grid."""
+    try:
+        if path.stat().st_size > MAX_JSON:
+            raise RigFileError(f"{path}: over {MAX_JSON >> 20} MB: not a camera file")
+        doc = json.loads(path.read_text())
+    except OSError as exc:
+        raise RigFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise RigFileError(f"{path}: not JSON: {exc}") from None
+    cams = doc.get("cameras") if isinstance(doc, dict) else None
+    if not isinstance(cams, list) or not cams or not all(isinstance(c, dict) for c in cams):
+        raise RigFileError(f'{path}: no "cameras" list')
+    first = cams[0]
+    size = tuple(int(v) for v in _field(path, first, "Resolution", 2))
+    focal = _field(path, first, "Focal", 2)
+    pp = _field(path, first, "Principle_point", 2)
+    rot = _field(path, first, "Rotation", 3)
+    for c in cams:
+        name = c.get("Name")
+        if not isinstance(name, str) or not name or "/" in name:
+            raise RigFileError(f"{path}: a camera has no usable Name ({name!r})")
+        if c.get("Projection", "Perspective") != "Perspective":
+            raise RigFileError(
+                f"{path}: camera {name}: {c.get('Projection')} projection: only perspective views form a grid"
+            )
+        for key, want in (("Resolution", list(size)), ("Focal", focal), ("Principle_point", pp), ("Rotation", rot)):
+            got = _field(path, c, key, len(want))
+            if not np.allclose(got, want, rtol=0, atol=1e-6):
+                raise RigFileError(
+                    f"{path}: camera {name}: {key} {got} differs from {first.get('Name')}'s {want}: not one planar grid"
+                )
+        _field(path, c, "Position", 3)
+        near, far = _field(path, c, "Depth_range", 2)
+        if not 0 < near < far:
+            raise RigFileError(f"{path}: camera {name}: Depth_range {[near, far]} must have 0 < near < far")
+    if abs(focal[0] - focal[1]) > 1e-6 * focal[0] or focal[0] <= 0:
+        raise RigFileError(f"{path}: Focal {focal}: the grid needs one positive focal length (square pixels)")
+    R = rotation(*rot)
+    world = np.array([c["Position"] for c in cams], np.float64)
+    local = omaf_to_cv((world - world.mean(axis=0)) @ R)  # R^T p for each row, then our axes
+    return _grid(path, cams, local, size, float(focal[0]), pp)  # type: ignore[arg-type]
+
+
+def _levels(values: F64, what: str, path: Path, names: list[str]) -> tuple[NDArray[np.int64], float]:
+    """Lattice indices of 1-D positions and the spacing (0 for one level); refuses what is off the lattice."""
+    order = np.sort(values)
+    gaps = np.diff(order)
+    big = gaps[gaps > 0.25 * max(gaps.max(initial=0.0), 1e-9)]
+    if big.size == 0:
+        return np.zeros(values.size, np.int64), 0.0
+    step = float(big.min())
+    idx = np.rint((values - order[0]) / step).astype(np.int64)
+    off = np.abs(values - order[0] - idx * step)
+    bad = int(np.argmax(off))
+    if off[bad] > PLANE_TOLERANCE * step:
+        raise RigFileError(
+            f"{path}: camera {names[bad]} is {off[bad] * 1e3:.1f} mm off the grid's {what} lattice "
+            f"(spacing {step * 1e3:.1f} mm): not a grid"
+        )
+    return idx, step
+
+
+def _grid(
+    path: Path, cams: list[dict[str, Any]], local: F64, size: tuple[int, int], focal: float, pp: list[float]
+) -> MivContent:
+    names = [c["Name"] for c in cams]
+    cols, sx = _levels(local[:, 0], "column", path, names)
+    rows, sy = _levels(local[:, 1], "row", path, names)
+    scale = max(sx, sy)
+    if scale == 0:
+        raise RigFileError(f"{path}: every camera is at one place: not a grid")
+    depth = local[:, 2] - np.median(local[:, 2])
+    bad = int(np.argmax(np.abs(depth)))
+    if abs(depth[bad]) > PLANE_TOLERANCE * scale:
+        raise RigFileError(
+            f"{path}: camera {names[bad]} is {depth[bad] * 1e3:.1f} mm in front of or behind the plane of the "
+            "others: the cameras are not planar"
+        )
+    seen: dict[tuple[int, int], str] = {}
+    out = []
+    for i, c in enumerate(cams):
+        key = (int(rows[i]), int(cols[i]))
+        if key in seen:
+            raise RigFileError(f"{path}: cameras {seen[key]} and {names[i]} are at one grid position")
+        seen[key] = names[i]
+        chroma = c.get("DepthColorSpace", "YUV420") != "YUV400"
+        out.append(
+            MivCamera(
+                names[i],
+                f"r{key[0]}c{key[1]}",
+                local[i],
+                (float(c["Depth_range"][0]), float(c["Depth_range"][1])),
+                int(c.get("BitDepthColor", 10)),
+                int(c.get("BitDepthDepth", 16)),
+                chroma,
+            )
+        )
+    return MivContent(path.parent, out, size, focal, (float(pp[0]) - 0.5, float(pp[1]) - 0.5), sx or sy, sy or sx)
+
+
+def import_miv(cameras_json: Path, out: Path, frames: range | None = None) -> list[Path]:
+    """Grid folders ``out/<frame:06d>/`` (grid.yaml, r{row}c{col}.png at 16 bits, disparity/r{row}c{col}.pfm
+    from the content's depth) for ``frames`` (default: all); returns the folders."""
+    import cv2
+
+    from rigctl.pfm import write_pfm
+
+    if out.exists():
+        raise ParameterError(f"{out}: already exists; the import goes into a new folder")
+    content = read_content(cameras_json)
+    count = content.frame_count()
+    numbers = list(frames) if frames is not None else list(range(count))
+    beyond = [n for n in numbers if n >= count]
+    if beyond:
+        raise ParameterError(f"{cameras_json}: the content has {count} frame(s); frame {beyond[0]} is beyond it")
+    folders = []
+    for n in numbers:
+        folder = out / f"{n:06d}"
+        (folder / "disparity").mkdir(parents=True)
+        grid = {"spacing_x": content.spacing_x, "spacing_y": content.spacing_y, "focal_px": content.focal_px}
+        (folder / "grid.yaml").write_text(json.dumps(grid) + "\n")  # JSON is YAML
+        for cam in content.cameras:
+            y, cb, cr = content.colour(cam, n)
+            rgb = yuv.ycbcr_to_rgb(upsample(y, cb, cr), cam.colour_bits)
+            png = np.rint(rgb[..., ::-1] * 65535.0).astype(np.uint16)
+            cv2.imwrite(str(folder / f"{cam.grid_name}.png"), png)
+            write_pfm(folder / "disparity" / f"{cam.grid_name}.pfm", content.disparity(cam, n))
+        folders.append(folder)
+    names = {c.grid_name: c.name for c in content.cameras}
+    (out / "import.json").write_text(json.dumps({"source": str(cameras_json), "cameras": names}, indent=2) + "\n")
+    return folders
+
+
+def upsample(y: NDArray[np.uint16], cb: NDArray[np.uint16], cr: NDArray[np.uint16]) -> NDArray[np.uint16]:
+    """(3, H, W) from 4:2:0, each chroma sample over its 2x2 block."""
+    from rigctl.interop.ivpsnr import upsample_420
+
+    return upsample_420(y, cb, cr)
