@@ -1,0 +1,1 @@
+"""Interchange with the immersive-video field: MPEG immersive-video content (MIV) out and in, IV-PSNR, USD cameras."""

@@ -64,7 +64,9 @@ class MivContent:
 
     def frame_count(self) -> int:
         w, h = self.size
-        return min(yuv.frame_count(self.texture(c), w, h, c.colour_bits) for c in self.cameras)
+        counts = [yuv.frame_count(self.texture(c), w, h, c.colour_bits) for c in self.cameras]
+        counts += [yuv.frame_count(self.depth(c), w, h, c.depth_bits, c.depth_chroma) for c in self.cameras]
+        return min(counts)
 
     def colour(self, cam: MivCamera, frame: int) -> tuple[NDArray[np.uint16], NDArray[np.uint16], NDArray[np.uint16]]:
         y, cb, cr = yuv.read_frame(self.texture(cam), self.size[0], self.size[1], cam.colour_bits, frame)
@@ -116,6 +118,8 @@ def read_content(path: Path) -> MivContent:
         raise RigFileError(f'{path}: no "cameras" list')
     first = cams[0]
     size = tuple(int(v) for v in _field(path, first, "Resolution", 2))
+    if not all(1 <= v <= 1 << 16 for v in size) or list(size) != first["Resolution"]:
+        raise RigFileError(f"{path}: Resolution {first['Resolution']}: must be two whole numbers from 1 to 65536")
     focal = _field(path, first, "Focal", 2)
     pp = _field(path, first, "Principle_point", 2)
     rot = _field(path, first, "Rotation", 3)
@@ -137,6 +141,10 @@ def read_content(path: Path) -> MivContent:
         near, far = _field(path, c, "Depth_range", 2)
         if not 0 < near < far:
             raise RigFileError(f"{path}: camera {name}: Depth_range {[near, far]} must have 0 < near < far")
+        for key, default, top in (("BitDepthColor", 10, 14), ("BitDepthDepth", 16, 16)):
+            bits = c.get(key, default)
+            if isinstance(bits, bool) or not isinstance(bits, int) or not 8 <= bits <= top:
+                raise RigFileError(f"{path}: camera {name}: {key} {bits!r} must be a whole number from 8 to {top}")
     if abs(focal[0] - focal[1]) > 1e-6 * focal[0] or focal[0] <= 0:
         raise RigFileError(f"{path}: Focal {focal}: the grid needs one positive focal length (square pixels)")
     R = rotation(*rot)

@@ -47,7 +47,12 @@ def frame_bytes(width: int, height: int, bits: int, chroma: bool = True) -> int:
 
 def frame_count(path: Path, width: int, height: int, bits: int, chroma: bool = True) -> int:
     """Whole frames in a file; a size that is not a whole number of frames is refused."""
-    size = os.path.getsize(path)
+    if width < 1 or height < 1:
+        raise YuvError(f"{path}: picture size {width}x{height} is not positive")
+    try:
+        size = os.path.getsize(path)
+    except OSError as exc:
+        raise YuvError(f"{path}: cannot read: {exc.strerror or exc}") from None
     per = frame_bytes(width, height, bits, chroma)
     if size % per:
         raise YuvError(f"{path}: {size} bytes is not a whole number of {width}x{height} {bits}-bit frames ({per})")
@@ -60,10 +65,7 @@ def read_frame(
     """Y, Cb, Cr planes of frame ``frame`` (Cb and Cr are None for 4:0:0). A file that is not a whole
     number of such frames is refused (the size or format given is not the file's)."""
     per = frame_bytes(width, height, bits, chroma)
-    try:
-        frame_count(path, width, height, bits, chroma)
-    except OSError as exc:
-        raise YuvError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    frame_count(path, width, height, bits, chroma)
     dtype = np.dtype("<u2") if _sample_bytes(bits) == 2 else np.dtype(np.uint8)
     try:
         with open(path, "rb") as f:

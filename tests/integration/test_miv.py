@@ -6,6 +6,7 @@ on our export against rigctl render and against the simulator's view, and the re
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -235,3 +236,33 @@ def test_content_that_is_not_a_planar_grid_is_refused_in_one_line(
 def test_export_into_an_existing_folder_is_refused(take: Path, content: Path) -> None:
     res = run_rigctl("miv", "export", str(take), str(take / "truth" / "disparity"), "--out", str(content))
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and "already exists" in res.stderr
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("{", "not JSON"),
+        ('{"cameras": 3}', 'no "cameras" list'),
+        ('{"cameras": [{"Name": "v0", "Resolution": [0, 0]}]}', "Resolution [0, 0]"),
+        ('{"cameras": [{"Name": "v0", "Resolution": [64, 48], "Focal": ["a", 1]}]}', "Focal must be 2 finite numbers"),
+    ],
+)
+def test_a_hostile_camera_file_is_refused_in_one_line(tmp_path: Path, text: str, message: str) -> None:
+    bad = tmp_path / "cameras.json"
+    bad.write_text(text)
+    res = run_rigctl("miv", "import", str(bad), "--out", str(tmp_path / "out"))
+    assert res.returncode == 3 and res.stderr.count("\n") == 1 and message in res.stderr, res.stderr
+
+
+def test_content_with_a_missing_or_short_file_is_refused_in_one_line(content: Path, tmp_path: Path) -> None:
+    folder = tmp_path / "content"
+    shutil.copytree(content, folder)
+    (folder / texture_name("r2c2", W, H)).unlink()
+    res = run_rigctl("miv", "import", str(folder / "cameras.json"), "--out", str(tmp_path / "a"))
+    assert res.returncode == 3 and res.stderr.count("\n") == 1 and "r2c2_texture" in res.stderr, res.stderr
+    shutil.copytree(content, folder, dirs_exist_ok=True)
+    with open(folder / depth_name("r1c1", W, H), "r+b") as f:
+        f.truncate(1000)
+    res = run_rigctl("miv", "import", str(folder / "cameras.json"), "--out", str(tmp_path / "b"))
+    assert res.returncode == 3 and res.stderr.count("\n") == 1 and "r1c1_depth" in res.stderr, res.stderr
+    assert not (tmp_path / "b").exists()  # checked before anything is written
