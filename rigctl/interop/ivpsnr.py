@@ -28,6 +28,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 log = logging.getLogger(__name__)
@@ -89,7 +90,53 @@ def global_offset(
 def _one_way(
     src: NDArray[np.int32], other: NDArray[np.int32], mask: NDArray[np.int32] | None, s: int
 ) -> NDArray[np.float64]:
-    """Per-component SSD of every pixel of ``src`` (already offset) against its best match in ``other``."""
+    """Per-component SSD of every pixel of ``src`` (already offset) against its best match in ``other``:
+    a compiled loop over the pixels (:func:`_one_way_kernel`); :func:`one_way_numpy` is the same in numpy,
+    kept as the reference the kernel is tested against."""
+    pad = np.ascontiguousarray(np.pad(other, ((0, 0), (s, s), (s, s)), mode="edge"))
+    m = np.ones(src.shape[1:], np.int32) if mask is None else mask
+    valid = np.ascontiguousarray(np.pad(m, s, mode="edge") != 0) if mask is not None else np.ones((1, 1), np.bool_)
+    return np.asarray(
+        _one_way_kernel(np.ascontiguousarray(src), pad, valid, np.ascontiguousarray(m), s, mask is not None),
+        np.float64,
+    )
+
+
+@njit(cache=True, nogil=True)
+def _one_way_kernel(
+    src: NDArray[np.int32], pad: NDArray[np.int32], valid: NDArray[np.bool_], mask: NDArray[np.int32], s: int,
+    masked: bool,
+) -> NDArray[np.float64]:  # fmt: skip
+    _, h, w = src.shape
+    ssd = np.zeros(3, np.float64)
+    for y in range(h):
+        for x in range(w):
+            if masked and mask[y, x] == 0:
+                continue
+            t0, t1, t2 = src[0, y, x], src[1, y, x], src[2, y, x]
+            best = np.int64(1) << 62
+            b0 = b1 = b2 = np.int64(0)
+            for dy in range(2 * s + 1):  # raster order, strictly better only: the first best wins a tie
+                for dx in range(2 * s + 1):
+                    if masked and not valid[y + dy, x + dx]:
+                        continue
+                    d0 = np.int64(t0 - pad[0, y + dy, x + dx])
+                    d1 = np.int64(t1 - pad[1, y + dy, x + dx])
+                    d2 = np.int64(t2 - pad[2, y + dy, x + dx])
+                    err = 4 * d0 * d0 + d1 * d1 + d2 * d2
+                    if err < best:
+                        best, b0, b1, b2 = err, d0, d1, d2
+            wt = mask[y, x] if masked else 1
+            ssd[0] += b0 * b0 * wt
+            ssd[1] += b1 * b1 * wt
+            ssd[2] += b2 * b2 * wt
+    return ssd
+
+
+def one_way_numpy(
+    src: NDArray[np.int32], other: NDArray[np.int32], mask: NDArray[np.int32] | None, s: int
+) -> NDArray[np.float64]:
+    """:func:`_one_way` in numpy: every window offset over the whole picture at once."""
     _, h, w = src.shape
     pad = np.pad(other, ((0, 0), (s, s), (s, s)), mode="edge")
     valid = None if mask is None else np.pad(mask, s, mode="edge") != 0

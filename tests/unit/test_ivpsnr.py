@@ -122,3 +122,15 @@ def test_bad_input_is_refused_in_one_sentence(kwargs: dict, message: str) -> Non
     args = {"ref": flat(), "test": flat(), "bit_depth": 8, **kwargs}
     with pytest.raises(ValueError, match=message):
         ivpsnr(**args)
+
+
+@pytest.mark.parametrize("masked", [False, True])
+def test_the_compiled_search_gives_the_numpy_search_to_the_bit(masked: bool) -> None:
+    from rigctl.interop.ivpsnr import _one_way, one_way_numpy
+
+    rng = np.random.default_rng(11)
+    src = rng.integers(0, 8, (3, 40, 56)).astype(np.int32)  # few values: many ties between candidates
+    other = rng.integers(0, 8, (3, 40, 56)).astype(np.int32)
+    mask = (rng.random((40, 56)) > 0.4).astype(np.int32) * rng.integers(1, 256, (40, 56)).astype(np.int32)
+    m = mask if masked else None
+    assert _one_way(src, other, m, 2).tolist() == one_way_numpy(src, other, m, 2).tolist()
