@@ -15,8 +15,9 @@ import numpy as np
 
 from rigctl.depth.estimate import estimate
 from rigctl.depth.key import Keyer
+from rigctl.depth.metrics import score
 from rigctl.depth.presets import PRESETS
-from rigctl.depth.run import score, unplanned_range
+from rigctl.depth.take_range import unplanned_range
 from rigctl.simulated_presenter import presenter
 
 
@@ -27,7 +28,7 @@ def main() -> None:
     ns = parser.parse_args()
     ds = presenter(ideal=False)
     mask = np.isfinite(ds.truth)
-    full = unplanned_range(ds.grid)
+    full = unplanned_range(ds.grid.shape[1])
     runs = {"keyed, planned range": (Keyer(), ds.d_range), "no key, whole range": (None, full)}
     out = {}
     for label, (keyer, d_range) in runs.items():

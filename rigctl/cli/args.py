@@ -66,6 +66,17 @@ def fraction(text: str) -> float:
     return value
 
 
+def positive_int(text: str) -> int:
+    """A whole number of at least 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
+    return value
+
+
 def add_layout(p: argparse.ArgumentParser) -> None:
     """``--layout`` of every command that writes per-frame, per-camera files (rigctl.layout), and ``--colour``
     of their EXR pictures (rigctl.exr)."""
@@ -81,4 +92,18 @@ def add_layout(p: argparse.ArgumentParser) -> None:
         choices=LAYOUTS,
         help="frames: DIR/<frame:06d>/<camera>.<ext> (default); sequence: DIR/<camera>/<camera>.<frame:06d>.<ext>, "
         "one image sequence per camera as NUKE and Unreal's Img Media read it",
+    )
+
+
+def add_pipeline_options(p: argparse.ArgumentParser) -> None:
+    """The take-level pipeline's options, the same for rigctl depth and rigctl process."""
+    from rigctl.depth.options import DEFAULT_CHUNK
+
+    p.add_argument("--no-temporal", action="store_true", help="each frame set on its own (no temporal stabilisation)")
+    p.add_argument(
+        "--chunk",
+        type=positive_int,
+        default=DEFAULT_CHUNK,
+        metavar="N",
+        help=f"frame sets per chunk: state carried between frame sets starts afresh at each (default {DEFAULT_CHUNK})",
     )

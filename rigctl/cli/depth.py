@@ -7,7 +7,7 @@ import json
 import math
 from pathlib import Path
 
-from rigctl.cli.args import add_layout, distance, far_distance
+from rigctl.cli.args import add_layout, add_pipeline_options, distance, far_distance
 from rigctl.cli.progress import Progress
 from rigctl.cli.take import damaged_exit
 from rigctl.depth.presets import PRESETS
@@ -39,6 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="leave out frame sets with a damaged or missing frame, list them in report.json and exit 5",
     )
+    add_pipeline_options(p)
     add_layout(p)
     p.add_argument("--json", action="store_true")
     p.add_argument("--check", action="store_true", help="add leave-one-out PSNR/SSIM (rigctl render) to report.json")
@@ -56,6 +57,8 @@ def run(ns: argparse.Namespace) -> int:
         far_m=ns.far if ns.far is not None else (math.inf if ns.near is not None else None),
         key=not ns.no_key,
         cameras=tuple(ns.cameras) if ns.cameras else None,
+        temporal=not ns.no_temporal,
+        chunk=ns.chunk,
     )
     if ns.check and ns.cameras is not None and len(set(ns.cameras)) < 2:
         raise ParameterError(
@@ -85,16 +88,27 @@ def run(ns: argparse.Namespace) -> int:
     if ns.json:
         print(json.dumps(data, default=float))
         return status
+    rng = report.range
+    print(
+        f"take range {rng.disparity_range_px[0]:.1f}..{rng.disparity_range_px[1]:.1f} px ({rng.source}); "
+        f"bound hit on {report.bound_hit_pixels} px in all"
+    )
     for n, fr in report.frames.items():
         lo, hi = fr.disparity_range_px
         print(
-            f"frame {n}: {len(fr.cameras)} cameras, disparity {lo:.1f}..{hi:.1f} px ({fr.range_source}), "
+            f"frame {n}: {len(fr.cameras)} cameras, disparity {lo:.1f}..{hi:.1f} px, "
             f"keyed background {fr.keyed_background_share:.0%}, bound hit on {fr.bound_hit_pixels} px, "
-            f"{fr.depth_s:.1f} s"
+            f"{fr.timings_s.depth:.1f} s"
         )
-        for cam, st in fr.cameras.items():
-            truth = st.get("against_truth")
-            if isinstance(truth, dict):
-                print(f"  {cam}: bad 1.0 {truth['bad_1.0']:.2f} %, bad 2.0 {truth['bad_2.0']:.2f} % against the truth")
+        for cam in fr.cameras:
+            truth = fr.truth(cam)
+            if truth is not None:
+                print(f"  {cam}: bad 1.0 {truth.bad_1_0:.2f} %, bad 2.0 {truth.bad_2_0:.2f} % against the truth")
+    for cam, v in report.video.items():
+        if v.static_change_mean_px is not None:
+            print(
+                f"{cam} over time: change where the truth is still {v.static_change_mean_px:.3f} px mean, "
+                f"{v.static_change_over_0_5_pct:.2f} % above 0.5 px"
+            )
     print(f"wrote {ns.out} in {report.seconds:.1f} s")
     return status

@@ -69,24 +69,14 @@ def stratified(size: tuple[int, int] = (256, 256), seed: int = 0) -> list[Datase
 
 
 def dataset_from_array(array: Any, name: str, camera: str = "r1c1") -> Dataset:
-    from rigctl.pixfmt import to_bgr8
-    from rigctl.rectify import Rectifier
+    """The first frame set of a simulated array as rendered (no camera noise), rectified with its true
+    calibration, searched over the planned range."""
+    from rigctl.depth.array_take import ArrayTake
 
-    fmt = array.format
-    raw = array.frames(0)
-    disp, _ = array.truth(0)
-    rect = Rectifier(array.calibration)
-    images = {}
-    for i, n in enumerate(array.names):
-        images[n] = rect.frame(n, to_bgr8(raw[i], fmt.pixel_format, fmt.width, fmt.height))  # 8-bit, as a take
-    g = rect.grid
-    origin = np.mean([g.position_m(n) for n in array.names], axis=0)
-    offsets = {n: tuple(((g.position_m(n) - origin)[:2] / g.spacing_x_m).tolist()) for n in array.names}
-    grid = Grid(list(array.names), images, offsets, g.focal_px, g.spacing_x_m)
-    near, far = array.near_far()
-    d_range = (g.focal_px * g.spacing_x_m / far - 2, g.focal_px * g.spacing_x_m / near + 2)
-    truth = disp[array.names.index(camera)]
-    return Dataset(name, grid, camera, truth, d_range, key=True)
+    take = ArrayTake(array, 1, name, noise=False)
+    grid = take.grid(0)
+    assert grid.truth is not None
+    return Dataset(name, grid, camera, grid.truth[camera], take.planned_range(), key=True)
 
 
 @dataclass(frozen=True)

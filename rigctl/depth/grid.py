@@ -24,6 +24,7 @@ from rigctl.errors import ParameterError, RigFileError, TakeError
 from rigctl.pixfmt import bgr8_to_rgb, to_bgr8, to_rgb, to_u8
 from rigctl.rig import CAMERA_NAME
 from rigctl.take.reader import TakeReader
+from rigctl.timecode import Timecode
 from rigctl.yamlfile import load_yaml
 
 F32 = NDArray[np.float32]
@@ -223,12 +224,62 @@ def load_grid_folder(folder: Path) -> Grid:
         raise RigFileError(f"{path}: spacing_x, spacing_y, focal_px, doffs must be numbers") from None
 
 
+def camera_offsets(
+    positions_m: Mapping[str, Any], names: list[str], spacing: float, where: str
+) -> dict[str, tuple[float, float]]:
+    """Each camera's position relative to the cameras' mean, in units of the horizontal ``spacing`` (x right,
+    y down): the grid's ``offsets``. Every camera of ``names`` needs a position: one without is refused,
+    naming ``where`` (the take or calibration it came from) and the camera."""
+    missing = [n for n in names if n not in positions_m]
+    if missing:
+        raise TakeError(f"{where}: no rectified position for camera(s) {', '.join(missing)}")
+    positions = {n: np.asarray(positions_m[n], float) for n in names}
+    origin = np.mean([positions[n] for n in names], axis=0)
+    rel = {n: positions[n] - origin for n in names}
+    return {n: (float(rel[n][0] / spacing), float(rel[n][1] / spacing)) for n in names}
+
+
+def grid_order(offsets: Mapping[str, tuple[float, float]]) -> list[str]:
+    """Camera names row by row, left to right."""
+    return sorted(offsets, key=lambda n: (offsets[n][1], offsets[n][0]))
+
+
 class SkippedFrameSet(Exception):
     """A frame set left out because one of its frames is damaged (``skip_damaged``)."""
 
 
-class TakeGrid:
-    """Frame sets of a take whose manifest has a rectification section, as grids of 8-bit BGR pictures."""
+class TakeFrames:
+    """What every frame source reading a take shares: its complete frame sets, their rate and timecode."""
+
+    flat = False  # one folder per frame set
+    doffs = 0.0
+    disparity_range: tuple[float, float] | None = None  # a take carries no plan of its own
+    reader: TakeReader
+    folder: Path
+
+    @property
+    def name(self) -> str:
+        return str(self.folder)
+
+    def frame_numbers(self) -> list[int]:
+        return [s.number for s in self.reader.complete_sets()]
+
+    def timing(self, number: int) -> tuple[float | None, Timecode | None]:
+        """The rate and the frame set's timecode, which the pictures carry."""
+        sets = {s.number: s for s in self.reader.frame_sets}
+        return self.reader.fps, self.reader.set_timecode(sets[number])
+
+    def members(self, number: int) -> dict[str, int]:
+        """Frame set ``number``'s frame of each camera; refused when it is not a complete frame set."""
+        sets = {s.number: s for s in self.reader.complete_sets()}
+        if number not in sets:
+            raise ParameterError(f"{self.folder}: frame set {number} is not complete or does not exist")
+        return dict(sets[number].members)
+
+
+class TakeGrid(TakeFrames):
+    """Frame sets of a take whose manifest has a rectification section, as grids of 8-bit BGR pictures (a
+    ``rigctl.depth.sources.FrameSource``)."""
 
     def __init__(self, folder: Path, skip_damaged: bool = False) -> None:
         self.reader = TakeReader(folder, skip_damaged=skip_damaged)
@@ -239,32 +290,17 @@ class TakeGrid:
                 "rectified as recorded, and one recorded before they said so is rectified with its "
                 "truth/calibration.yaml)"
             )
-        positions = {n: np.asarray(p, float) for n, p in rect.positions_m.items()}
         self.focal_px = rect.focal_px
         self.spacing = rect.spacing_x_m
-        names = self.reader.names
-        missing = [n for n in names if n not in positions]
-        if missing:
-            raise TakeError(f"{folder}: no rectified position for camera(s) {', '.join(missing)}")
-        origin = np.mean([positions[n] for n in names], axis=0)
-        self.offsets = {
-            n: (float((positions[n] - origin)[0] / self.spacing), float((positions[n] - origin)[1] / self.spacing))
-            for n in names
-        }
-        self.names = sorted(names, key=lambda n: (self.offsets[n][1], self.offsets[n][0]))
+        self.offsets = camera_offsets(rect.positions_m, self.reader.names, self.spacing, str(folder))
+        self.names = grid_order(self.offsets)
         self.folder = folder
 
-    def frame_numbers(self) -> list[int]:
-        return [s.number for s in self.reader.complete_sets()]
-
     def grid(self, number: int) -> Grid:
-        sets = {s.number: s for s in self.reader.complete_sets()}
-        if number not in sets:
-            raise ParameterError(f"{self.folder}: frame set {number} is not complete or does not exist")
-        s = sets[number]
+        members = self.members(number)
         frames: dict[str, U8] = {}
         for n in self.names:
-            data = self.reader.frame_or_none(n, s.members[n])
+            data = self.reader.frame_or_none(n, members[n])
             if data is None:
                 raise SkippedFrameSet(number)  # a damaged frame, skipped: listed in reader.damaged
             frames[n] = data

@@ -12,6 +12,7 @@ structures in front are few features, so no percentile may cut them off.
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 
 import cv2
 import numpy as np
@@ -81,9 +82,11 @@ def disparity_votes(grid: Grid, max_features: int = 4000) -> np.ndarray:
     return np.asarray(agreed, np.float64)
 
 
-def measured_range(grid: Grid) -> tuple[float, float] | None:
-    """The range the images show, or None when too few matches agree to say."""
-    votes = disparity_votes(grid)
+def measured_range(grids: Grid | Sequence[Grid]) -> tuple[float, float] | None:
+    """The range the images show (the features of every grid given, pooled: a take's sample of frame sets),
+    or None when too few matches agree to say."""
+    sample = [grids] if isinstance(grids, Grid) else list(grids)
+    votes = np.concatenate([disparity_votes(g) for g in sample]) if sample else np.zeros(0)
     votes = votes[np.isfinite(votes)]
     if votes.size < MIN_FEATURES:
         log.info("no plan and only %d features the cameras agree on: searching the whole plausible range", votes.size)

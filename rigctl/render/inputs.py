@@ -14,8 +14,8 @@ from typing import NoReturn
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.depth.grid import Grid, TakeGrid, load_grid_folder
 from rigctl.depth.key import Keyer
+from rigctl.depth.sources import FrameSource, open_source
 from rigctl.errors import ParameterError, TakeError
 from rigctl.pfm import read_pfm
 from rigctl.rig import CAMERA_NAME
@@ -96,17 +96,9 @@ class RenderInput:
         if not disparity_dir.is_dir():
             what = "is not a folder" if disparity_dir.exists() else "does not exist"
             raise ParameterError(f"{disparity_dir}: disparity folder {what}")
-        self.take: TakeGrid | None = None
-        self.grid0: Grid | None = None
         self._last: FrameViews | None = None
-        if (source / "take.yaml").exists():
-            self.take = TakeGrid(source)
-            self.numbers = self.take.frame_numbers()
-        elif (source / "grid.yaml").exists():
-            self.grid0 = load_grid_folder(source)
-            self.numbers = [0]
-        else:
-            raise ParameterError(f"{source}: not a take (take.yaml) or a grid folder (grid.yaml)")
+        self.frames: FrameSource = open_source(source)
+        self.numbers = self.frames.frame_numbers()
         if not self.numbers:
             raise ParameterError(f"{source}: the take has no complete frame set")
         made_from = _made_from(disparity_dir)
@@ -138,10 +130,7 @@ class RenderInput:
         return list(frames)
 
     def _names(self) -> list[str]:
-        if self.take is not None:
-            return list(self.take.names)
-        assert self.grid0 is not None
-        return list(self.grid0.names)
+        return list(self.frames.names)
 
     def _has_disparity(self, number: int) -> bool:
         return any(self._disparity_file(number, n).exists() for n in self._names())
@@ -156,7 +145,7 @@ class RenderInput:
 
     def _disparity_file(self, number: int, name: str) -> Path:
         folder = self.disparity_dir / f"{number:06d}"
-        if self.grid0 is not None and not folder.is_dir():
+        if self.frames.flat and not folder.is_dir():
             folder = self.disparity_dir  # a grid folder's depth output has no frame level
         return folder / f"{name}.pfm"
 
@@ -169,8 +158,7 @@ class RenderInput:
         return self._last
 
     def _read(self, number: int) -> FrameViews:
-        grid = self.take.grid(number) if self.take is not None else self.grid0
-        assert grid is not None
+        grid = self.frames.grid(number)
         h, w = grid.shape
         files = {n: self._disparity_file(number, n) for n in grid.names}
         found = {n: p for n, p in files.items() if p.exists()}

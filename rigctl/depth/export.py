@@ -1,0 +1,179 @@
+"""A frame set's outputs per camera: disparity + depth as EXR (NUKE layers), PFM, a colour-mapped PNG preview
+(red near, blue far), written in a ``rigctl.layout`` layout, or (``atomic``, the farm) staged beside the frame's
+folder and renamed into it file by file, each file's size and SHA-256 recorded so a resumed run can tell a
+whole file from a damaged one."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import os
+import shutil
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict
+
+from rigctl.depth.estimate import DepthResult
+from rigctl.depth.grid import Grid
+from rigctl.exr import picture, picture_attributes, write_exr
+from rigctl.layout import output_path
+from rigctl.pfm import write_pfm
+from rigctl.timecode import Timecode
+
+F32 = NDArray[np.float32]
+FORMATS = ("exr", "pfm", "png")
+PARTIAL_PREFIX = ".partial-"
+
+
+def frame_name(number: int) -> str:
+    """The folder name of a frame set in the frames layout."""
+    return f"{number:06d}"
+
+
+class FileRecord(BaseModel):
+    """A published file as written: its size in bytes and SHA-256."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    size: int
+    sha256: str
+
+
+def file_record(path: Path) -> FileRecord:
+    h = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return FileRecord(size=path.stat().st_size, sha256=h.hexdigest())
+
+
+def is_whole(path: Path, record: FileRecord) -> bool:
+    """``path`` holds exactly what was recorded (same size, then same checksum)."""
+    try:
+        if path.stat().st_size != record.size:
+            return False
+        return file_record(path).sha256 == record.sha256
+    except OSError:
+        return False
+
+
+def colour_preview(disparity: F32, d_range: tuple[float, float]) -> NDArray[np.uint8]:
+    """Red near, blue far (as in the paper); black where there is no estimate."""
+    lo, hi = d_range
+    valid = np.isfinite(disparity)
+    t = np.zeros(disparity.shape, np.float32)
+    if hi > lo:
+        t = np.clip((np.where(valid, disparity, lo) - lo) / (hi - lo), 0, 1)
+    img = cv2.applyColorMap((t * 255).astype(np.uint8), cv2.COLORMAP_JET)  # high disparity (near) = red
+    img[~valid] = 0
+    return np.asarray(img)
+
+
+@dataclass(frozen=True)
+class Target:
+    """Where one frame's outputs go (``rigctl.layout``) and what the pictures carry: rate and timecode."""
+
+    out: Path
+    layout: str
+    frame: int
+    fps: float | None = None
+    timecode: Timecode | None = None
+    flat: bool = False  # one picture (a grid folder): DIR/<camera>.<ext>
+    colour: str = "rec709"  # rigctl.exr.COLOURS
+
+    def path(self, camera: str, ext: str) -> Path:
+        p = self.out / f"{camera}{ext}" if self.flat else output_path(self.out, self.layout, self.frame, camera, ext)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        return p
+
+
+def write_outputs(
+    target: Target, name: str, grid: Grid, res: DepthResult, d_range: tuple[float, float], formats: tuple[str, ...]
+) -> None:
+    d = res.disparity
+    if "pfm" in formats:
+        write_pfm(target.path(name, ".pfm"), d)
+    if "png" in formats:
+        cv2.imwrite(str(target.path(name, ".png")), colour_preview(d, d_range))
+    if "exr" in formats:
+        z = grid.depth(d)
+        inv_z = np.where(np.isfinite(z) & (z > 0), 1.0 / z, 0.0).astype(np.float32)
+        fin = np.where(np.isfinite(d), d, 0.0).astype(np.float32)
+        # the picture scene-linear and premultiplied by the key matte, as NUKE and Unreal read it
+        channels: dict[str, F32] = {**picture(grid.images[name], res.matte, target.colour), "depth.Z": inv_z}
+        channels["confidence.Y"] = res.confidence
+        ox, oy = grid.offsets[name]
+        row = [n for n in grid.names if abs(grid.offsets[n][1] - oy) < 0.25 and n != name]
+        if any(grid.offsets[n][0] < ox for n in row):
+            channels["disparityL.x"] = fin  # the point is d further right in the left neighbour
+            channels["disparityL.y"] = np.zeros_like(fin)
+        if any(grid.offsets[n][0] > ox for n in row):
+            channels["disparityR.x"] = -fin
+            channels["disparityR.y"] = np.zeros_like(fin)
+        col = [n for n in grid.names if abs(grid.offsets[n][0] - ox) < 0.25 and n != name]
+        if col:
+            ratio = min(abs(grid.offsets[n][1] - oy) for n in col)
+            channels["disparityV.y"] = (-fin * ratio).astype(np.float32)  # shift to the camera below
+        attrs = {
+            **picture_attributes(target.fps, target.timecode, target.colour),
+            "rigctl.camera": name,
+            "rigctl.focal_px": f"{grid.focal_px:.6f}",
+            "rigctl.spacing_x": f"{grid.spacing:.6f}",
+            "rigctl.offset": f"{ox:.6f} {oy:.6f}",
+            "rigctl.disparity": "pixels of the horizontal spacing; depth.Z holds 1/Z",
+        }
+        write_exr(target.path(name, ".exr"), channels, attrs)
+
+
+def publish(tmp: Path, final: Path) -> dict[str, FileRecord]:
+    """Move every finished file into the frame's folder by rename (a reader sees a whole file or none);
+    returns each file's record."""
+    final.mkdir(parents=True, exist_ok=True)
+    records = {}
+    for f in sorted(tmp.iterdir()):
+        records[f.name] = file_record(f)
+        os.replace(f, final / f.name)
+    tmp.rmdir()
+    return records
+
+
+@dataclass(frozen=True)
+class Exporter:
+    """Where a run writes a frame set's outputs: ``out`` in ``layout``; ``atomic`` stages them in
+    ``out/.partial-<frame>-<id>`` and publishes them into ``out/<frame>`` by rename (frames layout)."""
+
+    out: Path
+    layout: str = "frames"
+    colour: str = "rec709"
+    formats: tuple[str, ...] = FORMATS
+    flat: bool = False
+    atomic: bool = False
+
+    def write(
+        self,
+        number: int,
+        grid: Grid,
+        results: dict[str, DepthResult],
+        d_range: tuple[float, float],
+        fps: float | None,
+        timecode: Timecode | None,
+    ) -> dict[str, FileRecord]:
+        target = Target(self.out, self.layout, number, fps, timecode, flat=self.flat, colour=self.colour)
+        if not self.atomic:
+            for cam, res in results.items():
+                write_outputs(target, cam, grid, res, d_range, self.formats)
+            return {}
+        name = frame_name(number)
+        tmp = self.out / f"{PARTIAL_PREFIX}{name}-{uuid.uuid4().hex[:12]}"
+        staging = dataclasses.replace(target, out=tmp, flat=True)
+        try:
+            for cam, res in results.items():
+                write_outputs(staging, cam, grid, res, d_range, self.formats)
+            return publish(tmp, self.out / name)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)

@@ -1,0 +1,230 @@
+"""The take-level pipeline: ONE object that processes a take's frame sets, used by ``rigctl depth``,
+``rigctl process`` (each farm task is a chunk), ``rigctl demo`` and ``rigctl bench depth``.
+
+Per frame set (:meth:`TakeProcessor.process`): read the grid from the :class:`~rigctl.depth.sources.
+FrameSource`; key and estimate every asked camera over the take's range (decided once:
+:mod:`rigctl.depth.take_range`); when the estimates pile up at a bound of a measured range, widen it and run
+the frame set again; stabilise each camera over time (:class:`rigctl.depth.temporal.Temporal`);
+cross-check the cameras; export (:class:`rigctl.depth.export.Exporter`); report (:class:`FrameReport`).
+
+State carried from one frame set to the next: the range (widened, never narrowed) and the temporal
+stabiliser's previous frame set. Both start afresh at :meth:`TakeProcessor.start_chunk`: a take is
+processed as contiguous chunks of ``DepthOptions.chunk`` frame sets (:func:`chunks`), so the farm hands
+chunks out independently and a run in one process over the same chunks writes the same bytes.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from rigctl.depth.estimate import DepthResult, cross_check, estimate
+from rigctl.depth.export import Exporter, FileRecord
+from rigctl.depth.grid import Grid, SkippedFrameSet
+from rigctl.depth.key import Keyer
+from rigctl.depth.metrics import score
+from rigctl.depth.options import DepthOptions
+from rigctl.depth.presets import PRESETS, Preset
+from rigctl.depth.report import FrameReport, Timings
+from rigctl.depth.sources import FrameSource
+from rigctl.depth.take_range import (
+    MAX_WIDEN,
+    RangeDecision,
+    Widening,
+    bound_side_hits,
+    decide_range,
+    unplanned_range,
+    widened,
+)
+from rigctl.depth.temporal import Temporal, TemporalParams
+from rigctl.errors import ParameterError
+
+Progress = Callable[[str], None]
+
+
+def chunks(numbers: list[int], size: int) -> list[list[int]]:
+    """``numbers`` (in order) as runs of ``size`` consecutive frame sets, the last one shorter."""
+    if size < 1:
+        raise ParameterError(f"--chunk must be at least 1 frame set, got {size}")
+    return [numbers[i : i + size] for i in range(0, len(numbers), size)]
+
+
+def _plain(value: Any) -> Any:
+    """Statistics as plain JSON values (numpy scalars as Python numbers)."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _rel(grid: Grid, a: str, b: str) -> tuple[float, float]:
+    return grid.offsets[b][0] - grid.offsets[a][0], grid.offsets[b][1] - grid.offsets[a][1]
+
+
+def cross_check_all(grid: Grid, out: dict[str, DepthResult]) -> None:
+    """Each camera against its nearest computed neighbour: a point where two cameras disagree is not trusted
+    (confidence 0); it is not replaced, because either camera may be the one that is wrong there."""
+    for cam, res in out.items():
+        t0 = time.perf_counter()
+        others = [c for c in out if c != cam]
+        nearest = min(others, key=lambda c: math.hypot(*_rel(grid, cam, c)))
+        bad = cross_check(res, out[nearest], _rel(grid, cam, nearest)) & (res.matte > 0)
+        res.confidence[bad] = 0.0
+        res.stats["cross_check_with"] = nearest
+        res.stats["cross_check_failed_pixels"] = int(bad.sum())
+        res.stats["cross_check_s"] = time.perf_counter() - t0
+
+
+@dataclass
+class FrameDone:
+    """One processed frame set: its grid and final results (for scoring), its report, the files written."""
+
+    number: int
+    grid: Grid
+    results: dict[str, DepthResult]
+    report: FrameReport
+    files: dict[str, FileRecord]
+
+
+@dataclass
+class FrameFailed:
+    number: int
+    error: BaseException
+
+
+class TakeProcessor:
+    """Processes the frame sets of one source, in order, chunk by chunk (see the module)."""
+
+    def __init__(
+        self,
+        source: FrameSource,
+        opt: DepthOptions,
+        decision: RangeDecision | None = None,
+        exporter: Exporter | None = None,
+    ) -> None:
+        if opt.preset not in PRESETS:
+            raise ParameterError(f"unknown preset {opt.preset!r} (presets: {', '.join(PRESETS)})")
+        if opt.chunk < 1:
+            raise ParameterError(f"--chunk must be at least 1 frame set, got {opt.chunk}")
+        cameras = list(opt.cameras) if opt.cameras else list(source.names)
+        unknown = [c for c in cameras if c not in source.names]
+        if unknown:
+            raise ParameterError(f"no camera {', '.join(unknown)} in the grid (it has {', '.join(source.names)})")
+        self.source = source
+        self.opt = opt
+        self.preset: Preset = PRESETS[opt.preset]
+        self.cameras = cameras
+        self.keyer = Keyer() if opt.key else None
+        self.decision = decision if decision is not None else decide_range(source, opt)
+        self.exporter = exporter
+        self.temporal = Temporal(TemporalParams(enabled=opt.temporal))
+        self.d_range = self.decision.disparity_range_px
+        self.widenings: list[Widening] = []  # every widening of the run, in order
+        self._last_widenings: list[Widening] = []
+
+    def start_chunk(self) -> None:
+        """A new chunk: the range as the take decided it, no previous frame set."""
+        self.d_range = self.decision.disparity_range_px
+        self.temporal.reset()
+
+    def _estimate(self, grid: Grid, d_range: tuple[float, float], progress: Progress | None) -> dict[str, DepthResult]:
+        out = {}
+        for cam in self.cameras:
+            if progress:
+                progress(cam)
+            out[cam] = estimate(grid, cam, d_range, self.preset, self.keyer)
+        return out
+
+    def depth(self, grid: Grid, number: int = 0, progress: Progress | None = None) -> dict[str, DepthResult]:
+        """Depth of the asked cameras of one frame set, over the current range (widened and run again when a
+        measured range is hit), stabilised over time and cross-checked. Advances the temporal state."""
+        frame_widenings: list[Widening] = []
+        results = self._estimate(grid, self.d_range, progress)
+        while not self.decision.planned and len(frame_widenings) < MAX_WIDEN:
+            low, high = bound_side_hits(results, self.d_range)
+            if not (low or high):
+                break
+            after = widened(self.d_range, bool(low), bool(high))
+            frame_widenings.append(
+                Widening(frame=number, before=self.d_range, after=after, low_hits=low, high_hits=high)
+            )
+            self.d_range = after
+            results = self._estimate(grid, self.d_range, progress)
+        self.widenings += frame_widenings
+        self._last_widenings = frame_widenings
+        for cam in self.cameras:
+            results[cam] = self.temporal.stabilise(grid, cam, results[cam], self.d_range)
+        if self.preset.cross_check and len(results) > 1:
+            cross_check_all(grid, results)
+        self.temporal.advance(grid, results)
+        return results
+
+    def run_chunk(
+        self,
+        numbers: list[int],
+        progress: Callable[[int, str], None] | None = None,
+        catch: tuple[type[BaseException], ...] = (),
+    ) -> Iterator[FrameDone | FrameFailed]:
+        """One chunk's frame sets in order, from a fresh state. A frame set with a damaged frame (skipped by
+        the source) is left out; an error of a type in ``catch`` is yielded as :class:`FrameFailed` and the
+        chunk goes on from a fresh state, anything else ends the run."""
+        self.start_chunk()
+        for n in numbers:
+            step = None if progress is None else (lambda cam, n=n: progress(n, cam))
+            try:
+                yield self.process(n, step)
+            except SkippedFrameSet:
+                continue
+            except catch as exc:
+                self.start_chunk()
+                yield FrameFailed(n, exc)
+
+    def process(self, number: int, progress: Progress | None = None) -> FrameDone:
+        """One frame set, start to end: read, depth, export, report."""
+        t0 = time.perf_counter()
+        grid = self.source.grid(number)
+        t_load = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        results = self.depth(grid, number, progress)
+        t_depth = time.perf_counter() - t0
+        if not any(np.isfinite(r.disparity).any() for r in results.values()):
+            notes = sorted({str(r.stats.get("note", "no camera found a match")) for r in results.values()})
+            raise ParameterError(f"{self.source.name}: frame {number}: no depth could be estimated: {'; '.join(notes)}")
+        t0 = time.perf_counter()
+        files: dict[str, FileRecord] = {}
+        if self.exporter is not None:
+            fps, timecode = self.source.timing(number)
+            files = self.exporter.write(number, grid, results, self.d_range, fps, timecode)
+        t_write = time.perf_counter() - t0
+        report = self.frame_report(grid, results, Timings(load=t_load, depth=t_depth, write=t_write))
+        return FrameDone(number, grid, results, report, files)
+
+    def frame_report(self, grid: Grid, results: dict[str, DepthResult], timings: Timings) -> FrameReport:
+        full = unplanned_range(grid.shape[1])
+        per_cam: dict[str, dict[str, Any]] = {}
+        for cam, res in results.items():
+            st: dict[str, Any] = _plain(dict(res.stats))
+            truth = grid.truth.get(cam) if grid.truth else None
+            if truth is not None:
+                st["against_truth"] = _plain(score(res.disparity, truth, np.isfinite(truth)))
+            per_cam[cam] = st
+        lo, hi = self.d_range
+        was_widened = self.d_range != self.decision.disparity_range_px
+        return FrameReport(
+            disparity_range_px=(float(lo), float(hi)),
+            range_source=self.decision.source + (" (widened)" if was_widened else ""),
+            levels_skipped_by_plan=max(0.0, (full[1] - full[0]) - (hi - lo)),
+            keyed_background_share=float(np.mean([r.stats["keyed_background_share"] for r in results.values()])),
+            bound_hit_pixels=int(sum(r.stats.get("bound_hit_pixels", 0) for r in results.values())),
+            widenings=list(self._last_widenings),
+            cameras=per_cam,
+            timings_s=timings,
+        )

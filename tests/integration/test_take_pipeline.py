@@ -1,0 +1,166 @@
+"""The take-level pipeline (rigctl.depth.pipeline) over takes of the simulator held in memory (every frame,
+the same bytes: no capture clock involved): the range is decided once per take and only ever widened, the
+state starts afresh at every chunk, and nothing under the CLI, the shoot UI, the demo or the farm runs the
+depth stages itself."""
+
+from __future__ import annotations
+
+import ast
+import itertools
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import rigctl.depth.take_range as take_range
+from rigctl.depth import measured_range as measured_module
+from rigctl.depth.grid import Grid
+from rigctl.depth.options import DepthOptions
+from rigctl.depth.pipeline import FrameDone, TakeProcessor, chunks
+from rigctl.depth.scenes import surfaces
+from rigctl.depth.take_range import RangeDecision
+from rigctl.simulated_presenter import presenter_video
+from rigctl.timecode import Timecode
+
+REPO = Path(__file__).resolve().parents[2]
+FRAMES = 6
+
+
+@pytest.fixture(scope="module")
+def moving_ideal(tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """An ideal presenter take at 480x270 whose presenter moves every frame set (seed 3, as in issue 23)."""
+    rig = (REPO / "rigs" / "sim-3x3.yaml").read_text()
+    rig = rig.replace("width_px: 960", "width_px: 480").replace("height_px: 540", "height_px: 270")
+    path = tmp_path_factory.mktemp("rig") / "small.yaml"
+    path.write_text(rig)
+    return presenter_video(True, FRAMES, ideal=True, seed=3, rig_name=str(path))
+
+
+def test_a_moving_take_without_a_plan_is_matched_once_and_never_searches_a_narrower_range(
+    moving_ideal: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    passes: list[int] = []
+    votes: list[int] = []
+    real_measured, real_votes = take_range.measured_range, measured_module.disparity_votes
+
+    def counting_measured(grids: Any) -> Any:
+        passes.append(len(grids))
+        return real_measured(grids)
+
+    def counting_votes(grid: Grid, *a: Any) -> Any:
+        votes.append(int(grid.meta["frame"]))
+        return real_votes(grid, *a)
+
+    monkeypatch.setattr(take_range, "measured_range", counting_measured)
+    monkeypatch.setattr(measured_module, "disparity_votes", counting_votes)
+    opt = DepthOptions(cameras=("r1c1",), chunk=FRAMES)
+    processor = TakeProcessor(moving_ideal, opt)
+    done = [d for d in processor.run_chunk(moving_ideal.frame_numbers()) if isinstance(d, FrameDone)]
+    assert len(done) == FRAMES
+    # one feature-matching pass for the whole take, on frame sets spread across it, none per frame set
+    assert passes == [3] and votes == [0, 2, 5]
+    assert not processor.decision.planned and processor.decision.sampled_frames == [0, 2, 5]
+    ranges = [d.report.disparity_range_px for d in done]
+    for (lo0, hi0), (lo1, hi1) in itertools.pairwise(ranges):
+        assert lo1 <= lo0 and hi1 >= hi0  # never narrower than an earlier frame set's
+    lo, hi = processor.decision.disparity_range_px
+    truths = [d.grid.truth["r1c1"] for d in done if d.grid.truth]
+    finite = np.concatenate([t[np.isfinite(t)] for t in truths])
+    assert lo < finite.min() and finite.max() < hi  # the measured range covers the scene ...
+    assert sum(d.report.bound_hit_pixels for d in done) == 0  # ... so nothing is clipped at its bounds
+    assert not processor.widenings
+    with np.errstate(invalid="ignore"):
+        moved = [np.abs(a - b)[np.isfinite(a) & np.isfinite(b)].max() for a, b in itertools.pairwise(truths)]
+    assert min(moved) > 0.1  # the presenter did move in every frame set
+
+
+class StillScene:
+    """A stratified scene as a take of ``frames`` identical frame sets (its truth spans about -4..6 px)."""
+
+    flat = False
+    doffs = 0.0
+    disparity_range = None
+
+    def __init__(self, frames: int) -> None:
+        self.base = surfaces((64, 64), 0)
+        self.names = list(self.base.names)
+        self.focal_px, self.spacing = self.base.focal_px, self.base.spacing
+        self.frames = frames
+
+    @property
+    def name(self) -> str:
+        return "still scene"
+
+    def frame_numbers(self) -> list[int]:
+        return list(range(self.frames))
+
+    def timing(self, number: int) -> tuple[float | None, Timecode | None]:
+        return None, None
+
+    def grid(self, number: int) -> Grid:
+        b = self.base
+        return Grid(
+            list(b.names), b.images, dict(b.offsets), b.focal_px, b.spacing, truth=b.truth, meta={"frame": number}
+        )
+
+
+def test_a_measured_range_that_clips_the_scene_is_widened_the_frame_set_run_again_and_kept() -> None:
+    source = StillScene(3)
+    assert source.base.truth is not None
+    t = source.base.truth["r1c1"]
+    top = float(t[np.isfinite(t)].max())
+    narrow = RangeDecision(disparity_range_px=(-6.0, top - 3.0), source="measured (test)", planned=False)
+    processor = TakeProcessor(source, DepthOptions(preset="balanced", cameras=("r1c1",), key=False), narrow)
+    done = [d for d in processor.run_chunk([0, 1, 2]) if isinstance(d, FrameDone)]
+    first = done[0].report
+    assert first.widenings and first.widenings[0].high_hits > 0 and first.widenings[0].low_hits == 0
+    lo, hi = first.disparity_range_px
+    assert lo == -6.0 and hi > top  # widened on the side that was hit until the scene fits
+    assert "(widened)" in first.range_source
+    assert [d.report.disparity_range_px for d in done[1:]] == [(lo, hi)] * 2  # kept, never narrowed again
+    assert not done[1].report.widenings
+    # the clipped first estimate was not kept: the frame set's result is the one over the widened range
+    r1c1 = done[0].results["r1c1"].disparity
+    assert float(np.nanmax(np.where(np.isfinite(r1c1), r1c1, np.nan))) > top - 3.0 + 0.5
+    processor.start_chunk()  # a new chunk starts from the take's range, as a farm worker would
+    assert processor.d_range == narrow.disparity_range_px
+
+
+def test_a_planned_range_is_never_widened() -> None:
+    source = StillScene(1)
+    plan = RangeDecision(disparity_range_px=(-6.0, 2.0), source="given disparity range", planned=True)
+    processor = TakeProcessor(source, DepthOptions(preset="balanced", cameras=("r1c1",), key=False), plan)
+    done = processor.process(0)
+    assert done.report.disparity_range_px == (-6.0, 2.0) and not done.report.widenings
+    assert done.report.bound_hit_pixels > 0  # reported, as the plan's word stands
+
+
+def test_chunks_are_runs_of_consecutive_frame_sets() -> None:
+    assert chunks([3, 4, 5, 7, 8], 2) == [[3, 4], [5, 7], [8]]
+    assert chunks([1], 10) == [[1]]
+    with pytest.raises(Exception, match="--chunk must be at least 1"):
+        chunks([1], 0)
+
+
+# the stages themselves; a caller may hand work to the pipeline (TakeProcessor, run_depth) or ask it for the
+# take's range (decide_range: the farm does before handing out chunks)
+DEPTH_STAGES = {"estimate", "cross_check", "depth_grid", "measured_range", "write_outputs", "Temporal", "Keyer"}
+
+
+def test_no_module_under_cli_tui_demo_or_farm_runs_the_depth_stages_itself() -> None:
+    """They hand a source and options to the pipeline; keying, estimating, cross-checking, deciding the range
+    and exporting happen in rigctl.depth alone."""
+    roots = [*(REPO / "rigctl" / "cli").glob("*.py"), *(REPO / "rigctl" / "tui").glob("*.py"),
+             *(REPO / "rigctl" / "farm").glob("*.py"), REPO / "rigctl" / "demo.py"]  # fmt: skip
+    offenders = []
+    for path in roots:
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("rigctl.depth"):
+                used = {a.name for a in node.names} & DEPTH_STAGES
+                if used:
+                    offenders.append(f"{path.relative_to(REPO)} imports {sorted(used)} from {node.module}")
+                if node.module in ("rigctl.depth.estimate", "rigctl.depth.key", "rigctl.depth.measured_range"):
+                    offenders.append(f"{path.relative_to(REPO)} imports {node.module}")
+    assert offenders == []
