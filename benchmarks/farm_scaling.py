@@ -49,11 +49,11 @@ def main() -> None:
         rates = {}
         for n in counts:
             out = Path(tmp) / f"out{n}"
-            s = process_take(FarmOptions(take, out, DepthOptions(preset=ns.preset), workers=n))
-            assert s["failed"] == 0, s["failed_frames"]
-            rates[n] = s["frames_per_second"]
+            s = process_take(FarmOptions(take, out, DepthOptions(preset=ns.preset, chunk=2), workers=n))
+            assert s.failed == 0, s.failed_frames
+            rates[n] = s.frames_per_second
             print(
-                f"{n} worker(s): {s['computed']} frame sets of {ns.size} in {s['compute_seconds']:.1f} s, "
+                f"{n} worker(s): {s.computed} frame sets of {ns.size} in {s.compute_seconds:.1f} s, "
                 f"{rates[n]:.3f} frames/s"
             )
         ref = Path(tmp) / f"out{counts[0]}" / "depth"

@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
-from rigctl.cli.args import distance, far_distance
+from rigctl.cli.args import add_pipeline_options, distance, far_distance
 from rigctl.cli.progress import Progress
 from rigctl.depth.presets import PRESETS
 from rigctl.take.export import parse_range
@@ -16,7 +15,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "process",
         help="depth for every frame set of a take on a Dask cluster (local processes or a scheduler)",
-        description="Every frame set is a Dask task: rectify (when the take is not rectified: --calibration), depth "
+        description="Chunks of --chunk consecutive frame sets are Dask tasks (the take's range decided first, "
+        "once): rectify (when the take is not rectified: --calibration), depth "
         "and export, written to DIR/depth/<frame>/<camera>.{exr,pfm,png} as rigctl depth writes them, with "
         "DIR/process.json saying which frames are done. Workers read the take from storage they share; run again "
         "to finish what a stopped run left (done frames are skipped unless --redo).",
@@ -39,6 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--near", type=distance, metavar="M", help="nearest subject distance (planner range)")
     p.add_argument("--far", type=far_distance, metavar="M", help="farthest subject distance (inf allowed)")
     p.add_argument("--no-key", action="store_true", help="search every pixel (no green-screen key)")
+    add_pipeline_options(p)
     p.add_argument("--redo", action="store_true", help="compute frames again even when done")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
@@ -51,7 +52,7 @@ def run(ns: argparse.Namespace) -> int:
     if not ns.debug:  # Dask's own INFO lines (scheduler, nannies, workers inherit it) only with --debug
         os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "warning")
 
-    from rigctl.depth.run import DepthOptions
+    from rigctl.depth.options import DepthOptions
     from rigctl.farm.run import FarmOptions, Status, process_take, scheduler_url
 
     opt = FarmOptions(
@@ -63,6 +64,8 @@ def run(ns: argparse.Namespace) -> int:
             far_m=ns.far if ns.far is not None else (math.inf if ns.near is not None else None),
             key=not ns.no_key,
             cameras=tuple(ns.cameras) if ns.cameras else None,
+            temporal=not ns.no_temporal,
+            chunk=ns.chunk,
         ),
         calibration=ns.calibration,
         frames=list(parse_range(ns.frames, 1_000_000)) if ns.frames else None,
@@ -81,12 +84,16 @@ def run(ns: argparse.Namespace) -> int:
     finally:
         bar.close()
     if ns.json:
-        print(json.dumps(summary))
+        print(summary.model_dump_json())
     else:
+        rng = summary.range
+        if rng is not None:
+            lo, hi = rng.disparity_range_px
+            print(f"take range {lo:.1f}..{hi:.1f} px ({rng.source}); widened {summary.widenings} times in chunks")
         print(
-            f"{summary['computed']} frame sets computed, {summary['failed']} failed, {summary['skipped_done']} "
-            f"already done; {summary['frames_per_second']:.2f} frames/s; ledger {summary['ledger']}"
+            f"{summary.computed} frame sets computed in {summary.chunks} chunks, {summary.failed} failed, "
+            f"{summary.skipped_done} already done; {summary.frames_per_second:.2f} frames/s; ledger {summary.ledger}"
         )
-        for name, err in summary["failed_frames"].items():
+        for name, err in summary.failed_frames.items():
             print(f"  frame {name} failed: {err}")
-    return 1 if summary["failed"] else 0
+    return 1 if summary.failed else 0

@@ -1,5 +1,6 @@
-"""``DIR/process.json``: what happened to every frame set, rewritten atomically after each one, so a run that
-is stopped at any moment leaves a ledger a re-run can trust."""
+"""``DIR/process.json``: the take's range and what happened to every frame set, rewritten atomically after
+each chunk, so a run that is stopped at any moment leaves a ledger a re-run can trust. Typed: a file that is
+not a ledger (or one whose entries are not entries) is refused in one line naming it."""
 
 from __future__ import annotations
 
@@ -8,8 +9,13 @@ import logging
 import math
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from rigctl.depth.export import FileRecord, is_whole
+from rigctl.depth.report import FrameReport
+from rigctl.depth.take_range import RangeDecision
 from rigctl.errors import TakeError
 
 log = logging.getLogger(__name__)
@@ -17,31 +23,66 @@ log = logging.getLogger(__name__)
 LEDGER = "process.json"
 
 
+class FrameEntry(BaseModel):
+    """One frame set: done (with its report and every published file's size and checksum) or failed."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    status: Literal["done", "failed"]
+    worker: str = ""
+    seconds: float = 0.0
+    error: str | None = None
+    report: FrameReport | None = None
+    files: dict[str, FileRecord] = {}
+
+
+class LedgerFile(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    range: RangeDecision | None = None
+    frames: dict[str, FrameEntry] = {}
+
+
 class Ledger:
     def __init__(self, out: Path) -> None:
         self.path = out / LEDGER
-        self.frames: dict[str, dict[str, Any]] = {}
+        self.data = LedgerFile()
         if self.path.exists():
             try:
-                data = json.loads(self.path.read_text())
-                frames = data["frames"]
-                if not isinstance(frames, dict):
-                    raise TypeError
-            except (OSError, ValueError, KeyError, TypeError):
-                raise TakeError(f'{self.path}: not a process ledger (expected {{"frames": {{...}}}})') from None
-            self.frames = frames
+                self.data = LedgerFile.model_validate_json(self.path.read_bytes())
+            except OSError as exc:
+                raise TakeError(f"{self.path}: cannot read the process ledger ({exc.strerror})") from None
+            except ValidationError as exc:
+                err = exc.errors()[0]
+                where = ".".join(str(p) for p in err["loc"]) or "the file"
+                raise TakeError(
+                    f'{self.path}: not a process ledger (expected {{"frames": {{...}}}}): {where}: {err["msg"]}'
+                ) from None
+
+    @property
+    def frames(self) -> dict[str, FrameEntry]:
+        return self.data.frames
 
     def done(self, name: str) -> bool:
-        return self.frames.get(name, {}).get("status") == "done"
+        entry = self.frames.get(name)
+        return entry is not None and entry.status == "done"
 
-    def record(self, name: str, entry: dict[str, Any]) -> None:
+    def whole(self, name: str, folder: Path) -> bool:
+        """Frame ``name`` is done and every file it published is in ``folder`` as written (size, checksum)."""
+        entry = self.frames.get(name)
+        if entry is None or entry.status != "done" or not entry.files:
+            return False
+        return all(is_whole(folder / f, rec) for f, rec in entry.files.items())
+
+    def record(self, name: str, entry: FrameEntry) -> None:
+        """Note frame ``name``'s outcome (written by the next :meth:`save`)."""
         self.frames[name] = entry
-        self.save()
 
     def save(self) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         tmp = self.path.with_name(f".{LEDGER}.{os.getpid()}.tmp")
-        data = {"frames": dict(sorted(self.frames.items()))}
+        data = self.data.model_dump(mode="json", by_alias=True)
+        data["frames"] = dict(sorted(data["frames"].items()))
         tmp.write_text(json.dumps(data, indent=1, default=_finite, allow_nan=False))
         os.replace(tmp, self.path)
 

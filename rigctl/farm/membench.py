@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from rigctl.depth.grid import Grid
-from rigctl.depth.run import DepthOptions, Target
+from rigctl.depth.options import DepthOptions
 from rigctl.errors import ParameterError
 
 log = logging.getLogger(__name__)
@@ -64,7 +64,10 @@ def _reset_peak() -> None:
 
 
 def _measure(make: Callable[[], Any], width: int, height: int, preset: str, cameras: tuple[str, ...] | None) -> dict:
-    from rigctl.farm.frame import depth_and_publish, pin_threads
+    from rigctl.depth.export import Exporter
+    from rigctl.depth.pipeline import TakeProcessor
+    from rigctl.depth.sources import OneGrid
+    from rigctl.farm.frame import pin_threads
 
     pin_threads()  # as on a worker
     ds = make()
@@ -76,14 +79,16 @@ def _measure(make: Callable[[], Any], width: int, height: int, preset: str, came
     opt = DepthOptions(preset=preset, disparity_range=d_range, cameras=cameras)
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
-        stats = depth_and_publish(grid, opt, Target(Path(tmp), "frames", 0))
+        # one frame set through the pipeline as a worker runs it: depth, then staged and published by rename
+        done = TakeProcessor(OneGrid(grid), opt, exporter=Exporter(Path(tmp), atomic=True)).process(0)
     seconds = time.perf_counter() - t0
+    stats = done.report
     return {
         "size": [width, height],
         "preset": preset,
-        "cameras": stats.cameras,
+        "cameras": list(stats.cameras),
         "seconds": seconds,
-        "timings_s": {"depth": stats.depth_s, "write": stats.write_s},
+        "timings_s": {"depth": stats.timings_s.depth, "write": stats.timings_s.write},
         "peak_rss_bytes": _peak_rss(),
         "peak_rss_while_building_input_bytes": before,
         "input_bytes": int(sum(v.nbytes for v in grid.images.values())),

@@ -1,6 +1,9 @@
-"""``rigctl process``: every frame set of a take as a task on a Dask cluster (an existing scheduler, or a local
-cluster of worker processes), outputs in ``rigctl depth``'s layout under ``DIR/depth``, a ledger in
-``DIR/process.json`` that makes a stopped run safe to run again.
+"""``rigctl process``: a take on a Dask cluster (an existing scheduler, or a local cluster of worker processes)
+as chunks of consecutive frame sets, each chunk one task running the take-level pipeline
+(:mod:`rigctl.depth.pipeline`), outputs in ``rigctl depth``'s layout under ``DIR/depth``, a ledger in
+``DIR/process.json`` that makes a stopped run safe to run again. The take's range is decided first (one task),
+recorded in the ledger and handed to every chunk, so all chunks search the same range and the outputs are the
+bytes ``rigctl depth`` writes over the same chunks.
 
 The client reads only the take's manifest and indexes (to list the frame sets); workers read the frames
 themselves from storage every one of them sees, so the scheduler carries paths and small dicts, never images.
@@ -22,10 +25,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rigctl.depth.run import DepthOptions
+from pydantic import BaseModel, ConfigDict
+
+from rigctl.depth.export import FORMATS, PARTIAL_PREFIX, frame_name
+from rigctl.depth.options import DepthOptions
+from rigctl.depth.pipeline import chunks
+from rigctl.depth.take_range import RangeDecision
 from rigctl.errors import ParameterError
-from rigctl.farm.frame import FORMATS, PARTIAL_PREFIX, FrameJob, frame_name, is_rectified, one_line, run_frame
-from rigctl.farm.ledger import Ledger
+from rigctl.farm.frame import ChunkJob, is_rectified, one_line, run_chunk, take_range
+from rigctl.farm.ledger import FrameEntry, Ledger
 
 log = logging.getLogger(__name__)
 
@@ -96,8 +104,22 @@ class Status:
         )
 
 
-def frames_to_do(options: FarmOptions) -> tuple[list[int], list[int], Ledger]:
-    """(frame sets to compute, frame sets already done and skipped, the ledger), checked on the client."""
+@dataclass
+class Work:
+    """What a run is to do: the chunks with a frame set not done (each computed whole, as its state runs
+    through it), the frame sets done whose files are whole (skipped), the ledger."""
+
+    todo: list[list[int]]
+    skipped: list[int]
+    ledger: Ledger
+
+    @property
+    def frames(self) -> int:
+        return sum(len(c) for c in self.todo)
+
+
+def frames_to_do(options: FarmOptions) -> Work:
+    """The chunks to compute and the frame sets already done, checked on the client."""
     from rigctl.take.reader import TakeReader
 
     take = options.take
@@ -128,13 +150,42 @@ def frames_to_do(options: FarmOptions) -> tuple[list[int], list[int], Ledger]:
     ledger = Ledger(options.out)
     depth_dir = options.out / "depth"
     names = list(cams or reader.names)
-    todo: list[int] = []
+    todo: list[list[int]] = []
     skipped: list[int] = []
-    for n in numbers:
-        folder = depth_dir / frame_name(n)
-        complete = all((folder / f"{c}.{ext}").exists() for c in names for ext in FORMATS)
-        (skipped if ledger.done(frame_name(n)) and complete and not options.redo else todo).append(n)
-    return todo, skipped, ledger
+    for chunk in chunks(numbers, options.depth.chunk):
+        whole = [
+            n
+            for n in chunk
+            if ledger.whole(frame_name(n), depth_dir / frame_name(n))
+            and all((depth_dir / frame_name(n) / f"{c}.{ext}").exists() for c in names for ext in FORMATS)
+        ]
+        if len(whole) == len(chunk) and not options.redo:
+            skipped += chunk
+        else:
+            todo.append(chunk)
+    return Work(todo, skipped, ledger)
+
+
+class ProcessSummary(BaseModel):
+    """What ``rigctl process`` did (``--json`` prints it)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    take: str
+    out: str
+    ledger: str
+    frames: int
+    chunks: int
+    computed: int
+    failed: int
+    skipped_done: int
+    failed_frames: dict[str, str]
+    frames_by_worker: dict[str, int]
+    range: RangeDecision | None
+    widenings: int  # widenings of the range within chunks (each in the frame's report)
+    seconds: float
+    compute_seconds: float  # from the first task submitted to the last result (no cluster start)
+    frames_per_second: float
 
 
 def default_memory_limit(take: Path, cameras: int | None) -> int:
@@ -197,69 +248,79 @@ def process_take(
     options: FarmOptions,
     progress: Callable[[Status], None] | None = None,
     clock: Callable[[], float] = time.monotonic,
-) -> dict[str, Any]:
-    """Run every frame set still to do; returns the summary (also what ``--json`` prints)."""
-    todo, skipped, ledger = frames_to_do(options)
+) -> ProcessSummary:
+    """Decide the take's range (or reuse the ledger's), then run every chunk still to do."""
+    work = frames_to_do(options)
+    ledger = work.ledger
     depth_dir = options.out / "depth"
     depth_dir.mkdir(parents=True, exist_ok=True)
     for stale in depth_dir.glob(PARTIAL_PREFIX + "*"):  # left by a run that was stopped mid-write
         shutil.rmtree(stale, ignore_errors=True)
-    status = Status(total=len(todo), skipped=len(skipped), clock=clock)
+    status = Status(total=work.frames, skipped=len(work.skipped), clock=clock)
     workers: dict[str, int] = {}
     failed: dict[str, str] = {}
+    widenings = 0
     t0 = clock()
     compute_seconds = 0.0
-    if todo:
+    if work.todo:
         from distributed import as_completed
 
+        take = str(options.take.resolve())
+        calibration = str(options.calibration.resolve()) if options.calibration else None
         with dask_client(options) as client:
             t_compute = clock()
             run_id = uuid.uuid4().hex[:8]
+            decision = ledger.data.range
+            if decision is None or options.redo:
+                fut = client.submit(take_range, take, calibration, options.depth, key=f"rigctl-range-{run_id}")
+                decision = fut.result()
+                ledger.data.range = decision
+                ledger.save()
             futures = {}
-            for n in todo:
-                job = FrameJob(
-                    str(options.take.resolve()),
-                    str(depth_dir.resolve()),
-                    n,
-                    options.depth,
-                    str(options.calibration.resolve()) if options.calibration else None,
-                )
-                futures[client.submit(run_frame, job, key=f"rigctl-frame-{frame_name(n)}-{run_id}", pure=False)] = n
+            for chunk in work.todo:
+                job = ChunkJob(take, str(depth_dir.resolve()), tuple(chunk), options.depth, decision, calibration)
+                key = f"rigctl-chunk-{frame_name(chunk[0])}-{run_id}"
+                futures[client.submit(run_chunk, job, key=key, pure=False)] = chunk
             if progress:
                 progress(status)
             for fut in as_completed(futures):
-                n = futures[fut]
+                chunk = futures[fut]
                 try:
-                    entry = fut.result()
+                    entries = fut.result()
                 except Exception as exc:  # the task itself could not run (KilledWorker, lost cluster, ...)
-                    entry = {"frame": n, "status": "failed", "worker": "", "seconds": 0.0, "error": one_line(exc)}
+                    entries = [(n, FrameEntry(status="failed", error=one_line(exc))) for n in chunk]
                 fut.release()
-                name = frame_name(n)
-                entry.pop("frame", None)
-                ledger.record(name, entry)
-                if entry["status"] == "done":
-                    status.done += 1
-                    workers[entry["worker"]] = workers.get(entry["worker"], 0) + 1
-                else:
-                    status.failed += 1
-                    failed[name] = entry.get("error", "")
+                for n, entry in entries:
+                    name = frame_name(n)
+                    ledger.record(name, entry)
+                    if entry.status == "done":
+                        status.done += 1
+                        workers[entry.worker] = workers.get(entry.worker, 0) + 1
+                        widenings += len(entry.report.widenings) if entry.report else 0
+                    else:
+                        status.failed += 1
+                        failed[name] = entry.error or ""
+                ledger.save()
                 if progress:
                     progress(status)
             compute_seconds = clock() - t_compute
     elif not ledger.path.exists():
         ledger.save()
     seconds = clock() - t0
-    return {
-        "take": str(options.take),
-        "out": str(options.out),
-        "ledger": str(ledger.path),
-        "frames": len(todo) + len(skipped),
-        "computed": status.done,
-        "failed": status.failed,
-        "skipped_done": len(skipped),
-        "failed_frames": failed,
-        "frames_by_worker": workers,
-        "seconds": seconds,
-        "compute_seconds": compute_seconds,  # from the first task submitted to the last result (no cluster start)
-        "frames_per_second": status.done / compute_seconds if compute_seconds > 0 and status.done else 0.0,
-    }
+    return ProcessSummary(
+        take=str(options.take),
+        out=str(options.out),
+        ledger=str(ledger.path),
+        frames=work.frames + len(work.skipped),
+        chunks=len(work.todo),
+        computed=status.done,
+        failed=status.failed,
+        skipped_done=len(work.skipped),
+        failed_frames=failed,
+        frames_by_worker=workers,
+        range=ledger.data.range,
+        widenings=widenings,
+        seconds=seconds,
+        compute_seconds=compute_seconds,
+        frames_per_second=status.done / compute_seconds if compute_seconds > 0 and status.done else 0.0,
+    )

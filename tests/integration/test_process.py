@@ -23,7 +23,8 @@ from rigctl.farm.run import FarmOptions, Status, process_take
 
 REPO = Path(__file__).resolve().parents[2]
 CAMS = ("r1c1", "r1c0")
-FAST = ["--preset", "fast", "--cameras", *CAMS]
+CHUNK = 2  # three chunks of the six frame sets: both workers get some
+FAST = ["--preset", "fast", "--cameras", *CAMS, "--chunk", str(CHUNK)]
 FRAMES = 6
 
 
@@ -65,17 +66,23 @@ def test_local_cluster_of_processes_matches_rigctl_depth_byte_for_byte(
     res = run_rigctl("process", str(take), "--out", str(tmp_path), "--workers", "2", *FAST, "--json")
     assert res.returncode == 0, res.stderr
     summary = json.loads(res.stdout)
-    assert summary["computed"] == FRAMES and summary["failed"] == 0
-    ledger = json.loads((tmp_path / "process.json").read_text())["frames"]
-    assert sorted(ledger) == [frame_name(n) for n in range(FRAMES)]
-    for name, entry in ledger.items():
+    assert summary["computed"] == FRAMES and summary["failed"] == 0 and summary["chunks"] == FRAMES // CHUNK
+    ledger = json.loads((tmp_path / "process.json").read_text())
+    report = json.loads((single_process / "report.json").read_text())
+    assert ledger["range"] == report["range"] == summary["range"]  # decided once, the same way, for every chunk
+    assert len(summary["frames_by_worker"]) == 2  # the chunks were spread over both workers
+    frames = ledger["frames"]
+    assert sorted(frames) == [frame_name(n) for n in range(FRAMES)]
+    for name, entry in frames.items():
         assert entry["status"] == "done" and entry["worker"].startswith("tcp://127.0.0.1:") and entry["seconds"] > 0
         assert same_bytes(single_process / name, tmp_path / "depth" / name) == []
+        assert sorted(entry["files"]) == sorted(p.name for p in (tmp_path / "depth" / name).iterdir())
+        assert entry["report"]["disparity_range_px"] == report["frames"][str(int(name))]["disparity_range_px"]
     assert not list((tmp_path / "depth").glob(".partial-*"))
 
 
 def test_a_rerun_after_an_interruption_computes_only_the_missing_frames(take: Path, tmp_path: Path) -> None:
-    opt = FarmOptions(take, tmp_path, DepthOptions(preset="fast", cameras=CAMS), workers=1)
+    opt = FarmOptions(take, tmp_path, DepthOptions(preset="fast", cameras=CAMS, chunk=CHUNK), workers=1)
 
     def stop_after_two(st: Status) -> None:
         if st.done == 2:
@@ -89,14 +96,23 @@ def test_a_rerun_after_an_interruption_computes_only_the_missing_frames(take: Pa
     (tmp_path / "depth" / ".partial-000004-deadbeef").mkdir()  # what a write cut short leaves
 
     summary = process_take(opt)
-    assert summary["skipped_done"] == 2 and summary["computed"] == FRAMES - 2 and summary["failed"] == 0
+    assert summary.skipped_done == 2 and summary.computed == FRAMES - 2 and summary.failed == 0
     ledger = json.loads((tmp_path / "process.json").read_text())["frames"]
     assert len(ledger) == FRAMES and all(e["status"] == "done" for e in ledger.values())
     assert {n: (tmp_path / "depth" / n / "r1c1.pfm").stat().st_mtime_ns for n in first} == stamps
     assert not list((tmp_path / "depth").glob(".partial-*"))
 
+    # a done frame whose file was damaged after the ledger recorded it (same size, other bytes): its chunk is
+    # computed again, and the file is whole again
+    damaged = tmp_path / "depth" / "000003" / "r1c0.png"
+    whole = damaged.read_bytes()
+    damaged.write_bytes(whole[:-1] + bytes([whole[-1] ^ 0xFF]))
+    fixed = process_take(opt)
+    assert fixed.computed == CHUNK and fixed.skipped_done == FRAMES - CHUNK
+    assert damaged.read_bytes() == whole
+
     again = process_take(FarmOptions(take, tmp_path, opt.depth, workers=1, frames=[0], redo=True))
-    assert again["computed"] == 1 and again["skipped_done"] == 0
+    assert again.computed == 1 and again.skipped_done == 0
 
 
 def test_a_failed_frame_is_reported_and_the_others_complete(take: Path, tmp_path: Path) -> None:
@@ -115,6 +131,13 @@ def test_a_bad_scheduler_address_is_one_line(take: Path, tmp_path: Path, url: st
     res = run_rigctl("process", str(take), "--out", str(tmp_path), "--scheduler", url)
     assert res.returncode == 2
     assert res.stderr.strip().count("\n") == 0 and "expected tcp://HOST:PORT" in res.stderr, res.stderr
+
+
+def test_a_ledger_that_is_not_one_is_refused_in_one_line_naming_it(take: Path, tmp_path: Path) -> None:
+    (tmp_path / "process.json").write_text('{"frames": {"000000": 5}}')  # ended in an AttributeError before
+    res = run_rigctl("process", str(take), "--out", str(tmp_path), *FAST)
+    assert res.returncode != 0 and res.stderr.count("\n") == 1, res.stderr
+    assert f"{tmp_path / 'process.json'}: not a process ledger" in res.stderr and "frames.000000" in res.stderr
 
 
 def test_a_folder_that_is_not_a_take_is_one_line(tmp_path: Path) -> None:
