@@ -27,7 +27,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="WxH",
         help="instead: time and peak memory of one frame set of the ideal presenter scaled to this size (3840x2160)",
     )
-    d.add_argument("--preset", default="best", help="with --size: the depth preset")
+    d.add_argument(
+        "--video",
+        action="store_true",
+        help="instead: depth over time on a still and a moving realistic presenter take, temporal stabilisation "
+        "off and on (flicker, change error, bad 1.0, time per frame)",
+    )
+    d.add_argument("--frames", type=int, default=10, metavar="N", help="with --video: frame sets per take")
+    d.add_argument("--preset", default="best", help="with --size or --video: the depth preset")
     d.add_argument("--cameras", nargs="+", metavar="CAM", help="with --size: cameras to compute (default: all)")
     d.set_defaults(func=run_depth_bench)
     render.register_bench(what)
@@ -41,6 +48,8 @@ def run_depth_bench(ns: argparse.Namespace) -> int:
 
     if ns.size:
         return run_size_bench(ns)
+    if ns.video:
+        return run_video_bench(ns)
     if ns.repeats < 1:
         raise ParameterError(f"--repeats must be at least 1, got {ns.repeats}")
     bar = Progress("bench depth")
@@ -78,4 +87,33 @@ def run_size_bench(ns: argparse.Namespace) -> int:
         f"(input images {r['input_bytes'] / 2**30:.2f} GiB, {r['peak_rss_while_building_input_bytes'] / 2**30:.2f} GiB "
         "while the input was built)"
     )
+    return 0
+
+
+def run_video_bench(ns: argparse.Namespace) -> int:
+    from rigctl.depth.presets import PRESETS
+    from rigctl.depth.video_bench import VideoTake, format_video_table, plot_video, run_video_bench
+    from rigctl.errors import ParameterError
+    from rigctl.simulated_presenter import presenter_video
+
+    if not 2 <= ns.frames <= 1000:
+        raise ParameterError(f"--frames: a video bench needs 2 to 1000 frame sets per take, got {ns.frames}")
+    if ns.preset not in PRESETS:
+        raise ParameterError(f"--preset: unknown preset {ns.preset!r} (presets: {', '.join(PRESETS)})")
+    plot_path = ns.plot if ns.plot != Path("bench-depth.png") else Path("bench-depth-video.png")
+    bar = Progress("bench depth --video")
+    try:
+        takes = [
+            VideoTake("still", presenter_video(False, ns.frames), still=True),
+            VideoTake("moving", presenter_video(True, ns.frames), still=False),
+        ]
+        result = run_video_bench(takes, ns.preset, progress=bar)
+    finally:
+        bar.close()
+    plot_video(result, plot_path)
+    if ns.json:
+        print(json.dumps(result.to_json()))
+    else:
+        print(format_video_table(result))
+        print(f"plot: {plot_path}")
     return 0
