@@ -129,10 +129,14 @@ class TakeProcessor:
         self.d_range = self.decision.disparity_range_px
         self.widenings: list[Widening] = []  # every widening of the run, in order
         self._last_widenings: list[Widening] = []
+        # per side, the bound hits a widening did not remove (spurious matches at whatever bound there is):
+        # within the chunk, only more than twice as many count as the scene being clipped
+        self.spurious = [0, 0]
 
     def start_chunk(self) -> None:
         """A new chunk: the range as the take decided it, no previous frame set."""
         self.d_range = self.decision.disparity_range_px
+        self.spurious = [0, 0]
         self.temporal.reset()
 
     def _estimate(self, grid: Grid, d_range: tuple[float, float], progress: Progress | None) -> dict[str, DepthResult]:
@@ -149,7 +153,13 @@ class TakeProcessor:
         frame_widenings: list[Widening] = []
         results = self._estimate(grid, self.d_range, progress)
         while not self.decision.planned and len(frame_widenings) < MAX_WIDEN:
-            low, high = bound_side_hits(results, self.d_range)
+            hits = bound_side_hits(results, self.d_range)
+            if frame_widenings:
+                last = frame_widenings[-1]
+                for side, before in enumerate((last.low_hits, last.high_hits)):
+                    if before > 0 and hits[side] > before / 2:  # not halved: matches at any bound, not clipping
+                        self.spurious[side] = max(self.spurious[side], hits[side])
+            low, high = (h if h > 2 * self.spurious[i] else 0 for i, h in enumerate(hits))
             if not (low or high):
                 break
             after = widened(self.d_range, bool(low), bool(high))

@@ -3,8 +3,9 @@ planner, a given range, a grid folder's ``disparity_range_px``), otherwise measu
 over a few frame sets spread across the take (:func:`rigctl.depth.measured_range.measured_range`), and
 failing that the whole plausible range. A measured range is only ever widened, never narrowed: when a frame
 set's estimates pile up at one of its bounds (:func:`bound_side_hits`), the pipeline widens that side and
-runs the frame set again, so no frame keeps a clipped result. A planned range is the user's word and is
-kept; its bound hits are reported."""
+runs the frame set again, so no frame keeps a clipped result. Hits a widening did not halve are spurious matches at
+whatever bound there is, not a clipped scene: for the rest of the chunk that side is widened again only
+when more than twice as many hit it. A planned range is the user's word and is kept; its bound hits are reported."""
 
 from __future__ import annotations
 

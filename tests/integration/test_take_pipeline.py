@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import ast
 import itertools
+import json
 from pathlib import Path
 from typing import Any
 
@@ -164,3 +165,40 @@ def test_no_module_under_cli_tui_demo_or_farm_runs_the_depth_stages_itself() -> 
                 if node.module in ("rigctl.depth.estimate", "rigctl.depth.key", "rigctl.depth.measured_range"):
                     offenders.append(f"{path.relative_to(REPO)} imports {node.module}")
     assert offenders == []
+
+
+def test_rigctl_depth_reports_the_take_range_bound_hits_and_flicker_of_a_recorded_take(tmp_path: Path) -> None:
+    from tests_support import run_rigctl
+
+    rig = (REPO / "rigs" / "sim-3x3.yaml").read_text()
+    rig = rig.replace("width_px: 960", "width_px: 480").replace("height_px: 540", "height_px: 270")
+    (tmp_path / "small.yaml").write_text(rig)
+    res = run_rigctl(
+        "record", str(tmp_path / "small.yaml"), "--take", "t", "--frames", "3", "--out", str(tmp_path),
+        "--sim", "ideal=true", "--sim", "deterministic=true", "--force",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    out = tmp_path / "d"
+    res = run_rigctl("depth", str(tmp_path / "t"), "--out", str(out), "--preset", "fast", "--cameras", "r1c1",
+                     "--chunk", "2", "--json")  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report == json.loads(res.stdout)
+    assert report["range"]["sampled_frames"] == [0, 1, 2] and report["range"]["planned"] is False
+    assert report["chunk"] == 2 and report["temporal"] is True
+    frames = report["frames"]
+    assert sorted(frames) == ["0", "1", "2"]
+    assert report["bound_hit_pixels"] == sum(f["bound_hit_pixels"] for f in frames.values())
+    lo, hi = report["range"]["disparity_range_px"]
+    for n in ("0", "1", "2"):  # each frame set searched at least the take's range, widened where it was hit
+        f_lo, f_hi = frames[n]["disparity_range_px"]
+        assert f_lo <= lo and f_hi >= hi
+        for w in frames[n]["widenings"]:
+            assert w["after"][0] <= w["before"][0] and w["after"][1] >= w["before"][1]
+    assert frames["1"]["disparity_range_px"][0] <= frames["0"]["disparity_range_px"][0]  # same chunk: never
+    assert frames["1"]["disparity_range_px"][1] >= frames["0"]["disparity_range_px"][1]  # narrower
+    video = report["video"]["r1c1"]  # the take has a truth: flicker per camera
+    assert video["frames"] == 3 and video["pairs"] == 2 and video["changing_pixels"] > 0
+    assert video["change_error_mean_px"] is not None and video["change_error_mean_px"] >= 0
+    bad = run_rigctl("depth", str(tmp_path / "t"), "--out", str(out), "--chunk", "0")
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--chunk" in bad.stderr, bad.stderr
