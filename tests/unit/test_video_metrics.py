@@ -117,3 +117,11 @@ def test_video_bench_scores_each_take_with_temporal_off_and_on(tmp_path: Path) -
     assert table.count("still") == 2 and "flicker" in table
     png = plot_video(result, tmp_path / "video.png")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize(("args", "says"), [(["--frames", "1"], "--frames"), (["--preset", "nope"], "--preset")])
+def test_bench_video_refuses_bad_options_in_one_line(args: list[str], says: str) -> None:
+    from tests_support import run_rigctl
+
+    res = run_rigctl("bench", "depth", "--video", *args)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and says in res.stderr, res.stderr
