@@ -181,6 +181,11 @@ def _grid(
     scale = max(sx, sy)
     if scale == 0:
         raise RigFileError(f"{path}: every camera is at one place: not a grid")
+    # the spacings as rectification defines them: a lattice o + col a + row b fitted to the centres, |a|, |b|
+    design = np.column_stack([np.ones(len(names))] + [v.astype(np.float64) for v, st in ((cols, sx), (rows, sy)) if st])
+    coef, *_ = np.linalg.lstsq(design, local, rcond=None)
+    sx = float(np.linalg.norm(coef[1])) if sx else 0.0
+    sy = float(np.linalg.norm(coef[-1])) if sy else 0.0
     depth = local[:, 2] - np.median(local[:, 2])
     bad = int(np.argmax(np.abs(depth)))
     if abs(depth[bad]) > PLANE_TOLERANCE * scale:

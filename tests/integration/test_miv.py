@@ -1,4 +1,4 @@
-"""MIV content out and in on an ideal simulated presenter take (two frame sets, true disparity, so the
+"""MIV content out and in on simulated presenter takes (two frame sets, true disparity, so the
 figures measure the interchange and the renderers, not our depth): the export read back (geometry, colour,
 depth), rigctl render on the imported content against the original take, MPEG's RVS (built from its source)
 on our export against rigctl render and against the simulator's view, and the refusals."""
@@ -32,6 +32,7 @@ AT = (1.5, 1.0)  # between r1c1 and r1c2
 
 @pytest.fixture(scope="module")
 def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An ideal simulated take: the simulator's view between cameras is exactly what it should show."""
     out = tmp_path_factory.mktemp("miv")
     res = run_rigctl(
         "record", "--take", "ideal", "--frames", "2", "--out", str(out),
@@ -39,6 +40,27 @@ def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
     return out / "ideal"
+
+
+@pytest.fixture(scope="module")
+def rectified(take: Path) -> Path:
+    """A simulated presenter take (mounting errors, focal spread, distortion) rectified with its true
+    calibration: the cameras off the lattice by up to half a millimetre, the principal point off centre."""
+    out = take.parent
+    res = run_rigctl("record", "--take", "real", "--frames", "2", "--out", str(out), "--sim", "motion=false", "--force")
+    assert res.returncode == 0, res.stderr
+    cal = out / "real" / "truth" / "calibration.yaml"
+    res = run_rigctl("rectify", str(out / "real"), "--calibration", str(cal), "--out", str(out / "rectified"))
+    assert res.returncode == 0, res.stderr
+    return out / "rectified"
+
+
+@pytest.fixture(scope="module")
+def rectified_content(rectified: Path) -> Path:
+    out = rectified.parent / "rectified-content"
+    res = run_rigctl("miv", "export", str(rectified), str(rectified / "truth" / "disparity"), "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    return out
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +89,10 @@ def truth(take: Path) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int, int]
     return rgb, Keyer().matte(rgb), registry.simulated_burnin_box(take, W)
 
 
-def test_the_export_names_every_file_and_reads_back_to_the_same_geometry(take: Path, content: Path) -> None:
+def test_the_export_names_every_file_and_reads_back_to_the_same_geometry(
+    rectified: Path, rectified_content: Path
+) -> None:
+    take, content = rectified, rectified_content
     readme = (content / "README.txt").read_text()
     files = sorted(p.name for p in content.iterdir() if p.name != "README.txt")
     assert len(files) == 1 + 2 * 9
@@ -83,11 +108,13 @@ def test_the_export_names_every_file_and_reads_back_to_the_same_geometry(take: P
         assert np.abs(cam.position_cv - (np.array(rect.positions_m[cam.name]) - mean)).max() < 1e-6
     assert abs(got.focal_px - rect.focal_px) < 1e-6
     assert abs(got.principal_cv[0] - rect.K[0][2]) < 1e-6 and abs(got.principal_cv[1] - rect.K[1][2]) < 1e-6
-    assert abs(got.spacing_x - rect.spacing_x_m) < 1e-9
+    assert abs(got.spacing_x - rect.spacing_x_m) < 1e-9 and abs(got.spacing_y - rect.spacing_y_m) < 1e-9
+    assert rect.lattice_residual_mm > 0.1  # a real rectified take: not on an exact lattice
     assert got.frame_count() == 2
 
 
-def test_the_export_reads_back_to_the_same_pixels_and_depth(take: Path, content: Path) -> None:
+def test_the_export_reads_back_to_the_same_pixels_and_depth(rectified: Path, rectified_content: Path) -> None:
+    take, content = rectified, rectified_content
     got = read_content(content / "cameras.json")
     grid = TakeGrid(take).grid(1)
     near, far = got.cameras[0].depth_range
