@@ -65,7 +65,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="MIV content (camera JSON + YUV) as grid folders for rigctl depth and render, one per frame",
     )
     im.add_argument("cameras", type=Path, help="the content's camera JSON")
-    im.add_argument("--out", type=Path, required=True, help="new folder: <frame>/grid.yaml, images, disparity")
+    im.add_argument(
+        "--out", type=Path, required=True, help="new folder: <frame>/grid.yaml, images, truth/ (the content's depth)"
+    )
     im.add_argument("--frames", type=_frames, help="frames A-B (default: every frame of the content)")
     im.set_defaults(func=cmd_import)
     p.set_defaults(func=lambda ns: p.print_help() or 2)

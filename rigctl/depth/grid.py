@@ -212,7 +212,7 @@ def load_grid_folder(folder: Path) -> Grid:
             raise RigFileError(f"{folder / (n + '.png')}: image is {w}x{h}, but {first}.png is {w0}x{h0}: sizes differ")
     rng = spec.get("disparity_range_px")
     try:
-        return grid_from_arrays(
+        grid = grid_from_arrays(
             {n: _png_picture(img) for n, img in images.items()},
             float(spec["focal_px"]),
             float(spec["spacing_x"]),
@@ -222,6 +222,26 @@ def load_grid_folder(folder: Path) -> Grid:
         )
     except (TypeError, ValueError, IndexError):
         raise RigFileError(f"{path}: spacing_x, spacing_y, focal_px, doffs must be numbers") from None
+    grid.truth = _folder_truth(folder / "truth", grid)
+    return grid
+
+
+def _folder_truth(folder: Path, grid: Grid) -> dict[str, F32] | None:
+    """A grid folder's reference disparities, ``truth/<camera>.pfm`` (e.g. the depth MIV content came
+    with, ``rigctl miv import``): what depth scores its estimates against. None when there are none."""
+    if not folder.is_dir():
+        return None
+    from rigctl.pfm import read_pfm
+
+    truth = {}
+    for n in grid.names:
+        p = folder / f"{n}.pfm"
+        if p.is_file():
+            d = read_pfm(p)
+            if d.shape != grid.shape:
+                raise RigFileError(f"{p}: reference disparity is {d.shape[::-1]} px, the images {grid.shape[::-1]}")
+            truth[n] = d
+    return truth or None
 
 
 def camera_offsets(

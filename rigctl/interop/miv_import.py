@@ -1,6 +1,6 @@
 """MIV content in: a camera JSON (the common test conditions' ``cameras`` list) and its YUV files, turned into
-one grid folder per frame (``grid.yaml``, 16-bit PNG colour, the content's own depth as disparity PFMs) that
-``rigctl depth`` and ``rigctl render`` read.
+one grid folder per frame (``grid.yaml``, 16-bit PNG colour, the content's own depth as disparity PFMs in
+``truth/``) that ``rigctl depth`` (which scores against it) and ``rigctl render`` read.
 
 Only a planar grid can be a grid: every camera perspective, with one resolution, one square-pixel focal length,
 one principal point and one orientation, their centres in one plane facing the way they look, on a lattice of
@@ -216,8 +216,9 @@ def _grid(
 
 
 def import_miv(cameras_json: Path, out: Path, frames: range | None = None) -> list[Path]:
-    """Grid folders ``out/<frame:06d>/`` (grid.yaml, r{row}c{col}.png at 16 bits, disparity/r{row}c{col}.pfm
-    from the content's depth) for ``frames`` (default: all); returns the folders."""
+    """Grid folders ``out/<frame:06d>/`` (grid.yaml, r{row}c{col}.png at 16 bits, truth/r{row}c{col}.pfm: the
+    content's own depth as disparity, which ``rigctl depth`` scores against and ``rigctl render`` can render
+    with) for ``frames`` (default: all); returns the folders."""
     import cv2
 
     from rigctl.pfm import write_pfm
@@ -233,7 +234,7 @@ def import_miv(cameras_json: Path, out: Path, frames: range | None = None) -> li
     folders = []
     for n in numbers:
         folder = out / f"{n:06d}"
-        (folder / "disparity").mkdir(parents=True)
+        (folder / "truth").mkdir(parents=True)
         grid = {"spacing_x": content.spacing_x, "spacing_y": content.spacing_y, "focal_px": content.focal_px}
         (folder / "grid.yaml").write_text(json.dumps(grid) + "\n")  # JSON is YAML
         for cam in content.cameras:
@@ -241,7 +242,7 @@ def import_miv(cameras_json: Path, out: Path, frames: range | None = None) -> li
             rgb = yuv.ycbcr_to_rgb(upsample(y, cb, cr), cam.colour_bits)
             png = np.rint(rgb[..., ::-1] * 65535.0).astype(np.uint16)
             cv2.imwrite(str(folder / f"{cam.grid_name}.png"), png)
-            write_pfm(folder / "disparity" / f"{cam.grid_name}.pfm", content.disparity(cam, n))
+            write_pfm(folder / "truth" / f"{cam.grid_name}.pfm", content.disparity(cam, n))
         folders.append(folder)
     names = {c.grid_name: c.name for c in content.cameras}
     (out / "import.json").write_text(json.dumps({"source": str(cameras_json), "cameras": names}, indent=2) + "\n")

@@ -146,7 +146,7 @@ def test_render_on_the_imported_content_reproduces_render_on_the_take(take: Path
     views = {}
     for name, src, disp in (
         ("take", take, take / "truth" / "disparity"),
-        ("imported", imported / "000001", imported / "000001" / "disparity"),
+        ("imported", imported / "000001", imported / "000001" / "truth"),
     ):
         out = take.parent / f"view-{name}"
         res = run_rigctl("render", str(src), "--disparity", str(disp), "--at", f"{AT[0]},{AT[1]}", "--out", str(out))
@@ -293,3 +293,11 @@ def test_content_with_a_missing_or_short_file_is_refused_in_one_line(content: Pa
     res = run_rigctl("miv", "import", str(folder / "cameras.json"), "--out", str(tmp_path / "b"))
     assert res.returncode == 3 and res.stderr.count("\n") == 1 and "r1c1_depth" in res.stderr, res.stderr
     assert not (tmp_path / "b").exists()  # checked before anything is written
+
+
+def test_depth_on_imported_content_scores_against_the_content_s_own_depth(imported: Path, tmp_path: Path) -> None:
+    res = run_rigctl("depth", str(imported / "000000"), "--out", str(tmp_path / "d"), "--cameras", "r1c1", "--json")
+    assert res.returncode == 0, res.stderr
+    frames = json.loads(res.stdout)["frames"]
+    scores = next(iter(frames.values()))["cameras"]["r1c1"]["against_truth"]
+    assert scores["bad_2.0"] < 10, scores  # our depth on MIV content, scored against the depth it came with
