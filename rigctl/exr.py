@@ -103,12 +103,20 @@ def picture_attributes(fps: float | None, timecode: Timecode | None, colour: str
 
 
 def write_exr(
-    path: Path, channels: dict[str, NDArray[np.floating]], attributes: dict[str, object] | None = None
+    path: Path,
+    channels: dict[str, NDArray[np.floating]],
+    attributes: dict[str, object] | None = None,
+    half: tuple[str, ...] = (),
+    compression: Any = None,
 ) -> None:
-    """Write a scanline EXR (ZIP) with float32 channels; ``RGB`` may be one H x W x 3 array."""
-    header: dict[str, object] = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    """Write a scanline EXR with float32 channels, or half floats for those named in ``half``; ``RGB`` may be
+    one H x W x 3 array. ZIP unless ``compression`` says otherwise (an ``OpenEXR.*_COMPRESSION``)."""
+    header: dict[str, object] = {
+        "compression": OpenEXR.ZIP_COMPRESSION if compression is None else compression,
+        "type": OpenEXR.scanlineimage,
+    }
     header.update(attributes or {})
-    data = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in channels.items()}
+    data = {k: np.ascontiguousarray(v, dtype=np.float16 if k in half else np.float32) for k, v in channels.items()}
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.exr")
     OpenEXR.File(header, data).write(str(tmp))

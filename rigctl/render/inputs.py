@@ -19,6 +19,7 @@ from rigctl.depth.sources import FrameSource, open_source
 from rigctl.errors import ParameterError, TakeError
 from rigctl.pfm import read_pfm
 from rigctl.rig import CAMERA_NAME
+from rigctl.timecode import Timecode
 
 log = logging.getLogger(__name__)
 
@@ -148,6 +149,30 @@ class RenderInput:
         if self.frames.flat and not folder.is_dir():
             folder = self.disparity_dir  # a grid folder's depth output has no frame level
         return folder / f"{name}.pfm"
+
+    def timing(self, number: int) -> tuple[float | None, Timecode | None]:
+        """A take's rate and frame set ``number``'s timecode, which its views carry (None for a grid folder)."""
+        return self.frames.timing(number)
+
+    def view_camera(self, frame: FrameViews, offset: tuple[float, float]) -> dict[str, object]:
+        """``worldToCamera`` and ``worldToNDC`` (OpenEXR's attributes, ``rigctl.interop.exrcam``) of a view
+        at ``offset`` (in spacings from the cameras' mean, as :meth:`FrameViews.position` gives it), in the
+        take's rectified frame (a grid folder's: centred on its cameras, principal point at the centre)."""
+        from rigctl.interop.exrcam import world_to_camera, world_to_ndc
+
+        h, w = frame.shape
+        origin = np.zeros(3)
+        principal = ((w - 1) / 2, (h - 1) / 2)
+        reader = getattr(self.frames, "reader", None)  # a take's (rectified, or rectified as it is read)
+        rect = reader.manifest.rectification if reader is not None else None
+        if rect is not None:
+            origin = np.mean([rect.positions_m[n] for n in frame.views], axis=0)
+            principal = (float(rect.K[0][2]), float(rect.K[1][2]))
+        centre = origin + np.array([offset[0] * frame.spacing, offset[1] * frame.spacing, 0.0])
+        return {
+            "worldToCamera": np.ascontiguousarray(world_to_camera(centre), np.float32),
+            "worldToNDC": np.ascontiguousarray(world_to_ndc(centre, frame.focal_px, principal, (w, h)), np.float32),
+        }
 
     def frame(self, number: int) -> FrameViews:
         """Frame ``number``'s colour, key and disparity (the last one asked for is kept: the CLI reads the

@@ -11,6 +11,7 @@ from typing import NotRequired, TypedDict
 
 import cv2
 import numpy as np
+import OpenEXR
 from numpy.typing import NDArray
 
 from rigctl.errors import ParameterError
@@ -115,7 +116,8 @@ def path_positions(points: list[tuple[float, float]], steps: int) -> list[tuple[
 
 def write_view(folder: Path, stem: str, rgba: F32, attrs: dict[str, object]) -> None:
     """``stem.png`` (8-bit RGBA, the cameras' BT.709 picture) and ``stem.exr`` (scene-linear Rec. 709 RGB
-    premultiplied by ``A`` from the key, with ``chromaticities``: as take export and depth write pictures)."""
+    premultiplied by ``A`` from the key, with ``chromaticities``: as take export and depth write pictures; half
+    floats, PIZ, and whatever ``attrs`` add: the take's time and the view's camera)."""
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -123,7 +125,13 @@ def write_view(folder: Path, stem: str, rgba: F32, attrs: dict[str, object]) -> 
     png = np.clip(rgba * 255.0 + 0.5, 0, 255).astype(np.uint8)
     if not cv2.imwrite(str(folder / f"{stem}.png"), cv2.cvtColor(png, cv2.COLOR_RGBA2BGRA)):
         raise ParameterError(f"{folder / stem}.png: cannot write")
-    write_exr(folder / f"{stem}.exr", picture(rgba[..., :3], rgba[..., 3]), {**picture_attributes(None, None), **attrs})
+    write_exr(
+        folder / f"{stem}.exr",
+        picture(rgba[..., :3], rgba[..., 3]),
+        {**picture_attributes(None, None), **attrs},
+        half=("RGB", "A"),
+        compression=OpenEXR.PIZ_COMPRESSION,
+    )
 
 
 def render_views(
@@ -158,8 +166,11 @@ def render_views(
                 "%s holds %d view(s) from an earlier run that this one does not write over (%s): a sequence read "
                 "from the folder would mix the two", folder, len(earlier), names,
             )  # fmt: skip
+        fps, timecode = inp.timing(n)
         for eye, res, ms in _rendered(ren, frame, wanted):
             attrs: dict[str, object] = {
+                **picture_attributes(fps, timecode),
+                **inp.view_camera(frame, frame.position(eye.col, eye.row)),
                 "rigctl_position": f"{eye.col:g},{eye.row:g}",
                 "rigctl_sources": ",".join(res.sources),
             }
