@@ -183,12 +183,12 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
             f"- Rectification, held-out corners, {label}: RMS {pooled.net.rms:.3f} px net of camera "
             f"placement ({pooled.raw.rms:.3f} px raw)."
         )
-    fr_truth = [t for st in frame.cameras.values() if isinstance(t := st.get("against_truth"), dict)]
+    fr_truth = [t for cam in frame.cameras if (t := frame.truth(cam)) is not None]
     if fr_truth:
         lines.append(
             "- Depth on the demo's own rectified take (its truth is in the true calibration's geometry): mean bad "
-            f"1.0 {np.mean([t['bad_1.0'] for t in fr_truth]):.2f} %, "
-            f"bad 2.0 {np.mean([t['bad_2.0'] for t in fr_truth]):.2f} %."
+            f"1.0 {np.mean([t.bad_1_0 for t in fr_truth]):.2f} %, "
+            f"bad 2.0 {np.mean([t.bad_2_0 for t in fr_truth]):.2f} %."
         )
     lines.append(
         f"- Keyed background left out: {frame.keyed_background_share:.0%} of pixels; disparity levels left out "

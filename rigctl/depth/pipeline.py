@@ -30,7 +30,7 @@ from rigctl.depth.key import Keyer
 from rigctl.depth.metrics import score
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.presets import PRESETS, Preset
-from rigctl.depth.report import FrameReport, Timings
+from rigctl.depth.report import CameraDepth, FrameReport, Timings, TruthScores
 from rigctl.depth.sources import FrameSource
 from rigctl.depth.take_range import (
     MAX_WIDEN,
@@ -219,12 +219,12 @@ class TakeProcessor:
 
     def frame_report(self, grid: Grid, results: dict[str, DepthResult], timings: Timings) -> FrameReport:
         full = unplanned_range(grid.shape[1])
-        per_cam: dict[str, dict[str, Any]] = {}
+        per_cam: dict[str, CameraDepth] = {}
         for cam, res in results.items():
-            st: dict[str, Any] = _plain(dict(res.stats))
+            st = CameraDepth(**_plain(dict(res.stats)))
             truth = grid.truth.get(cam) if grid.truth else None
             if truth is not None:
-                st["against_truth"] = _plain(score(res.disparity, truth, np.isfinite(truth)))
+                st["against_truth"] = TruthScores.model_validate(score(res.disparity, truth, np.isfinite(truth)))
             per_cam[cam] = st
         lo, hi = self.d_range
         was_widened = self.d_range != self.decision.disparity_range_px

@@ -10,6 +10,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from rigctl.depth.search import EstimateStats
 from rigctl.depth.take_range import RangeDecision, Widening
 from rigctl.depth.video_metrics import VideoScores
 from rigctl.take.manifest import DamagedFrame
@@ -33,6 +34,12 @@ class TruthScores(BaseModel):
     pixels: int
 
 
+class CameraDepth(EstimateStats, total=False):
+    """One camera of a frame set: its estimator statistics and, when the take has a truth, its scores."""
+
+    against_truth: TruthScores
+
+
 class Timings(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -53,12 +60,12 @@ class FrameReport(BaseModel):
     keyed_background_share: float
     bound_hit_pixels: int
     widenings: list[Widening] = []
-    cameras: dict[str, dict[str, Any]]  # EstimateStats (and TruthScores) as JSON
+    cameras: dict[str, CameraDepth]
     timings_s: Timings
 
     def truth(self, camera: str) -> TruthScores | None:
-        data = self.cameras.get(camera, {}).get("against_truth")
-        return TruthScores.model_validate(data) if data is not None else None
+        cam = self.cameras.get(camera)
+        return cam.get("against_truth") if cam is not None else None
 
     def to_json(self) -> dict[str, Any]:
         return self.model_dump(mode="json", by_alias=True)

@@ -4,10 +4,10 @@ searched box), with the per-camera statistics that end up in ``report.json``."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TypedDict
 
 import numpy as np
 from numpy.typing import NDArray
+from typing_extensions import TypedDict  # pydantic validates these (the report) only on Python < 3.12
 
 from rigctl.depth.grid import Grid
 from rigctl.depth.presets import Preset
