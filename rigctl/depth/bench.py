@@ -17,10 +17,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.depth.baselines import BASELINES
-from rigctl.depth.estimate import estimate
 from rigctl.depth.grid import Grid, grid_from_arrays
-from rigctl.depth.key import Keyer
 from rigctl.depth.metrics import score
+from rigctl.depth.options import DepthOptions
 from rigctl.depth.presets import PRESETS
 from rigctl.depth.scenes import SCENES
 
@@ -121,6 +120,16 @@ class Comparison:
     time_ratio: float
 
 
+def preset_disparity(ds: Dataset, preset: str) -> NDArray[np.float32]:
+    """A preset on one dataset through the take-level pipeline, as rigctl depth runs it on one frame set: the
+    dataset's range given, its camera alone, no temporal state (a still)."""
+    from rigctl.depth.pipeline import TakeProcessor
+    from rigctl.depth.sources import OneGrid
+
+    opt = DepthOptions(preset, disparity_range=ds.d_range, key=ds.key, cameras=(ds.camera,), temporal=False)
+    return TakeProcessor(OneGrid(ds.grid, ds.name), opt).depth(ds.grid)[ds.camera].disparity
+
+
 def run_bench(
     datasets: list[Dataset],
     methods: list[str] | None = None,
@@ -146,7 +155,7 @@ def run_bench(
             for _ in range(repeats):
                 t0 = time.perf_counter()
                 if m in PRESETS:
-                    disp = estimate(ds.grid, ds.camera, ds.d_range, PRESETS[m], Keyer() if ds.key else None).disparity
+                    disp = preset_disparity(ds, m)
                 else:
                     disp = BASELINES[m](ds.grid, ds.camera, ds.d_range)
                 times.append(time.perf_counter() - t0)
