@@ -271,7 +271,10 @@ def process_take(
             t_compute = clock()
             run_id = uuid.uuid4().hex[:8]
             decision = ledger.data.range
-            if decision is None or options.redo:
+            plan = options.depth.near_m is not None or options.depth.disparity_range is not None
+            # a measured range is kept across runs (every chunk must search the same one); a plan is cheap to
+            # turn into a range again, and may have been given since
+            if decision is None or options.redo or plan or decision.planned:
                 fut = client.submit(take_range, take, calibration, options.depth, key=f"rigctl-range-{run_id}")
                 decision = fut.result()
                 ledger.data.range = decision
