@@ -29,7 +29,7 @@ log = logging.getLogger(__name__)
 # only that module (and what it needs), not every verb's libraries: start-up is part of a take's start
 VERBS = (
     "plan", "devices", "record", "take", "tally", "control", "board", "calibrate", "rectify", "depth", "process",
-    "render", "bench", "demo", "tui", "miv", "usd",
+    "render", "bench", "demo", "tui", "miv", "usd", "view",
 )  # fmt: skip
 
 

@@ -1,0 +1,74 @@
+"""``rigctl view``: the take's light field in a browser (WebGL2), served from this machine."""
+
+from __future__ import annotations
+
+import argparse
+import ipaddress
+import logging
+import sys
+from pathlib import Path
+
+from rigctl.errors import ParameterError
+
+log = logging.getLogger(__name__)
+
+
+def port(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a port number 0..65535, got {text!r}") from None
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port number 0..65535, got {text!r}")
+    return value
+
+
+def address(text: str) -> str:
+    """An IP address to listen on (never a name: what is reachable should be what was typed)."""
+    try:
+        return str(ipaddress.ip_address(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an IP address such as 127.0.0.1 or 0.0.0.0, got {text!r}") from None
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "view",
+        help="look around a take in the browser: a real-time light-field viewer (WebGL2) on a local web server",
+        description="Serves one page and the take's frame sets; the page renders novel views on the GPU by the "
+        "method of rigctl render, moves the eye within the array's window, plays the take, and shows stereo "
+        "and WebXR. Listens on 127.0.0.1 unless --bind names another address; Ctrl-C stops it.",
+    )
+    p.add_argument("input", type=Path, metavar="INPUT", help="rectified take, ideal simulated take, or grid folder")
+    p.add_argument("--disparity", type=Path, required=True, metavar="DIR", help="depth output or truth/disparity")
+    p.add_argument(
+        "--bind", type=address, default="127.0.0.1", metavar="ADDR",
+        help="address to listen on (default 127.0.0.1: this machine only; 0.0.0.0: every network)",
+    )  # fmt: skip
+    p.add_argument("--port", type=port, default=0, help="port (default: a free one)")
+    p.add_argument("--open", action="store_true", help="open the page in the default browser")
+    p.set_defaults(func=run)
+
+
+def run(ns: argparse.Namespace) -> int:
+    from rigctl.viewer.bundle import Bundles
+    from rigctl.viewer.server import ViewerServer
+
+    if not ns.input.exists():
+        raise ParameterError(f"{ns.input}: does not exist")
+    bundles = Bundles(ns.input, ns.disparity)
+    server = ViewerServer(bundles, ns.bind, ns.port)
+    if ns.bind not in ("127.0.0.1", "::1"):
+        log.warning("listening on %s: anyone who can reach this machine there can see the take", ns.bind)
+    print(f"rigctl view: {ns.input} ({len(bundles.numbers)} frame sets) at {server.url} (Ctrl-C stops)", flush=True)
+    if ns.open:
+        import webbrowser
+
+        webbrowser.open(server.url)
+    try:
+        server.serve_forever(poll_interval=0.2)
+    except KeyboardInterrupt:
+        sys.stderr.write("rigctl view: stopped\n")
+    finally:
+        server.server_close()
+    return 0

@@ -1,0 +1,118 @@
+"""What the page renders from: the take's description (``take.json``) and one binary bundle per frame set.
+
+A bundle holds *every* camera's colour and disparity of one frame set in one response, so the page can only
+ever upload a frame set's colour together with that same frame set's disparity. Layout (little-endian)::
+
+    b"RGFS"  u32 header length  JSON header (padded with spaces to a multiple of 4)
+    per camera, in the header's order: RGBA8 texels (W x H x 4), then float32 disparity (W x H)
+
+The texels are exactly those ``rigctl.render.warp.prepare`` gives the CPU renderer (RGB and key alpha,
+``x * 255 + 0.5`` saturated); the disparity is the PFM's with ``NONE`` (-1e6) where there is no estimate.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import struct
+import threading
+from collections import OrderedDict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rigctl.errors import ParameterError
+from rigctl.render.inputs import RenderInput, _row_col
+from rigctl.render.kernels import NONE
+
+log = logging.getLogger(__name__)
+
+MAGIC = b"RGFS"
+CACHE = 12  # bundles kept in memory: the page's read-ahead plus a little
+
+
+def _u8(a: np.ndarray) -> np.ndarray:
+    return np.clip(a.astype(np.float32) * np.float32(255.0) + np.float32(0.5), 0, 255).astype(np.uint8)
+
+
+class Bundles:
+    """The take's frame sets as bundles, made on first request and kept in a small LRU cache."""
+
+    def __init__(self, source: Path, disparity: Path) -> None:
+        self.input = RenderInput(source, disparity)
+        self.numbers = self.input.select(None)
+        self._lock = threading.Lock()
+        self._cache: OrderedDict[int, bytes] = OrderedDict()
+        first = self.input.frame(self.numbers[0])
+        self.height, self.width = first.shape
+        self.info = self._describe(first)
+
+    def _describe(self, frame: Any) -> dict[str, Any]:
+        views = frame.views
+        names = list(views)
+        rc = np.array([_row_col(n) for n in names], float)
+        off = np.array([views[n].offset for n in names], float)
+        design = np.column_stack([np.ones(len(names)), rc[:, 1], rc[:, 0]])
+        coef, *_ = np.linalg.lstsq(design, off, rcond=None)
+        fps, start = 25.0, None
+        take = self.input.take
+        if take is not None:
+            manifest = take.reader.manifest
+            fps = float(manifest.format.fps)
+            tc = manifest.timing.start_timecode
+            start = None if tc is None else int(tc)
+        cameras = [
+            {"name": n, "row": int(r), "col": int(c), "offset": list(views[n].offset)}
+            for n, (r, c) in zip(names, rc.tolist(), strict=True)
+        ]
+        cols, rows = rc[:, 1], rc[:, 0]
+        return {
+            "width": self.width,
+            "height": self.height,
+            "frames": self.numbers,
+            "fps": fps,
+            "start_timecode_frames": start,
+            "cameras": cameras,
+            # grid units (1, col, row) @ fit -> (u, v) in horizontal spacings, as rigctl render maps --at
+            "fit": coef.tolist(),
+            "limits": {"col": [cols.min() - 1, cols.max() + 1], "row": [rows.min() - 1, rows.max() + 1]},
+            "spacing_m": frame.spacing,
+            "focal_px": frame.focal_px,
+        }
+
+    def get(self, number: int) -> bytes:
+        if number not in self.numbers:
+            raise ParameterError(f"frame set {number} is not one of the take's with a disparity")
+        with self._lock:
+            if number in self._cache:
+                self._cache.move_to_end(number)
+                return self._cache[number]
+            data = self._make(number)
+            self._cache[number] = data
+            while len(self._cache) > CACHE:
+                self._cache.popitem(last=False)
+            return data
+
+    def _make(self, number: int) -> bytes:
+        frame = self.input.frame(number)
+        names, chunks, spread = [], [], []
+        for v in frame.views.values():
+            if v.disparity is None:
+                continue
+            rgba = np.empty((*v.alpha.shape, 4), np.uint8)
+            rgba[..., :3] = _u8(v.rgb)
+            rgba[..., 3] = _u8(v.alpha)
+            disp = np.where(np.isfinite(v.disparity), v.disparity, NONE).astype("<f4")
+            half = disp[::2, ::2]
+            valid = half[half > NONE]
+            if valid.size:
+                spread.append(float(valid.max() - valid.min()))
+            names.append(v.name)
+            chunks += [rgba.tobytes(), disp.tobytes()]
+        # the renderer's bound on a disocclusion (warp.Renderer.max_gap): from every source of the frame
+        max_gap = int(max(spread, default=0.0) * 1.5 / 2) + 4
+        header = json.dumps({"number": number, "cameras": names, "width": self.width, "height": self.height,
+                             "max_gap": max_gap}).encode()  # fmt: skip
+        header += b" " * (-len(header) % 4)
+        return b"".join([MAGIC, struct.pack("<I", len(header)), header, *chunks])

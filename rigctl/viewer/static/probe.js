@@ -1,0 +1,70 @@
+// Probes for tests and the benchmark, run only when the server was started to accept results (never by
+// `rigctl view` itself). Each posts what it measured to /api/result?tag=...:
+//   probe=shots&frame=I&at=C,R;C,R&loo=CAM,CAM  the views' RGBA8 pixels as rendered (tags at:C,R / loo:CAM)
+//   probe=play                                  plays the take once; per frame shown, which frame set each
+//                                               source's colour and disparity textures came from (tag play)
+//   probe=bench&repeats=N&ipd=MM                eye pairs at the centre, timed (tag bench)
+// then tag done (the GL implementation).
+
+function post(tag, body) {
+  return fetch(`/api/result?tag=${encodeURIComponent(tag)}`, { method: "POST", body });
+}
+
+const nextFrame = () => new Promise((resolve) => requestAnimationFrame(resolve));
+
+async function shots(params, v) {
+  const index = Number(params.get("frame") || 0);
+  await v.store.load(index);
+  v.show(index);
+  const view = v.views[0];
+  for (const at of (params.get("at") || "").split(";").filter(Boolean)) {
+    const [c, r] = at.split(",").map(Number);
+    const sources = v.r.render(...v.r.position(c, r), view);
+    await post(`at:${at}`, v.r.read(view));
+    await post(`sources:${at}`, JSON.stringify(sources));
+  }
+  for (const cam of (params.get("loo") || "").split(",").filter(Boolean)) {
+    const offset = v.take.cameras.find((c) => c.name === cam).offset;
+    const sources = v.r.render(offset[0], offset[1], view, [cam]);
+    await post(`loo:${cam}`, v.r.read(view));
+    await post(`sources:${cam}`, JSON.stringify(sources));
+  }
+}
+
+async function play(v) {
+  document.getElementById("loop").checked = false;
+  const shown = [];
+  const draw = v.draw.bind(v);
+  v.draw = () => {
+    draw();
+    const srcs = v.r.sources;
+    shown.push({ index: v.index, number: v.r.frame, t: performance.now(),
+      colour: srcs.map((s) => s.tex.colourFrame), disparity: srcs.map((s) => s.tex.disparityFrame) });
+  };
+  await v.store.load(0);
+  v.play();
+  do { v.tick(await nextFrame()); } while (v.playing);
+  await post("play", JSON.stringify(shown));
+}
+
+async function bench(params, v) {
+  document.getElementById("stereo").checked = true;
+  document.getElementById("ipd").value = params.get("ipd") || "64";
+  await v.store.load(0);
+  v.show(0);
+  v.layout();
+  const repeats = Number(params.get("repeats") || 20);
+  v.times = [];
+  for (let i = 0; i < repeats + 3; i++) { v.draw(); await nextFrame(); }
+  await post("bench", JSON.stringify({ pair_ms: v.times.slice(3), width: v.take.width, height: v.take.height }));
+}
+
+export async function runProbe(params, viewer, glName) {
+  viewer.bindUi();
+  const kind = params.get("probe");
+  if (kind === "shots") await shots(params, viewer);
+  else if (kind === "play") await play(viewer);
+  else if (kind === "bench") await bench(params, viewer);
+  else throw new Error(`unknown probe ${kind}`);
+  await post("done", JSON.stringify({ gl: glName, userAgent: navigator.userAgent }));
+}
