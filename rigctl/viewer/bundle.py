@@ -17,6 +17,7 @@ import logging
 import struct
 import threading
 from collections import OrderedDict
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +30,8 @@ from rigctl.render.kernels import NONE
 log = logging.getLogger(__name__)
 
 MAGIC = b"RGFS"
-CACHE = 12  # bundles kept in memory: the page's read-ahead plus a little
+CACHE = 16  # bundles kept in memory: the page's read-ahead plus a little
+AHEAD = 8  # bundles made ahead of the last one asked for
 
 
 def _u8(a: np.ndarray) -> np.ndarray:
@@ -43,7 +45,8 @@ class Bundles:
         self.input = RenderInput(source, disparity)
         self.numbers = self.input.select(None)
         self._lock = threading.Lock()
-        self._cache: OrderedDict[int, bytes] = OrderedDict()
+        self._cache: OrderedDict[int, Future[bytes]] = OrderedDict()
+        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rigctl-view-bundles")
         first = self.input.frame(self.numbers[0])
         self.height, self.width = first.shape
         self.info = self._describe(first)
@@ -82,17 +85,26 @@ class Bundles:
         }
 
     def get(self, number: int) -> bytes:
+        """Frame set ``number``'s bundle; the ones after it are made meanwhile on one thread of their own (a
+        bundle costs about as much as ``rigctl render`` reading the frame: decoding and keying nine images)."""
         if number not in self.numbers:
             raise ParameterError(f"frame set {number} is not one of the take's with a disparity")
+        at = self.numbers.index(number)
+        wanted = self._future(number)
+        for later in self.numbers[at + 1 : at + 1 + AHEAD] + self.numbers[: max(0, at + 1 + AHEAD - len(self.numbers))]:
+            self._future(later)
+        return wanted.result()
+
+    def _future(self, number: int) -> Future[bytes]:
         with self._lock:
             if number in self._cache:
                 self._cache.move_to_end(number)
                 return self._cache[number]
-            data = self._make(number)
-            self._cache[number] = data
+            made = self._worker.submit(self._make, number)
+            self._cache[number] = made
             while len(self._cache) > CACHE:
                 self._cache.popitem(last=False)
-            return data
+            return made
 
     def _make(self, number: int) -> bytes:
         frame = self.input.frame(number)

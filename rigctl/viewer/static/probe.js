@@ -44,7 +44,7 @@ async function play(v) {
   await v.store.load(0);
   v.play();
   do { v.tick(await nextFrame()); } while (v.playing);
-  await post("play", JSON.stringify(shown));
+  await post("play", JSON.stringify({ shown, stalls: v.stalls }));
 }
 
 async function bench(params, v) {

@@ -31,6 +31,7 @@ class Viewer {
     this.playing = false; this.clock = null;
     this.views = [renderer.newView(), renderer.newView()];
     this.times = [];
+    this.stalls = 0;
     this.dirty = true;
     this.store.listeners.push((i, err) => {
       if (err) status(String(err), true);
@@ -87,7 +88,8 @@ class Viewer {
     $("position").textContent = `eye ${this.col.toFixed(2)}, ${this.row.toFixed(2)} (columns ${this.take.limits.col
       .join("..")}, rows ${this.take.limits.row.join("..")})`;
     const sorted = [...this.times].sort((a, b) => a - b);
-    $("timing").textContent = `${sorted[sorted.length >> 1].toFixed(1)} ms per ${this.stereo ? "eye pair" : "view"}`;
+    $("timing").textContent = `${sorted[sorted.length >> 1].toFixed(1)} ms per ${this.stereo ? "eye pair" : "view"}` +
+      (this.stalls ? `, ${this.stalls} waits for frames` : "");
     const eye = $("eye"), box = this.windowBox;
     eye.style.left = `${box.x(this.col)}px`; eye.style.top = `${box.y(this.row)}px`;
   }
@@ -98,9 +100,20 @@ class Viewer {
       if (this.clock === null) this.clock = { t: now, index: this.index };
       let due = this.clock.index + Math.floor((now - this.clock.t) / period);
       if (due >= this.take.frames.length) {
-        if ($("loop").checked) { this.clock = { t: now, index: 0 }; due = 0; } else { this.pause(); due = this.index; }
+        if ($("loop").checked) { this.clock = { t: now, index: 0 }; due = 0; } else due = this.take.frames.length - 1;
       }
-      if (due !== this.index && this.show(due)) this.dirty = true;
+      if (due !== this.index) {
+        if (this.show(due)) this.dirty = true;
+        else {
+          // not here yet: never skip ahead of what is loaded; wait for the next frame set and restart the clock
+          // from it (a stall, counted), so a slow read shows every frame set late rather than none
+          const next = Math.min(this.index + 1, this.take.frames.length - 1);
+          if (next !== this.index && this.show(next)) this.dirty = true;
+          this.clock = { t: now, index: this.index };
+          this.stalls += 1;
+        }
+      }
+      if (this.index === this.take.frames.length - 1 && !$("loop").checked) this.pause();  // the end, shown
     }
     if (this.dirty && this.show(this.index)) { this.dirty = false; this.draw(); }
   }

@@ -1,0 +1,148 @@
+"""rigctl view's server as a real process: the address it binds, the only paths it serves (``..`` and encoded
+variants refused), Ctrl-C, and bad input as one line."""
+
+from __future__ import annotations
+
+import http.client
+import signal
+import socket
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from tests_support import rigctl_exe, run_rigctl
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("view-server")
+    rig = (REPO / "rigs" / "sim-3x3.yaml").read_text()
+    rig = rig.replace("width_px: 960", "width_px: 160").replace("height_px: 540", "height_px: 90")
+    (out / "tiny.yaml").write_text(rig)
+    res = run_rigctl(
+        "record", str(out / "tiny.yaml"), "--take", "t", "--frames", "2", "--out", str(out),
+        "--sim", "ideal=true", "--sim", "motion=false", "--sim", "deterministic=true", "--force",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    (out / "secret.txt").write_text("not for the network")
+    return out / "t"
+
+
+class Served:
+    def __init__(self, proc: subprocess.Popen[str], line: str) -> None:
+        self.proc = proc
+        self.line = line
+        self.url = line.split(" at ")[1].split(" ")[0]
+        self.host, port = self.url.removeprefix("http://").rstrip("/").rsplit(":", 1)
+        self.port = int(port)
+
+    def get(self, path: str, method: str = "GET") -> tuple[int, bytes]:
+        conn = http.client.HTTPConnection(self.host, self.port, timeout=30)
+        try:
+            conn.putrequest(method, path, skip_host=False, skip_accept_encoding=True)  # the path as given
+            conn.endheaders()
+            res = conn.getresponse()
+            return res.status, res.read()
+        finally:
+            conn.close()
+
+
+def serve(take: Path, *extra: str) -> Served:
+    proc = subprocess.Popen(
+        [*rigctl_exe(), "view", str(take), "--disparity", str(take / "truth" / "disparity"), *extra],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True,
+    )  # fmt: skip
+    assert proc.stdout is not None
+    line = proc.stdout.readline()
+    assert line.startswith("rigctl view: "), (line, proc.stderr.read() if proc.poll() is not None else "")  # type: ignore[union-attr]
+    return Served(proc, line)
+
+
+@pytest.fixture(scope="module")
+def served(take: Path) -> Iterator[Served]:
+    s = serve(take)
+    yield s
+    if s.proc.poll() is None:
+        s.proc.send_signal(signal.SIGINT)
+        s.proc.wait(30)
+
+
+def test_it_listens_on_127_0_0_1_on_a_free_port_unless_told(served: Served) -> None:
+    assert served.host == "127.0.0.1" and served.port > 0
+    assert "2 frame sets" in served.line and "Ctrl-C" in served.line
+    status, body = served.get("/")
+    assert status == 200 and b"<canvas" in body
+    status, body = served.get("/api/take.json")
+    assert status == 200 and b'"frames": [0, 1]' in body
+    status, body = served.get("/api/frame/1.bin")
+    assert status == 200 and body[:4] == b"RGFS" and len(body) > 9 * 160 * 90 * 8
+    for shader in ("splat.vert", "shade.frag", "fill.frag", "scan.frag"):
+        status, body = served.get(f"/static/shaders/{shader}.glsl")
+        assert status == 200 and body.startswith(b"#version 300 es"), shader
+
+
+@pytest.mark.parametrize(
+    "path",
+    [
+        "/../secret.txt", "/static/../../secret.txt", "/static/../t/take.yaml", "/%2e%2e/secret.txt",
+        "/static/%2e%2e/%2e%2e/secret.txt", "/static/..%2f..%2fsecret.txt", "/static/%252e%252e/secret.txt",
+        "/%2E%2E%2F%2E%2E%2Fetc%2Fpasswd", "/static/shaders/..%5c..%5cserver.py", "//etc/passwd",
+        "/take.yaml", "/t/take.yaml", "/truth/disparity/000000/r1c1.pfm", "/static/../server.py",
+        "/static/viewer.js%00.html", "/api/frame/2.bin", "/api/frame/-1.bin", "/api/frame/..%2f1.bin",
+        "/api/result", "/static/", "/static/shaders",
+    ],
+)  # fmt: skip
+def test_nothing_outside_the_page_and_the_take_is_served(served: Served, path: str) -> None:
+    status, body = served.get(path)
+    assert status in (400, 404), (path, status)
+    assert b"not for the network" not in body and b"spec:" not in body and b"import" not in body
+
+
+def test_results_are_not_accepted_by_rigctl_view(served: Served) -> None:
+    assert served.get("/api/result?tag=x", "POST")[0] == 404
+
+
+def test_ctrl_c_stops_it_cleanly(take: Path) -> None:
+    s = serve(take, "--port", "0")
+    assert s.get("/")[0] == 200
+    s.proc.send_signal(signal.SIGINT)
+    _out, err = s.proc.communicate(timeout=30)
+    assert s.proc.returncode == 0, err
+    assert err.strip().splitlines()[-1] == "rigctl view: stopped" and "Traceback" not in err, err
+    with socket.socket() as again:  # the port is free again
+        again.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        again.bind(("127.0.0.1", s.port))
+
+
+def test_an_explicit_address_is_used_and_warned_about(take: Path) -> None:
+    s = serve(take, "--bind", "0.0.0.0")
+    try:
+        assert s.host == "0.0.0.0"
+        assert s.get("/")[0] == 200
+    finally:
+        s.proc.send_signal(signal.SIGINT)
+        _out, err = s.proc.communicate(timeout=30)
+    assert "anyone who can reach this machine" in err
+
+
+def one_line(res: subprocess.CompletedProcess[str], *words: str) -> None:
+    assert res.returncode != 0
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and all(w in lines[0] for w in words), lines
+
+
+def test_bad_input_is_one_line(take: Path, tmp_path: Path) -> None:
+    truth = str(take / "truth" / "disparity")
+    one_line(run_rigctl("view", str(tmp_path / "nope"), "--disparity", truth), "nope", "does not exist")
+    one_line(run_rigctl("view", str(tmp_path), "--disparity", truth), "not a take")
+    one_line(run_rigctl("view", str(take), "--disparity", str(tmp_path / "none")), "disparity folder does not exist")
+    one_line(run_rigctl("view", str(take), "--disparity", truth, "--bind", "example.com"), "IP address")
+    one_line(run_rigctl("view", str(take), "--disparity", truth, "--port", "70000"), "port")
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        one_line(run_rigctl("view", str(take), "--disparity", truth, "--port", str(port)), "cannot listen", str(port))
