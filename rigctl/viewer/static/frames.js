@@ -46,7 +46,7 @@ export class FrameStore {
     }
     for (let k = 0; k <= this.ahead && this.pending.size < this.parallel; k++) {
       let i = index + k;
-      if (i >= count) { if (!loop) break; i -= count; }
+      if (i >= count) { if (!loop) break; i %= count; }
       if (!this.ready.has(i) && !this.pending.has(i)) this.load(i).catch((e) => this.listeners.forEach((f) => f(i, e)));
     }
   }

@@ -169,9 +169,23 @@ export class Renderer {
     gl.drawArrays(gl.TRIANGLES, 0, 3);
   }
 
+  // With `this.profile` set (an object), each stage waits for the GPU and adds its milliseconds there.
+  mark(stage, fb) {
+    if (!this.profile) return;
+    const gl = this.gl;
+    gl.bindFramebuffer(gl.FRAMEBUFFER, fb.fb);
+    const type = fb === this._view ? [gl.RGBA_INTEGER, gl.UNSIGNED_INT, new Uint32Array(4)] : [gl.RGBA, gl.FLOAT, new Float32Array(4)];
+    gl.readPixels(0, 0, 1, 1, ...type);
+    const now = performance.now();
+    this.profile[stage] = (this.profile[stage] || 0) + now - this._t;
+    this._t = now;
+  }
+
   // The view at (u, v) into `view` (from newView()); returns the sources used.
   render(u, v, view, exclude = []) {
     const gl = this.gl;
+    this._view = view;
+    this._t = performance.now();
     const srcs = this.nearest(u, v, exclude);
     if (!srcs.length) throw new Error("no source cameras");
     const du = srcs.map((s) => { const x = f32(s.offset[0] - u); return Math.abs(x) < 1e-6 ? 0 : x; });
@@ -198,10 +212,12 @@ export class Renderer {
       gl.drawArrays(gl.POINTS, 0, this.wl * this.hl);
     });
     gl.disable(gl.BLEND);
+    this.mark("splat", a);
     // 1b, 1c: close one-pixel cracks
     this.pass(this.progs.morph, b, { radius: ["uniform1i", 1], erode: ["uniform1i", 0] }, { source: a });
     this.pass(this.progs.morph, c, { radius: ["uniform1i", 1], erode: ["uniform1i", 1] }, { source: b });
     this.pass(this.progs.cracks, b, {}, { splatted: a, closed: c });
+    this.mark("close", b);
     // 1d: fill disocclusions from the background side, rows then columns
     let cur = b, spare = a;
     for (const axis of [[1, 0], [0, 1]]) {
@@ -216,6 +232,7 @@ export class Renderer {
         { source: cur, ends: e0 });
       [cur, spare] = [spare, cur];
     }
+    this.mark("fill", cur);
     // 1e: the ring of the key's soft edge
     this.pass(this.progs.morph, d, { radius: ["uniform1i", 2], erode: ["uniform1i", 0] }, { source: cur });
     // 2-3: shade
@@ -234,6 +251,7 @@ export class Renderer {
     this.pass(this.progs.shade, view, {
       n: ["uniform1i", srcs.length], offset: ["uniform2fv", off], weight: ["uniform3fv", w],
     }, textures);
+    this.mark("shade", view);
     return srcs.map((s) => s.name);
   }
 

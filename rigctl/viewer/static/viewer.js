@@ -210,6 +210,8 @@ async function main() {
   viewer.bindUi();
   const { offerXr } = await import("./xr.js");
   offerXr(viewer, $("xr"));
+  await viewer.store.load(0);
+  viewer.tick(performance.now());  // the first picture without waiting for an animation frame
   const loop = (now) => { viewer.tick(now); requestAnimationFrame(loop); };
   requestAnimationFrame(loop);
   status(`${take.width}x${take.height}, ${take.frames.length} frame sets at ${take.fps} fps`);
