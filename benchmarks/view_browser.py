@@ -84,8 +84,9 @@ def screenshot(take: Path, out: Path) -> None:
         with tempfile.TemporaryDirectory() as profile:
             flags = [f for f in FLAGS if not f.startswith(("--remote-debugging", "--window-size"))]
             subprocess.run(
-                [chromium(), *flags, f"--user-data-dir={profile}", "--window-size=1180,560",
-                 "--virtual-time-budget=60000", "--run-all-compositor-stages-before-draw", f"--screenshot={out.resolve()}", srv.url],
+                [chromium(), *flags, f"--user-data-dir={profile}", "--window-size=1180,740",
+                 "--virtual-time-budget=60000", "--run-all-compositor-stages-before-draw",
+                 f"--screenshot={out.resolve()}", srv.url],
                 check=True, capture_output=True, timeout=300,
             )  # fmt: skip
     finally:

@@ -58,13 +58,12 @@ class Bundles:
         off = np.array([views[n].offset for n in names], float)
         design = np.column_stack([np.ones(len(names)), rc[:, 1], rc[:, 0]])
         coef, *_ = np.linalg.lstsq(design, off, rcond=None)
-        fps, start = 25.0, None
-        take = self.input.take
-        if take is not None:
-            manifest = take.reader.manifest
-            fps = float(manifest.format.fps)
-            tc = manifest.timing.start_timecode
-            start = None if tc is None else int(tc)
+        fps = 25.0
+        if (self.input.source / "take.yaml").is_file():
+            from rigctl.take.manifest import read_manifest
+
+            fps = float(read_manifest(self.input.source).format.fps)
+        timecodes = [self.input.frames.timing(n)[1] for n in self.numbers]
         cameras = [
             {"name": n, "row": int(r), "col": int(c), "offset": list(views[n].offset)}
             for n, (r, c) in zip(names, rc.tolist(), strict=True)
@@ -75,7 +74,7 @@ class Bundles:
             "height": self.height,
             "frames": self.numbers,
             "fps": fps,
-            "start_timecode_frames": start,
+            "timecodes": [None if tc is None else str(tc) for tc in timecodes],
             "cameras": cameras,
             # grid units (1, col, row) @ fit -> (u, v) in horizontal spacings, as rigctl render maps --at
             "fit": coef.tolist(),

@@ -83,8 +83,7 @@ class Viewer {
   hud() {
     const n = this.take.frames[this.index];
     $("frame").textContent = `frame ${n} (${this.index + 1}/${this.take.frames.length})`;
-    const start = this.take.start_timecode_frames;
-    $("timecode").textContent = timecode((start ?? 0) + n, this.take.fps);
+    $("timecode").textContent = this.take.timecodes[this.index] ?? timecode(n, this.take.fps);
     $("position").textContent = `eye ${this.col.toFixed(2)}, ${this.row.toFixed(2)} (columns ${this.take.limits.col
       .join("..")}, rows ${this.take.limits.row.join("..")})`;
     const sorted = [...this.times].sort((a, b) => a - b);
