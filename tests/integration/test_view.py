@@ -56,11 +56,12 @@ def server(take: Path) -> Iterator[ViewerServer]:
 @pytest.fixture(scope="module")
 def shots(server: ViewerServer) -> dict[str, np.ndarray]:
     """The page's views of frame set 0 at POSITIONS and r1c1 left out, as it read them back (RGBA8)."""
-    with Probe(server, probe="shots", frame="0", at=";".join(POSITIONS), loo="r1c1") as probe:
+    with Probe(server, probe="shots", frame="0", at=";".join(POSITIONS), loo="r1c1", stereo="1,1", ipd="60") as probe:
         got = probe.collect()
-    assert "SwiftShader" in done_info(got)["gl"] or done_info(got)["gl"]  # which GL ran is reported
+    assert done_info(got)["gl"]  # the page names the GL implementation it ran on
     h, w = server.bundles.height, server.bundles.width
-    views = {t: np.frombuffer(b, np.uint8).reshape(h, w, 4) for t, b in got.items() if t.startswith(("at:", "loo:"))}
+    pictures = ("at:", "loo:", "eye:")
+    views = {t: np.frombuffer(b, np.uint8).reshape(h, w, 4) for t, b in got.items() if t.startswith(pictures)}
     return views | {"sources": {t[8:]: json.loads(b) for t, b in got.items() if t.startswith("sources:")}}  # type: ignore[dict-item]
 
 
@@ -118,6 +119,21 @@ def test_leave_one_out_through_the_page_scores_as_the_cpu_renderer(take: Path, s
     # and it can fail: the same view one pixel off scores far worse
     shifted = score(np.roll(gpu, 2, axis=1), view.rgb, view.alpha, box)
     assert shifted["psnr_db"] < cpu["psnr_db"] - 1.0
+
+
+def test_the_pages_stereo_pair_is_rigctl_renders(take: Path, shots: dict[str, np.ndarray], tmp_path: Path) -> None:
+    res = run_rigctl(
+        "render", str(take), "--disparity", str(take / "truth" / "disparity"), "--at", "1,1", "--stereo", "0.06",
+        "--out", str(tmp_path),
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    figures = {}
+    for eye in "LR":
+        png = cv2.imread(str(tmp_path / "000000" / f"c1r1_{eye}.png"), cv2.IMREAD_UNCHANGED)
+        figures[eye] = psnr_keyed(cv2.cvtColor(png, cv2.COLOR_BGRA2RGBA), shots[f"eye:{eye}"])
+    print("the page's eye pair (IPD 60 mm) against rigctl render --stereo 0.06:", figures)
+    assert min(figures.values()) >= 35.0, figures
+    assert np.abs(shots["eye:L"].astype(int) - shots["eye:R"]).mean() > 1.0  # two different eyes
 
 
 def best_shift(ref: np.ndarray, moved: np.ndarray, mask: np.ndarray) -> int:

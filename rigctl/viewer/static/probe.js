@@ -1,6 +1,7 @@
 // Probes for tests and the benchmark, run only when the server was started to accept results (never by
 // `rigctl view` itself). Each posts what it measured to /api/result?tag=...:
-//   probe=shots&frame=I&at=C,R;C,R&loo=CAM,CAM  the views' RGBA8 pixels as rendered (tags at:C,R / loo:CAM)
+//   probe=shots&frame=I&at=C,R;C,R&loo=CAM,CAM  the views' RGBA8 pixels as rendered (tags at:C,R / loo:CAM;
+//     &stereo=C,R&ipd=MM                          eye:L and eye:R, the page's stereo pair there)
 //   probe=play                                  plays the take once; per frame shown, which frame set each
 //                                               source's colour and disparity textures came from (tag play)
 //   probe=bench&repeats=N&ipd=MM                eye pairs at the centre, timed (tag bench)
@@ -22,6 +23,17 @@ async function shots(params, v) {
     const sources = v.r.render(...v.r.position(c, r), view);
     await post(`at:${at}`, v.r.read(view));
     await post(`sources:${at}`, JSON.stringify(sources));
+  }
+  if (params.has("stereo")) {  // the page's own eye pair: IPD in mm around C,R, as the stereo checkbox gives it
+    const [c, r] = params.get("stereo").split(",").map(Number);
+    document.getElementById("stereo").checked = true;
+    document.getElementById("ipd").value = params.get("ipd") || "64";
+    v.layout();
+    v.move(c, r);
+    for (const [i, [ec, er]] of v.eyes().entries()) {
+      v.r.render(...v.r.position(ec, er), view);
+      await post(`eye:${i ? "R" : "L"}`, v.r.read(view));
+    }
   }
   for (const cam of (params.get("loo") || "").split(",").filter(Boolean)) {
     const offset = v.take.cameras.find((c) => c.name === cam).offset;
