@@ -136,6 +136,30 @@ def test_the_pages_stereo_pair_is_rigctl_renders(take: Path, shots: dict[str, np
     assert np.abs(shots["eye:L"].astype(int) - shots["eye:R"]).mean() > 1.0  # two different eyes
 
 
+def test_our_depth_serves_and_matches_too(take: Path, tmp_path: Path) -> None:
+    """rigctl depth's output (as the demo makes it), not only the simulator's truth."""
+    depth = tmp_path / "depth"
+    res = run_rigctl("depth", str(take), "--out", str(depth), "--near", "1.95", "--far", "3.0")
+    assert res.returncode == 0, res.stderr
+    res = run_rigctl("render", str(take), "--disparity", str(depth), "--at", "1.25,1", "--out", str(tmp_path / "v"))
+    assert res.returncode == 0, res.stderr
+    srv = ViewerServer(Bundles(take, depth), accept_results=True)
+    srv.start()
+    try:
+        with Probe(srv, probe="shots", frame="0", at="1.25,1") as probe:
+            got = probe.collect()
+    finally:
+        srv.shutdown()
+        srv.server_close()
+    gpu = np.frombuffer(got["at:1.25,1"], np.uint8).reshape(srv.bundles.height, srv.bundles.width, 4)
+    png = cv2.imread(str(tmp_path / "v" / "000000" / "c1.25r1.png"), cv2.IMREAD_UNCHANGED)
+    cpu = cv2.cvtColor(png, cv2.COLOR_BGRA2RGBA)
+    assert (gpu[..., 3] == 255).sum() > 2000  # the keyed subject is there
+    figure = psnr_keyed(cpu, gpu)
+    print(f"our depth, view at 1.25,1: the page against rigctl render --at: {figure:.1f} dB")
+    assert figure >= 35.0
+
+
 def best_shift(ref: np.ndarray, moved: np.ndarray, mask: np.ndarray) -> int:
     """The leftward shift (pixels) that best maps ``ref``'s pixels in ``mask`` onto ``moved``."""
     ys, xs = np.nonzero(mask)
