@@ -1,4 +1,4 @@
-"""Temporal stability of depth over a take (the seam between the take-level pipeline and the stabiliser).
+"""Temporal stability of depth over a take: a still surface keeps its depth from one frame set to the next.
 
 The pipeline (one ``Temporal`` per run of consecutive frame sets, reset at the start of every chunk the farm
 hands out) calls, per frame set:
@@ -9,31 +9,59 @@ hands out) calls, per frame set:
     ... cross-check, write ...
     temporal.advance(grid, results)                         # the frame set's final results become "previous"
 
-``stabilise`` may use the previous frame set's grid (every view's picture) and final results, and must not
-touch anything else; with no previous frame set it returns ``result`` unchanged. It records what it did in
-``result.stats`` (e.g. the share of pixels whose previous depth was kept). Deterministic: the same frames in
-the same order give the same bytes.
+A single-frame estimate turns sensor noise into depth noise: on a scene that does not move, the disparity of
+a pixel changes by a fraction of a pixel every frame, which a headset shows as shimmer. As MPEG's immersive
+video depth estimator does, the previous frame set's depth is used where the colour of every view that sees
+a pixel did not change beyond the noise (``temporal_change.py``: the noise measured from the frames
+themselves, per camera). There:
 
-This first version is the pass-through that fixes the interface; the stabiliser replaces its body.
+* **blended**: the new estimate agrees with the previous depth (within ``agree_sigmas`` of the estimator's own
+  frame-to-frame spread, measured on those pixels, and at least ``agree_floor_px``): the output is the running
+  mean of the estimates since the pixel last changed, over at most ``max_frames`` frames. A still pixel's depth
+  then settles instead of shimmering, and a first frame's small error is averaged away, not frozen;
+* **kept** or **new**: they disagree (one of the two is a mismatch). The matching cost of both on the current
+  views decides: the new estimate replaces the previous one (and the mean starts again from it) only when its
+  cost is clearly lower (by ``better_share``); otherwise the previous depth stays.
+
+Everywhere else (the colour changed in some view that sees the pixel, or there was no previous depth) the new
+estimate stands as it is, so a moving edge is never dragged. ``result.stats`` records the shares. The same
+frames in the same order give the same bytes.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
+import numpy as np
+from numpy.typing import NDArray
+
+from rigctl.depth.cost import SweepLevel
 from rigctl.depth.estimate import DepthResult
 from rigctl.depth.grid import Grid
+from rigctl.depth.temporal_change import MAD_TO_SIGMA, FrameChange, NoiseHistory, frame_change, still_in_every_view
+
+F32 = NDArray[np.float32]
 
 
 @dataclass(frozen=True)
 class TemporalParams:
     enabled: bool = True
+    window: int = 5  # colour-change statistic: window over which the squared frame difference is averaged, px
+    change_sigmas: float = 6.0  # a pixel changed when its statistic lies this many noise spreads above the noise
+    max_frames: int = 16  # the running mean of a still pixel spans at most this many frames
+    agree_sigmas: float = 5.0  # new and previous depth agree within this many of the estimator's spreads ...
+    agree_floor_px: float = 0.5  # ... and at least this (an estimator with a 1/16 px step has a spread of 0)
+    better_share: float = 0.1  # a new estimate replaces a disagreeing previous one when its cost is this much lower
+    cost_window: int = 7  # the matching cost that decides: window, px ...
+    cost_keep: float = 0.5  # ... and share of the views kept per pixel (the best ones: occlusion-aware)
 
 
 @dataclass
 class Previous:
     grid: Grid
     results: dict[str, DepthResult]
+    frames: dict[str, NDArray[np.int16]] = field(default_factory=dict)  # per camera: frames in each pixel's mean
 
 
 class Temporal:
@@ -42,12 +70,101 @@ class Temporal:
     def __init__(self, params: TemporalParams | None = None) -> None:
         self.params = params or TemporalParams()
         self.previous: Previous | None = None
+        self.noise: dict[str, NoiseHistory] = {}
+        self._change: tuple[Grid, FrameChange] | None = None
+        self._frames: dict[str, NDArray[np.int16]] = {}
 
     def reset(self) -> None:
         self.previous = None
+        self.noise = {}
+        self._change = None
+        self._frames = {}
 
     def stabilise(self, grid: Grid, ref: str, result: DepthResult, d_range: tuple[float, float]) -> DepthResult:
+        p = self.params
+        d_new = result.disparity
+        prev = self.previous
+        if not p.enabled or prev is None or ref not in prev.results or prev.grid.shape != grid.shape:
+            self._frames[ref] = np.isfinite(d_new).astype(np.int16)
+            return result
+        change = self._frame_change(prev.grid, grid)
+        d_prev = prev.results[ref].disparity
+        n_prev = prev.frames.get(ref)
+        if n_prev is None:
+            n_prev = np.isfinite(d_prev).astype(np.int16)
+        still = still_in_every_view(change, grid, ref, d_prev) & np.isfinite(d_new)
+        with np.errstate(invalid="ignore"):
+            delta = np.where(still, d_new - d_prev, 0.0).astype(np.float32)
+        spread = MAD_TO_SIGMA * float(np.median(np.abs(delta[still]))) if still.any() else 0.0
+        tol = max(p.agree_floor_px, p.agree_sigmas * spread)
+        agree = still & (np.abs(delta) <= tol)
+        disagree = still & ~agree
+        new_wins = np.zeros(d_new.shape, bool)
+        if disagree.any():
+            new_wins[disagree] = self._clearly_better(grid, ref, d_new, d_prev, disagree)
+        kept = disagree & ~new_wins
+
+        n = np.maximum(n_prev, 1).astype(np.float32)
+        out = d_new.copy()
+        out[agree] = (d_prev + delta / (n + 1.0))[agree]
+        out[kept] = d_prev[kept]
+        frames = np.isfinite(out).astype(np.int16)
+        frames[agree] = np.minimum(n_prev[agree] + 1, p.max_frames)
+        frames[kept] = n_prev[kept]
+        self._frames[ref] = frames
+
+        estimated = max(1, int(np.isfinite(d_new).sum()))
+        result.disparity = out
+        result.stats["temporal_blended_share"] = float(agree.sum() / estimated)
+        result.stats["temporal_kept_share"] = float(kept.sum() / estimated)
+        result.stats["temporal_replaced_share"] = float((disagree & new_wins).sum() / estimated)
+        result.stats["temporal_new_share"] = float((np.isfinite(d_new) & ~still).sum() / estimated)
+        result.stats["temporal_agree_px"] = tol
+        result.stats["temporal_noise_levels"] = change.sigma[ref]
+        result.stats["temporal_changed_share"] = change.share[ref]
         return result
 
     def advance(self, grid: Grid, results: dict[str, DepthResult]) -> None:
-        self.previous = Previous(grid, dict(results)) if self.params.enabled else None
+        if not self.params.enabled:
+            self.previous = None
+            return
+        frames = {n: self._frames[n] for n in results if n in self._frames}
+        self.previous = Previous(grid, dict(results), frames)
+        self._frames = {}
+        self._change = None
+
+    def _frame_change(self, prev: Grid, grid: Grid) -> FrameChange:
+        """The colour change of every camera between the previous frame set and this one, once per frame set."""
+        if self._change is None or self._change[0] is not grid:
+            p = self.params
+            self._change = (grid, frame_change(prev, grid, self.noise, p.window, p.change_sigmas))
+        return self._change[1]
+
+    def _clearly_better(
+        self, grid: Grid, ref: str, d_new: F32, d_prev: F32, where: NDArray[np.bool_]
+    ) -> NDArray[np.bool_]:
+        """At the pixels of ``where``: whether the new disparity matches the current views clearly better than
+        the previous one (the matching cost of the plane sweep, ``cost.py``, best views per pixel)."""
+        p = self.params
+        views = [
+            n
+            for n in grid.names
+            if n != ref
+            and math.hypot(grid.offsets[n][0] - grid.offsets[ref][0], grid.offsets[n][1] - grid.offsets[ref][1]) > 1e-9
+        ]
+        if not views:
+            return np.zeros(int(where.sum()), bool)
+        h, w = d_new.shape
+        ys, xs = np.nonzero(where)
+        r = p.cost_window
+        box = (max(0, ys.min() - r), min(h, ys.max() + r + 1), max(0, xs.min() - r), min(w, xs.max() + r + 1))
+        y0, y1, x0, x1 = box
+        level = SweepLevel(grid, ref, views, 1.0, box)
+        a = d_new[y0:y1, x0:x1]
+        b = d_prev[y0:y1, x0:x1]
+        # the cost window reaches neighbours without an estimate: each candidate there takes the other's value
+        a_f = np.where(np.isfinite(a), a, np.where(np.isfinite(b), b, 0.0)).astype(np.float32)
+        b_f = np.where(np.isfinite(b), b, a_f).astype(np.float32)
+        keep = max(1, math.ceil(p.cost_keep * len(views)))
+        costs = level.costs_where([a_f, b_f], where[y0:y1, x0:x1], r, keep)
+        return np.asarray(costs[0] < costs[1] * (1.0 - p.better_share), bool)

@@ -1,0 +1,153 @@
+"""Which pixels of a view changed between two consecutive frame sets by more than the sensor noise.
+
+The colour of a still surface changes between frames only by noise, so the test needs the noise level, and it
+is measured from the data, not assumed: per camera, the frame difference of every pixel (after a global gain
+and offset fitted per channel, so a change of exposure or light is not taken for motion) is squared and
+averaged over a small window; over the whole picture, where most pixels are still (the screen, the set, a
+presenter between gestures), the median of that statistic is the noise's own level and its median absolute
+deviation its spread. A pixel changed when its statistic lies ``sigmas`` spreads above that level. Each
+frame pair gives one level and spread per camera; the threshold uses the median of the pairs seen so far, so a
+frame in which most of the picture moves does not raise it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from rigctl.depth.grid import Grid
+
+F32 = NDArray[np.float32]
+MAD_TO_SIGMA = 1.4826  # the median absolute deviation of a normal distribution is 0.6745 sigma
+SUBSAMPLE = 2  # every other row and column (of the half-size picture) for the fits and the noise figures
+
+
+@dataclass
+class NoiseHistory:
+    """One camera's noise figures, one per frame pair seen (level and spread of the change statistic, in 8-bit
+    grey levels squared)."""
+
+    levels: list[float] = field(default_factory=list)
+    spreads: list[float] = field(default_factory=list)
+
+    def add(self, level: float, spread: float) -> None:
+        self.levels.append(level)
+        self.spreads.append(spread)
+
+    def threshold(self, sigmas: float) -> float:
+        return float(np.median(self.levels) + sigmas * MAD_TO_SIGMA * np.median(self.spreads))
+
+    def sigma(self) -> float:
+        """The noise of the half-size picture (8-bit levels, one frame): the statistic's level is twice its
+        variance."""
+        return float(np.sqrt(max(0.0, float(np.median(self.levels))) / 2.0))
+
+
+def gain_matched(prev: F32, cur: F32) -> F32:
+    """``prev`` with one gain and offset per channel fitted to ``cur`` (least squares, then again on the pixels
+    the first fit explains: moving ones do not pull the fit)."""
+    s = (slice(None, None, SUBSAMPLE), slice(None, None, SUBSAMPLE))
+    xs = prev[s].reshape(-1, prev.shape[2])
+    ys = cur[s].reshape(-1, cur.shape[2])
+    gain = np.ones(prev.shape[2], np.float32)
+    offset = np.zeros(prev.shape[2], np.float32)
+    for c in range(prev.shape[2]):
+        x, y = xs[:, c], ys[:, c]
+        keep = np.ones(x.size, bool)
+        for _ in range(2):
+            a, b = line_fit(x[keep], y[keep])
+            r = np.abs(y - (a * x + b))
+            keep = r <= 3.0 * MAD_TO_SIGMA * max(float(np.median(r)), 1e-6)
+        gain[c], offset[c] = a, b
+    return np.asarray(prev * gain + offset, np.float32)
+
+
+def line_fit(x: F32, y: F32) -> tuple[float, float]:
+    """Least-squares y = a x + b; a pure offset when x does not vary (a flat or empty picture)."""
+    if x.size < 16:
+        return 1.0, 0.0
+    mx, my = float(x.mean()), float(y.mean())
+    vx = float(np.dot(x - mx, x - mx))
+    if vx < 1e-6 * x.size:
+        return 1.0, my - mx
+    a = float(np.dot(x - mx, y - my)) / vx
+    return a, my - a * mx
+
+
+def change_statistic(prev: F32, cur: F32, window: int) -> F32:
+    """Mean over the window and the channels of the squared frame difference, in 8-bit levels squared."""
+    diff = (cur - gain_matched(prev, cur)) * np.float32(255.0)
+    sq = np.asarray((diff * diff).mean(axis=2), np.float32)
+    return np.asarray(cv2.boxFilter(sq, -1, (window, window), borderType=cv2.BORDER_REFLECT), np.float32)
+
+
+def noise_figures(stat: F32) -> tuple[float, float]:
+    """Level (median) and spread (median absolute deviation) of a change statistic over the picture."""
+    v = stat[::SUBSAMPLE, ::SUBSAMPLE].ravel()
+    level = float(np.median(v))
+    return level, float(np.median(np.abs(v - level)))
+
+
+@dataclass
+class FrameChange:
+    """Every camera's changed pixels between two frame sets, with the noise each test used."""
+
+    changed: dict[str, NDArray[np.uint8]]  # 1: changed (dilated by the window), per camera
+    sigma: dict[str, float]  # sensor noise, 8-bit levels
+    share: dict[str, float]  # share of the camera's pixels that changed
+
+
+def half(img: F32) -> F32:
+    """A picture at half size (area average): the change test looks at windows of pixels, and a quarter of the
+    pixels is a quarter of the work."""
+    h, w = img.shape[:2]
+    return np.asarray(cv2.resize(img, ((w + 1) // 2, (h + 1) // 2), interpolation=cv2.INTER_AREA), np.float32)
+
+
+def frame_change(prev: Grid, cur: Grid, history: dict[str, NoiseHistory], window: int, sigmas: float) -> FrameChange:
+    """The change of every camera present in both grids; adds this pair's noise figures to ``history``. The
+    test runs at half size (``window`` is in full-size pixels), its answer is given at full size."""
+    changed, sigma, share = {}, {}, {}
+    win = max(3, window // 2 | 1)
+    kernel = np.ones((win, win), np.uint8)
+    h, w = cur.shape
+    for name in cur.names:
+        if name not in prev.names:
+            continue
+        stat = change_statistic(half(prev.images[name]), half(cur.images[name]), win)
+        hist = history.setdefault(name, NoiseHistory())
+        hist.add(*noise_figures(stat))
+        moved = (stat > hist.threshold(sigmas)).astype(np.uint8)
+        # the window's statistic reaches half a window around a change: the pixels it reached changed too
+        grown = cv2.dilate(moved, kernel)
+        changed[name] = np.asarray(cv2.resize(grown, (w, h), interpolation=cv2.INTER_NEAREST), np.uint8)
+        sigma[name] = hist.sigma()
+        share[name] = float(changed[name].mean())
+    return FrameChange(changed, sigma, share)
+
+
+def still_in_every_view(change: FrameChange, grid: Grid, ref: str, disparity: F32) -> NDArray[np.bool_]:
+    """Pixels of ``ref`` (with a finite ``disparity``) unchanged in ``ref`` and in every other camera that sees
+    them: the point at disparity d lies at (x - d dx, y - d dy) in a camera at offset (dx, dy)."""
+    h, w = disparity.shape
+    have = np.isfinite(disparity)
+    still = have & (change.changed[ref] == 0)
+    if not still.any():
+        return still
+    gy, gx = np.mgrid[0:h, 0:w].astype(np.float32)
+    d = np.where(have, disparity, 0.0).astype(np.float32)
+    ox, oy = grid.offsets[ref]
+    for name, moved in change.changed.items():
+        if name == ref:
+            continue
+        rx, ry = grid.offsets[name][0] - ox, grid.offsets[name][1] - oy
+        if abs(rx) < 1e-9 and abs(ry) < 1e-9:
+            continue
+        mx, my = gx - d * np.float32(rx), gy - d * np.float32(ry)
+        # outside the camera's picture: it does not see the point, so it has no say (border value 0)
+        seen_moved = cv2.remap(moved, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        still &= seen_moved == 0
+    return still
