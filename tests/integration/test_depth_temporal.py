@@ -104,14 +104,14 @@ def bad1(ds: list[F32], truth: list[F32]) -> float:
 @pytest.fixture(scope="session")
 def static_take(tmp_path_factory: pytest.TempPathFactory) -> TakeDepth:
     root = tmp_path_factory.mktemp("temporal-static")
-    return depth_over_take(record(root, "still", 20, "motion=false", "seed=5"))
+    return depth_over_take(record(root, "still", 20, "motion=false", "seed=5", "deterministic=true"))
 
 
 @pytest.fixture(scope="session")
 def moving_take(tmp_path_factory: pytest.TempPathFactory) -> TakeDepth:
     # the presenter's motion from the first frame (no ramp): a new pose every 4 frames at 25 fps
     root = tmp_path_factory.mktemp("temporal-moving")
-    return depth_over_take(record(root, "moving", 16, "seed=5", "motion_ramp_s=0"))
+    return depth_over_take(record(root, "moving", 16, "seed=5", "motion_ramp_s=0", "deterministic=true"))
 
 
 @pytest.mark.slow

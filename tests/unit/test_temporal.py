@@ -1,0 +1,148 @@
+"""The temporal stabiliser on small synthetic grids with exact disparity: the noise it measures from the frames,
+what it calls a change, what it keeps, what it replaces, and that it never drags what moved."""
+
+from __future__ import annotations
+
+import copy
+import itertools
+
+import cv2
+import numpy as np
+import pytest
+
+from rigctl.depth.estimate import DepthResult
+from rigctl.depth.grid import Grid, grid_from_arrays
+from rigctl.depth.temporal import Temporal, TemporalParams
+from rigctl.depth.temporal_change import NoiseHistory, frame_change, still_in_every_view
+
+H, W = 96, 128
+D_BACK, D_FRONT = 3.0, 7.0
+
+
+def texture(seed: int, h: int = H + 60, w: int = W + 60) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.asarray(cv2.GaussianBlur(rng.random((h, w)).astype(np.float32), (0, 0), 1.5) * 0.6 + 0.2, np.float32)
+
+
+def scene(square_x: int | None, noise: float, seed: int, gain: float = 1.0, only: str | None = None) -> Grid:
+    """A 3x3 grid (spacing ratio 1) of a textured wall at D_BACK and a textured square at D_FRONT whose left
+    edge is at ``square_x`` in r1c1 (None: no square), 8-bit with Gaussian noise of ``noise`` levels;
+    ``only``: the square is drawn in that camera alone (a change one view sees)."""
+    back, front = texture(1), texture(2)
+    rng = np.random.default_rng(seed)
+    gy, gx = np.mgrid[0:H, 0:W].astype(np.float32)
+    images = {}
+    for r in range(3):
+        for c in range(3):
+            name = f"r{r}c{c}"
+            ox, oy = c - 1.0, r - 1.0
+            # a point at r1c1's (x, y) with disparity d lies at (x - d ox, y - d oy) in this camera
+            img = cv2.remap(back, gx + D_BACK * ox + 30, gy + D_BACK * oy + 30, cv2.INTER_LINEAR)
+            if square_x is not None and (only is None or only == name):
+                sx, sy = gx + D_FRONT * ox, gy + D_FRONT * oy
+                inside = (sx >= square_x) & (sx < square_x + 40) & (sy >= 28) & (sy < 68)
+                img = np.where(inside, cv2.remap(front, sx - square_x + 10, sy + 10, cv2.INTER_LINEAR), img)
+            noisy = img * gain * 255 + rng.normal(0, noise, img.shape)
+            images[name] = np.repeat(np.clip(np.rint(noisy), 0, 255).astype(np.uint8)[..., None], 3, axis=2)
+    return grid_from_arrays(images, 1000.0, 0.1, 0.1)
+
+
+def truth(square_x: int | None) -> np.ndarray:
+    d = np.full((H, W), D_BACK, np.float32)
+    if square_x is not None:
+        d[28:68, square_x : square_x + 40] = D_FRONT
+    return d
+
+
+def result(d: np.ndarray) -> DepthResult:
+    z = np.zeros(d.shape, bool)
+    return DepthResult(d.astype(np.float32), np.ones(d.shape, np.float32), z, z.copy(), np.ones(d.shape, np.float32))
+
+
+def run(grids: list[Grid], estimates: list[np.ndarray], params: TemporalParams | None = None) -> list[DepthResult]:
+    temporal, out = Temporal(params), []
+    for g, d in zip(grids, estimates, strict=True):
+        res = temporal.stabilise(g, "r1c1", result(d.copy()), (0.0, 10.0))
+        temporal.advance(g, {"r1c1": res})
+        out.append(res)
+    return out
+
+
+@pytest.mark.parametrize("noise", [1.0, 3.0])
+def test_the_noise_is_measured_from_the_frames_and_a_moved_square_is_seen_above_it(noise: float) -> None:
+    history: dict[str, NoiseHistory] = {}
+    a, b = scene(40, noise, 1), scene(40, noise, 2)
+    still = frame_change(a, b, history, 5, 6.0)
+    # the half-size picture averages four pixels: half the noise
+    assert history["r1c1"].sigma() == pytest.approx(noise / 2, rel=0.25)
+    assert max(still.share.values()) < 0.03, still.share  # a false alarm is a 6 px block: 0.3 % of this picture
+    moved = frame_change(b, scene(46, noise, 3), history, 5, 6.0)
+    assert moved.changed["r1c1"][30:66, 42:84].all()  # the square's old and new place
+    assert moved.changed["r1c1"][:, :30].sum() == 0 and moved.changed["r1c1"][:, 100:].sum() == 0
+
+
+def test_a_change_of_exposure_is_not_motion() -> None:
+    change = frame_change(scene(40, 1.0, 1), scene(40, 1.0, 2, gain=1.08), {}, 5, 6.0)
+    assert max(change.share.values()) < 0.03, change.share
+
+
+def test_a_change_that_only_another_view_sees_makes_the_pixel_new() -> None:
+    """The square appears in r1c2 alone: r1c1's pixels where r1c2 sees it (at x - D_BACK) are not still, even
+    though r1c1's own colour did not change."""
+    a, b = scene(None, 1.0, 1), scene(40, 1.0, 2, only="r1c2")
+    change = frame_change(a, b, {}, 5, 6.0)
+    assert change.changed["r1c1"].sum() == 0
+    still = still_in_every_view(change, b, "r1c1", truth(None))
+    seen = np.zeros((H, W), bool)
+    seen[30:66, 38:74] = True  # r1c2 shows the square at [33, 73): r1c1's pixels x - 3 (the wall's disparity)
+    assert not still[seen].any() and still[:, :30].mean() > 0.97
+
+
+def test_a_still_scene_settles_and_an_outlier_of_one_frame_is_not_taken() -> None:
+    rng = np.random.default_rng(0)
+    grids = [scene(40, 1.0, s) for s in range(8)]
+    estimates = [truth(40) + rng.normal(0, 0.15, (H, W)).astype(np.float32) for _ in grids]
+    estimates[5][50:60, 90:100] += 4.0  # a mismatch in one frame only
+    out = run(grids, estimates)
+    raw = np.mean([np.abs(b - a).mean() for a, b in itertools.pairwise(estimates)])
+    stab = np.mean([np.abs(b.disparity - a.disparity).mean() for a, b in itertools.pairwise(out)])
+    assert stab < raw / 4, (stab, raw)
+    assert np.abs(out[5].disparity[50:60, 90:100] - D_BACK).max() < 0.5  # the wall's depth stayed
+    assert np.abs(out[-1].disparity - truth(40)).mean() < 0.5 * np.abs(estimates[-1] - truth(40)).mean()
+    assert out[1].stats["temporal_blended_share"] > 0.9 and out[5].stats["temporal_kept_share"] > 0
+    assert out[0].stats.get("temporal_blended_share") is None  # nothing before the first frame
+
+
+def test_an_error_of_the_first_frame_is_replaced_when_the_views_say_so() -> None:
+    grids = [scene(40, 1.0, s) for s in range(3)]
+    first = truth(40)
+    first[10:20, 90:110] += 3.0  # wrong in the first frame: the views disagree with it
+    out = run(grids, [first, truth(40), truth(40)])
+    assert np.abs(out[1].disparity[10:20, 90:110] - D_BACK).max() < 0.3
+    assert out[1].stats["temporal_replaced_share"] > 0
+
+
+def test_a_moving_square_is_not_dragged() -> None:
+    """The square moves 6 px right: where it left and where it arrived the output is the new estimate."""
+    grids = [scene(40, 1.0, 0), scene(40, 1.0, 1), scene(46, 1.0, 2)]
+    out = run(grids, [truth(40), truth(40), truth(46)])
+    moved = truth(40) != truth(46)
+    assert np.array_equal(out[2].disparity[moved], truth(46)[moved])
+    assert np.abs(out[2].disparity - truth(46)).max() < 1e-6
+    assert out[2].stats["temporal_new_share"] > 0.12  # the square's old and new place: 40 x 46 px and a rim
+
+
+def test_the_same_frames_give_the_same_bytes_and_reset_or_disabled_pass_through() -> None:
+    rng = np.random.default_rng(1)
+    grids = [scene(40, 1.0, s) for s in range(3)]
+    estimates = [truth(40) + rng.normal(0, 0.2, (H, W)).astype(np.float32) for _ in grids]
+    a, b = run(grids, estimates), run(grids, estimates)
+    assert all(x.disparity.tobytes() == y.disparity.tobytes() for x, y in zip(a, b, strict=True))
+    assert not np.array_equal(a[2].disparity, estimates[2])
+    off = run(grids, estimates, TemporalParams(enabled=False))
+    assert all(np.array_equal(o.disparity, e) for o, e in zip(off, estimates, strict=True))
+    temporal = Temporal()
+    temporal.advance(grids[0], {"r1c1": result(estimates[0])})
+    temporal.reset()
+    res = temporal.stabilise(grids[1], "r1c1", copy.copy(result(estimates[1])), (0.0, 10.0))
+    assert np.array_equal(res.disparity, estimates[1])
