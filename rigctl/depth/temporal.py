@@ -19,18 +19,21 @@ themselves, per camera). There:
   frame-to-frame spread, measured on those pixels, and at least ``agree_floor_px``): the output is the running
   mean of the estimates since the pixel last changed, over at most ``max_frames`` frames. A still pixel's depth
   then settles instead of shimmering, and a first frame's small error is averaged away, not frozen;
-* **kept** or **new**: they disagree (one of the two is a mismatch). The matching cost of both on the current
-  views decides: the new estimate replaces the previous one (and the mean starts again from it) only when its
-  cost is clearly lower (by ``better_share``); otherwise the previous depth stays.
+* **kept** or **replaced**: they disagree (one of the two is a mismatch). The matching cost of both on the
+  current views decides: the new estimate replaces the previous one (and the mean starts again from it) only
+  when its cost is clearly lower (by ``better_share``); otherwise the previous depth stays.
 
 Everywhere else (the colour changed in some view that sees the pixel, or there was no previous depth) the new
-estimate stands as it is, so a moving edge is never dragged. ``result.stats`` records the shares. The same
-frames in the same order give the same bytes.
+estimate stands (**new**), unless it lies within the agreement of the previous depth and the previous depth
+matches the current views clearly better (**held**): a larger jump, where an edge moved, always takes the new
+estimate, so a moving edge is not dragged. ``result.stats`` records the shares. The same frames in the same
+order give the same bytes.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -55,6 +58,7 @@ class TemporalParams:
     better_share: float = 0.1  # a new estimate replaces a disagreeing previous one when its cost is this much lower
     cost_window: int = 7  # the matching cost that decides: window, px ...
     cost_keep: float = 0.5  # ... and share of the views kept per pixel (the best ones: occlusion-aware)
+    hold_changed: bool = True  # changed pixels: the previous depth stays (within the agreement) if it matches better
 
 
 @dataclass
@@ -81,6 +85,7 @@ class Temporal:
         self._frames = {}
 
     def stabilise(self, grid: Grid, ref: str, result: DepthResult, d_range: tuple[float, float]) -> DepthResult:
+        t0 = time.perf_counter()
         p = self.params
         d_new = result.disparity
         prev = self.previous
@@ -99,29 +104,43 @@ class Temporal:
         tol = max(p.agree_floor_px, p.agree_sigmas * spread)
         agree = still & (np.abs(delta) <= tol)
         disagree = still & ~agree
-        new_wins = np.zeros(d_new.shape, bool)
-        if disagree.any():
-            new_wins[disagree] = self._clearly_better(grid, ref, d_new, d_prev, disagree)
-        kept = disagree & ~new_wins
+        # where the colour changed in a view, the new estimate stands unless it lies within the agreement of the
+        # previous depth and the previous depth matches the current views clearly better. Not beyond it: a larger
+        # jump is where an edge moved, and a cost window that straddles the edge favours the old side of it (a
+        # card's trailing edge was held over the strip it uncovered)
+        with np.errstate(invalid="ignore"):
+            changed = np.isfinite(d_new) & np.isfinite(d_prev) & ~still & (np.abs(d_new - d_prev) <= tol)
+        decide = disagree | (changed if p.hold_changed else np.zeros_like(changed))
+        new_better = np.zeros(d_new.shape, bool)
+        prev_better = np.zeros(d_new.shape, bool)
+        if decide.any():
+            c_new, c_prev = self._costs(grid, ref, d_new, d_prev, decide)
+            new_better[decide] = c_new < c_prev * (1.0 - p.better_share)
+            prev_better[decide] = c_prev < c_new * (1.0 - p.better_share)
+        kept = disagree & ~new_better
+        held = changed & prev_better
 
         n = np.maximum(n_prev, 1).astype(np.float32)
         out = d_new.copy()
         out[agree] = (d_prev + delta / (n + 1.0))[agree]
-        out[kept] = d_prev[kept]
-        frames = np.isfinite(out).astype(np.int16)
+        out[kept | held] = d_prev[kept | held]
+        frames = np.isfinite(out).astype(np.int16)  # a new estimate starts a new mean
         frames[agree] = np.minimum(n_prev[agree] + 1, p.max_frames)
         frames[kept] = n_prev[kept]
         self._frames[ref] = frames
 
         estimated = max(1, int(np.isfinite(d_new).sum()))
         result.disparity = out
-        result.stats["temporal_blended_share"] = float(agree.sum() / estimated)
-        result.stats["temporal_kept_share"] = float(kept.sum() / estimated)
-        result.stats["temporal_replaced_share"] = float((disagree & new_wins).sum() / estimated)
-        result.stats["temporal_new_share"] = float((np.isfinite(d_new) & ~still).sum() / estimated)
-        result.stats["temporal_agree_px"] = tol
-        result.stats["temporal_noise_levels"] = change.sigma[ref]
-        result.stats["temporal_changed_share"] = change.share[ref]
+        st = result.stats
+        st["temporal_blended_share"] = float(agree.sum() / estimated)
+        st["temporal_kept_share"] = float(kept.sum() / estimated)
+        st["temporal_replaced_share"] = float((disagree & new_better).sum() / estimated)
+        st["temporal_held_share"] = float(held.sum() / estimated)
+        st["temporal_new_share"] = float((np.isfinite(d_new) & ~still & ~held).sum() / estimated)
+        st["temporal_agree_px"] = tol
+        st["temporal_noise_levels"] = change.sigma[ref]
+        st["temporal_changed_share"] = change.share[ref]
+        st["temporal_s"] = time.perf_counter() - t0
         return result
 
     def advance(self, grid: Grid, results: dict[str, DepthResult]) -> None:
@@ -140,31 +159,24 @@ class Temporal:
             self._change = (grid, frame_change(prev, grid, self.noise, p.window, p.change_sigmas))
         return self._change[1]
 
-    def _clearly_better(
-        self, grid: Grid, ref: str, d_new: F32, d_prev: F32, where: NDArray[np.bool_]
-    ) -> NDArray[np.bool_]:
-        """At the pixels of ``where``: whether the new disparity matches the current views clearly better than
-        the previous one (the matching cost of the plane sweep, ``cost.py``, best views per pixel)."""
+    def _costs(self, grid: Grid, ref: str, d_new: F32, d_prev: F32, where: NDArray[np.bool_]) -> tuple[F32, F32]:
+        """At the pixels of ``where``: the matching cost of the new and of the previous disparity on the current
+        views (the plane sweep's cost, ``cost.py``: the best views per pixel, so an occluded view drops out)."""
         p = self.params
-        views = [
-            n
-            for n in grid.names
-            if n != ref
-            and math.hypot(grid.offsets[n][0] - grid.offsets[ref][0], grid.offsets[n][1] - grid.offsets[ref][1]) > 1e-9
-        ]
+        views = [n for n in grid.names if n != ref and grid.offsets[n] != grid.offsets[ref]]
         if not views:
-            return np.zeros(int(where.sum()), bool)
+            zeros = np.zeros(int(where.sum()), np.float32)
+            return zeros, zeros
         h, w = d_new.shape
         ys, xs = np.nonzero(where)
         r = p.cost_window
-        box = (max(0, ys.min() - r), min(h, ys.max() + r + 1), max(0, xs.min() - r), min(w, xs.max() + r + 1))
-        y0, y1, x0, x1 = box
-        level = SweepLevel(grid, ref, views, 1.0, box)
-        a = d_new[y0:y1, x0:x1]
-        b = d_prev[y0:y1, x0:x1]
+        y0, y1 = max(0, int(ys.min()) - r), min(h, int(ys.max()) + r + 1)
+        x0, x1 = max(0, int(xs.min()) - r), min(w, int(xs.max()) + r + 1)
+        level = SweepLevel(grid, ref, views, 1.0, (y0, y1, x0, x1))
+        a, b = d_new[y0:y1, x0:x1], d_prev[y0:y1, x0:x1]
         # the cost window reaches neighbours without an estimate: each candidate there takes the other's value
         a_f = np.where(np.isfinite(a), a, np.where(np.isfinite(b), b, 0.0)).astype(np.float32)
         b_f = np.where(np.isfinite(b), b, a_f).astype(np.float32)
         keep = max(1, math.ceil(p.cost_keep * len(views)))
         costs = level.costs_where([a_f, b_f], where[y0:y1, x0:x1], r, keep)
-        return np.asarray(costs[0] < costs[1] * (1.0 - p.better_share), bool)
+        return costs[0], costs[1]

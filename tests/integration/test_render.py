@@ -18,8 +18,18 @@ from tests_support import run_rigctl
 def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("render")
     res = run_rigctl(
-        "record", "--take", "ideal", "--frames", "1", "--out", str(out),
-        "--sim", "ideal=true", "--sim", "motion=false", "--force",
+        "record",
+        "--take",
+        "ideal",
+        "--frames",
+        "1",
+        "--out",
+        str(out),
+        "--sim",
+        "ideal=true",
+        "--sim",
+        "motion=false",
+        "--force",
     )
     assert res.returncode == 0, res.stderr
     return out / "ideal"
