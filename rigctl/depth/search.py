@@ -52,10 +52,10 @@ class EstimateStats(TypedDict, total=False):
     temporal_blended_share: float  # still, and agreeing with the previous depth: its running mean
     temporal_kept_share: float  # still, disagreeing, and the previous depth matches as well: kept
     temporal_replaced_share: float  # still, disagreeing, and the new estimate matches clearly better: taken
-    temporal_held_share: float  # the colour changed, but the previous depth matches clearly better: kept
+    temporal_held_share: float  # changed, within the agreement, and the previous depth matches clearly better: kept
     temporal_new_share: float  # the colour changed in a view that sees it (or no previous depth): new estimate
     temporal_agree_px: float  # within this of the previous depth, a new estimate agrees with it
-    temporal_noise_levels: float  # the camera's sensor noise measured from the frame differences, 8-bit levels
+    temporal_noise_sigma: float  # the camera's noise measured from the frame differences (half size), 8-bit levels
     temporal_changed_share: float  # share of the camera's pixels whose colour changed beyond the noise
     temporal_s: float
 

@@ -138,7 +138,7 @@ class Temporal:
         st["temporal_held_share"] = float(held.sum() / estimated)
         st["temporal_new_share"] = float((np.isfinite(d_new) & ~still & ~held).sum() / estimated)
         st["temporal_agree_px"] = tol
-        st["temporal_noise_levels"] = change.sigma[ref]
+        st["temporal_noise_sigma"] = change.sigma[ref]
         st["temporal_changed_share"] = change.share[ref]
         st["temporal_s"] = time.perf_counter() - t0
         return result

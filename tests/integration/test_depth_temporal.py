@@ -120,15 +120,16 @@ def test_a_still_scene_keeps_its_depth_from_frame_to_frame(static_take: TakeDept
     """Issue 23's static take: single-frame, the depth of a pixel changes by 0.19 px per frame on average and by
     more than 0.5 px on 6.6 % of pixels; stabilised, at most 0.03 px and 0.5 %, and no less accurate."""
     (before, _), (after, _) = scores(static_take.single), scores(static_take.stable)
-    assert before.static_change_mean_px and before.static_change_over_0_5_pct  # the flicker is there to remove
-    assert before.static_change_mean_px > 0.1 and before.static_change_over_0_5_pct > 3.0, before
+    assert before.static_change_mean_px is not None and before.static_change_over_0_5_pct is not None
     assert after.static_change_mean_px is not None and after.static_change_over_0_5_pct is not None
     assert after.static_change_mean_px <= 0.03, after
     assert after.static_change_over_0_5_pct <= 0.5, after
+    # whatever the estimator's own flicker (0.19 px and 6.6 % with the pairs engine), most of it is removed
+    assert after.static_change_mean_px < before.static_change_mean_px / 3, (before, after)
     assert bad1(static_take.stable, static_take.truth) <= bad1(static_take.single, static_take.truth)
     for st in static_take.stats[1:]:
         assert st["temporal_blended_share"] > 0.8 and st["temporal_new_share"] < 0.05, st  # type: ignore[operator]
-        assert 0.3 < st["temporal_noise_levels"] < 5.0, st  # type: ignore[operator]
+        assert 0.3 < st["temporal_noise_sigma"] < 5.0, st  # type: ignore[operator]
 
 
 @pytest.mark.slow
