@@ -12,7 +12,8 @@ Exit codes, one per class of error, so a script can tell a missing device from a
 2     usage: a bad option or parameter value (:class:`ParameterError`, argparse)
 3     bad input file: rig file, take, calibration, grid (:class:`RigFileError`, :class:`TakeError`,
       :class:`CalibrationError`)
-4     device: missing, busy, failing, or speaking garbage (:class:`DeviceError`, :class:`ProtocolError`)
+4     device: missing, busy, failing, or speaking garbage (:class:`DeviceError`, :class:`ProtocolError`);
+      an output destination that is read-only, full or busy (:class:`OutputError`, :class:`DiskFullError`)
 5     data damaged: a frame fails its checksum or is missing (:class:`DamagedDataError`); also the exit
       status of a run that completed with ``--skip-damaged`` and left damaged frames out
 130   interrupted (Ctrl-C)
@@ -75,6 +76,12 @@ class DiskFullError(TakeError):
     destination (a device) cannot do what the take needs, the input was fine."""
 
     exit_code = EXIT_DEVICE
+
+
+class OutputError(DeviceError):
+    """An output cannot be written where the user asked: a read-only or full destination, a file where a folder
+    is needed, a path that is not UTF-8, a folder another rigctl run is writing. Exit status 4 (the
+    destination); the message names the path."""
 
 
 class PreflightError(RigctlError):

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import os
 from collections.abc import Mapping
 from fractions import Fraction
 from pathlib import Path
@@ -19,7 +20,8 @@ import numpy as np
 import OpenEXR
 from numpy.typing import NDArray
 
-from rigctl.errors import ParameterError, TakeError
+from rigctl.errors import DiskFullError, OutputError, ParameterError, TakeError
+from rigctl.publish import publishing
 from rigctl.timecode import Timecode, is_fractional
 
 log = logging.getLogger(__name__)
@@ -117,10 +119,14 @@ def write_exr(
     }
     header.update(attributes or {})
     data = {k: np.ascontiguousarray(v, dtype=np.float16 if k in half else np.float32) for k, v in channels.items()}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp.exr")
-    OpenEXR.File(header, data).write(str(tmp))
-    tmp.replace(path)
+    with publishing(path) as tmp:  # a temporary name in the same folder, renamed once whole
+        try:
+            OpenEXR.File(header, data).write(str(tmp))
+        except RuntimeError as exc:  # OpenEXR's way of saying a write failed (a full disk among others)
+            full = os.statvfs(tmp.parent).f_bavail * os.statvfs(tmp.parent).f_frsize < (1 << 20)
+            raise (DiskFullError if full else OutputError)(
+                f"{path}: {'no space left on the device' if full else f'cannot write: {exc}'}; the file was not written"
+            ) from None
 
 
 # the most any EXR compression expands to (ZIP/deflate tops out near 1032:1, half floats read as float32 x2)

@@ -4,24 +4,53 @@
 ``sequence``: ``DIR/<camera>/<camera>.<frame:06d>.<ext>``, one folder per camera holding a numbered image
 sequence, as NUKE's Read node (``<camera>.######.exr``) and Unreal's Img Media Source (one folder of
 numbered frames) read them.
+``flat`` (a grid folder, one picture): ``DIR/<camera>.<ext>``.
+
+:func:`output_path` is the one function that turns names from data into output paths: a camera name is a
+grid position ``r{row}c{col}`` (ASCII digits), a frame a number, an extension a short lower-case word, and
+anything else is refused, so a name read from a hostile file can never put a file outside ``DIR``.
 """
 
 from __future__ import annotations
 
 import logging
+import re
 from pathlib import Path
 
-from rigctl.errors import ParameterError
+from rigctl.errors import ParameterError, TakeError
 
 log = logging.getLogger(__name__)
 
 LAYOUTS = ("frames", "sequence")
+SAFE_CAMERA = re.compile(r"r([0-9]{1,4})c([0-9]{1,4})")  # fullmatch: no trailing newline, no other digits
+SAFE_EXT = re.compile(r"\.[a-z]{2,4}")
+MAX_FRAME = 999_999_999
+
+
+def check_layout(layout: str) -> None:
+    """Refuse an unknown ``--layout`` before any work."""
+    if layout not in LAYOUTS:
+        raise ParameterError(f"--layout {layout!r}: choose {' or '.join(LAYOUTS)}")
+
+
+def safe_camera(name: object, where: str = "camera name") -> str:
+    """``name`` when it is a grid position ``r{row}c{col}``; otherwise a one-line :class:`TakeError`."""
+    if not isinstance(name, str) or not SAFE_CAMERA.fullmatch(name):
+        raise TakeError(f"{where}: {name!r} is not a camera name r{{row}}c{{col}}: refused as a file name")
+    return name
 
 
 def output_path(out: Path, layout: str, frame: int, camera: str, ext: str) -> Path:
     """The file of one camera's output at one frame set; ``ext`` with its dot (``.exr``)."""
+    if layout not in (*LAYOUTS, "flat"):
+        check_layout(layout)
+    safe_camera(camera)
+    if not SAFE_EXT.fullmatch(ext):
+        raise ParameterError(f"output extension {ext!r} refused")
+    if isinstance(frame, bool) or not isinstance(frame, int) or not 0 <= frame <= MAX_FRAME:
+        raise TakeError(f"frame number {frame!r} refused as a file name (0 to {MAX_FRAME})")
     if layout == "frames":
         return out / f"{frame:06d}" / f"{camera}{ext}"
     if layout == "sequence":
         return out / camera / f"{camera}.{frame:06d}{ext}"
-    raise ParameterError(f"--layout {layout!r}: choose {' or '.join(LAYOUTS)}")
+    return out / f"{camera}{ext}"

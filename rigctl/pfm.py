@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.errors import ParameterError, TakeError
+from rigctl.publish import publish_bytes
 
 
 def write_pfm(path: Path, image: NDArray[np.floating]) -> None:
@@ -23,11 +24,7 @@ def write_pfm(path: Path, image: NDArray[np.floating]) -> None:
     else:
         raise ParameterError(f"{path}: PFM holds 1 or 3 channels, got shape {img.shape}")
     h, w = img.shape[:2]
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as f:
-        f.write(header + b"\n" + f"{w} {h}\n".encode() + b"-1.0\n")
-        f.write(np.ascontiguousarray(img[::-1]).tobytes())
-    os.replace(tmp, path)
+    publish_bytes(path, header + b"\n" + f"{w} {h}\n".encode() + b"-1.0\n" + np.ascontiguousarray(img[::-1]).tobytes())
 
 
 HEADER_MAX = 256  # bytes: three short lines

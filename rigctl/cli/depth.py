@@ -13,6 +13,7 @@ from rigctl.cli.take import damaged_exit
 from rigctl.depth.presets import PRESETS
 from rigctl.depth.run import DepthOptions, run_depth
 from rigctl.errors import ParameterError
+from rigctl.publish import output_folder, publish_json
 from rigctl.take.export import parse_range
 
 
@@ -64,26 +65,27 @@ def run(ns: argparse.Namespace) -> int:
         raise ParameterError(
             "--check renders each computed camera from the others: give at least two --cameras, or none for all"
         )
-    bar = Progress(f"depth {ns.input.name}")
-    try:
-        report = run_depth(
-            ns.input,
-            ns.out,
-            opt,
-            frames,
-            progress=bar,
-            skip_damaged=ns.skip_damaged,
-            layout=ns.layout,
-            colour=ns.colour,
-        )
-    finally:
-        bar.close()
-    data = report.to_json()
-    if ns.check:
-        from rigctl.cli.render import leave_one_out_report
+    with output_folder(ns.out, "depth"):  # usable, locked for this run, an interrupted run's leftovers removed
+        bar = Progress(f"depth {ns.input.name}")
+        try:
+            report = run_depth(
+                ns.input,
+                ns.out,
+                opt,
+                frames,
+                progress=bar,
+                skip_damaged=ns.skip_damaged,
+                layout=ns.layout,
+                colour=ns.colour,
+            )
+        finally:
+            bar.close()
+        data = report.to_json()
+        if ns.check:
+            from rigctl.cli.render import leave_one_out_report
 
-        data["leave_one_out"] = leave_one_out_report(ns.input, ns.out, frames, ns.cameras)
-        (ns.out / "report.json").write_text(json.dumps(data, indent=1, default=float))
+            data["leave_one_out"] = leave_one_out_report(ns.input, ns.out, frames, ns.cameras)
+            publish_json(ns.out / "report.json", data, default=float)
     status = damaged_exit(report.damaged_skipped, ns.out / "report.json")
     if ns.json:
         print(json.dumps(data, default=float))

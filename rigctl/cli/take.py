@@ -12,6 +12,7 @@ from rigctl.cli.args import add_layout
 from rigctl.cli.progress import Progress
 from rigctl.cli.record import format_summary
 from rigctl.errors import EXIT_DAMAGED
+from rigctl.publish import output_folder, utf8_path
 from rigctl.take.check import check_take
 from rigctl.take.export import export_take
 from rigctl.take.manifest import DamagedFrame
@@ -68,14 +69,16 @@ def run_check(ns: argparse.Namespace) -> int:
 
 
 def run_export(ns: argparse.Namespace) -> int:
+    utf8_path(ns.out)
     reader = TakeReader(ns.take, skip_damaged=ns.skip_damaged)
-    bar = Progress(f"exporting {reader.manifest.take}")
-    try:
-        result = export_take(
-            reader, ns.out, ns.frames, ns.format, progress=bar.steps, layout=ns.layout, colour=ns.colour
-        )
-    finally:
-        bar.close()
+    with output_folder(ns.out, "take export"):  # locked for this run; an interrupted run's leftovers removed
+        bar = Progress(f"exporting {reader.manifest.take}")
+        try:
+            result = export_take(
+                reader, ns.out, ns.frames, ns.format, progress=bar.steps, layout=ns.layout, colour=ns.colour
+            )
+        finally:
+            bar.close()
     print(
         f"{result['images']} images from {result['sets']} frame sets written to {ns.out}"
         + (f" ({result['missing']} members not captured)" if result["missing"] else "")

@@ -23,6 +23,7 @@ from rigctl.depth.grid import Grid
 from rigctl.exr import picture, picture_attributes, write_exr
 from rigctl.layout import output_path
 from rigctl.pfm import write_pfm
+from rigctl.publish import publish_png
 from rigctl.timecode import Timecode
 
 F32 = NDArray[np.float32]
@@ -87,9 +88,7 @@ class Target:
     colour: str = "rec709"  # rigctl.exr.COLOURS
 
     def path(self, camera: str, ext: str) -> Path:
-        p = self.out / f"{camera}{ext}" if self.flat else output_path(self.out, self.layout, self.frame, camera, ext)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        return p
+        return output_path(self.out, "flat" if self.flat else self.layout, self.frame, camera, ext)
 
 
 def write_outputs(
@@ -99,7 +98,7 @@ def write_outputs(
     if "pfm" in formats:
         write_pfm(target.path(name, ".pfm"), d)
     if "png" in formats:
-        cv2.imwrite(str(target.path(name, ".png")), colour_preview(d, d_range))
+        publish_png(target.path(name, ".png"), colour_preview(d, d_range))
     if "exr" in formats:
         z = grid.depth(d)
         inv_z = np.where(np.isfinite(z) & (z > 0), 1.0 / z, 0.0).astype(np.float32)

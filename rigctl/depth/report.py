@@ -4,7 +4,6 @@ the JSON is read or written."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +12,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from rigctl.depth.search import EstimateStats
 from rigctl.depth.take_range import RangeDecision, Widening
 from rigctl.depth.video_metrics import VideoScores
+from rigctl.publish import publish_json
 from rigctl.take.manifest import DamagedFrame
 
 
@@ -94,5 +94,4 @@ class TakeReport(BaseModel):
         return data
 
     def write(self, path: Path) -> None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.to_json(), indent=1))
+        publish_json(path, self.to_json())

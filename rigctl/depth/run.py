@@ -23,7 +23,7 @@ from rigctl.depth.take_range import unplanned_range
 from rigctl.depth.video_metrics import VideoMetrics
 from rigctl.errors import ParameterError
 from rigctl.exr import to_colour
-from rigctl.layout import output_path
+from rigctl.layout import check_layout
 
 __all__ = [
     "DEFAULT_CHUNK",
@@ -94,7 +94,7 @@ def run_depth(
     A damaged frame of a take stops it (naming file and byte) unless ``skip_damaged``: then its frame set is
     left out and the damaged frames are listed in the report's ``damaged_skipped``."""
     t_start = time.perf_counter()
-    output_path(out, layout, 0, "", "")  # an unknown layout is refused before any work
+    check_layout(layout)  # an unknown layout is refused before any work
     to_colour(np.zeros((1, 3), np.float32), colour)  # and an unknown colour space
     src = open_source(source, skip_damaged=skip_damaged)
     numbers = select_frames(src, frames)

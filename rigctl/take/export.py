@@ -6,17 +6,16 @@ left out and listed in ``DIR/export.json`` under ``skipped_damaged``.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from rigctl.depth.key import Keyer
 from rigctl.errors import ParameterError, TakeError
 from rigctl.exr import picture, picture_attributes, to_colour, write_exr
-from rigctl.layout import output_path
+from rigctl.layout import check_layout, output_path
+from rigctl.publish import publish_json, publish_png
 from rigctl.take.reader import TakeReader
 
 
@@ -54,7 +53,7 @@ def export_take(
     """
     if fmt not in ("png", "exr"):
         raise ParameterError(f"--format {fmt!r}: choose png or exr")
-    output_path(out, layout, 0, "", "")  # an unknown layout is refused before any work
+    check_layout(layout)  # an unknown layout is refused before any work
     to_colour(np.zeros((1, 3), np.float32), colour)  # and an unknown colour space
     sets = reader.frame_sets
     if not sets:
@@ -73,10 +72,8 @@ def export_take(
             if image is None:
                 continue  # damaged, skipped: listed in reader.damaged
             path = output_path(out, layout, n, name, f".{fmt}")
-            path.parent.mkdir(parents=True, exist_ok=True)
             if fmt == "png":
-                if not cv2.imwrite(str(path), image):
-                    raise TakeError(f"{path}: cannot write")
+                publish_png(path, image)
             else:
                 rgb = np.asarray(image, np.float32)
                 attrs = picture_attributes(reader.fps, tc, colour)
@@ -89,5 +86,5 @@ def export_take(
     if reader.damaged:
         skipped = [d.model_dump(exclude_none=True) for d in reader.damaged]
         manifest = {"take": str(reader.folder), **result, "skipped_damaged": skipped}
-        (out / "export.json").write_text(json.dumps(manifest, indent=1))
+        publish_json(out / "export.json", manifest)
     return result

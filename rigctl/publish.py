@@ -1,0 +1,235 @@
+"""Publishing outputs: every file a command writes appears whole under its final name or not at all.
+
+:func:`publish_bytes` writes to a hidden temporary name in the same folder (``.<name>.<pid>.rigctl-tmp``),
+flushes, fsyncs and renames it over the final name, then fsyncs the folder. A run killed at any instant
+leaves the final name either absent, or the previous whole file, or the new whole file; its temporary files
+are recognised by their suffix and removed by the next run on the same folder (:func:`remove_stale_temps`).
+PNG is encoded in memory (``cv2.imencode``) and published the same way: ``cv2.imwrite`` crashes the process
+on a path that is not UTF-8.
+
+:class:`OutputLock` holds an ``flock`` on the output folder itself for the length of a run (the kernel drops
+it when the process dies, however it dies): a second run on the same folder is refused in one line.
+:func:`prepare_output` refuses, before any work, an output path that cannot be used: not valid UTF-8, a
+file where a folder is needed, a folder that cannot be created or written. Failures while writing (disk
+full, read-only) become :class:`~rigctl.errors.OutputError`: one line naming the file.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import json
+import logging
+import os
+import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from types import TracebackType
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from rigctl.errors import DiskFullError, OutputError, ParameterError, RigctlError, TakeError
+
+log = logging.getLogger(__name__)
+
+TEMP_SUFFIX = ".rigctl-tmp"
+
+
+def utf8_path(path: Path, what: str = "--out") -> None:
+    """Refuse a path that is not valid UTF-8 (a byte the file system allows, which OpenCV and OpenEXR do not)."""
+    try:
+        os.fsencode(path).decode("utf-8")
+        str(path).encode("utf-8")
+    except UnicodeError:
+        shown = os.fsencode(path).decode("utf-8", "backslashreplace")
+        raise ParameterError(f"{what} {shown}: the path is not valid UTF-8; choose another name") from None
+
+
+def output_error(path: Path, exc: OSError) -> RigctlError:
+    """One line for a write that failed: the file and why (full disk and read-only said plainly)."""
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return DiskFullError(f"{path}: no space left on the device; the file was not written")
+    if exc.errno == errno.EROFS:
+        return OutputError(f"{path}: the file system is read-only")
+    if exc.errno in (errno.EACCES, errno.EPERM):
+        return OutputError(f"{path}: permission denied")
+    return OutputError(f"{path}: cannot write: {exc.strerror or exc}")
+
+
+def prepare_output(out: Path, what: str = "--out") -> Path:
+    """Create the output folder (and parents) and prove it usable before any work: valid UTF-8, a folder,
+    writable. Returns ``out``."""
+    utf8_path(out, what)
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"{what} {out}: is a file, not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise output_error(out, exc) from None
+    if not os.access(out, os.W_OK | os.X_OK):
+        ro = os.statvfs(out).f_flag & os.ST_RDONLY
+        raise OutputError(f"{what} {out}: {'the file system is read-only' if ro else 'not writable'}")
+    return out
+
+
+def _fsync_dir(folder: Path) -> None:
+    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def temp_name(path: Path) -> Path:
+    """The temporary name ``path`` is written under before it is published (same folder, hidden, ours)."""
+    return path.with_name(f".{path.name}.{os.getpid()}{TEMP_SUFFIX}")
+
+
+@contextmanager
+def publishing(path: Path) -> Iterator[Path]:
+    """Yields the temporary name to write (same folder, hidden, ours), then fsyncs it, renames it over ``path``
+    and fsyncs the folder; on any failure the temporary file is removed and an OSError becomes one line."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise output_error(path.parent, exc) from None
+    tmp = temp_name(path)
+    try:
+        yield tmp
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+        _fsync_dir(path.parent)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise output_error(path, exc) from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def publish_bytes(path: Path, data: bytes | memoryview) -> None:
+    """Write ``data`` to ``path`` atomically: temporary name, flush, fsync, rename, fsync the folder."""
+    with publishing(path) as tmp, open(tmp, "wb") as f:
+        f.write(data)
+
+
+def publish_text(path: Path, text: str) -> None:
+    publish_bytes(path, text.encode("utf-8"))
+
+
+def publish_json(path: Path, data: object, **kwargs: object) -> None:
+    publish_text(path, json.dumps(data, indent=1, **kwargs))  # type: ignore[arg-type]
+
+
+def publish_png(path: Path, image: NDArray[np.integer] | NDArray[np.floating]) -> None:
+    """Encode ``image`` (8- or 16-bit, 1, 3 or 4 channels, OpenCV's channel order) as PNG and publish it."""
+    ok, buf = cv2.imencode(".png", image)
+    if not ok:
+        raise OutputError(f"{path}: the image could not be encoded as PNG")
+    publish_bytes(path, buf.data)
+
+
+def remove_stale_temps(folder: Path) -> int:
+    """Remove the temporary files a killed run left under ``folder`` (ours by their suffix); the caller
+    holds the folder's :class:`OutputLock`, so none of them belongs to a live run. Returns how many."""
+    removed = 0
+    if not folder.is_dir():
+        return 0
+    for p in folder.rglob(f".*{TEMP_SUFFIX}"):
+        if p.is_file() and not p.is_symlink():
+            p.unlink(missing_ok=True)
+            removed += 1
+    if removed:
+        log.info("%s: removed %d unfinished file(s) of an interrupted run", folder, removed)
+    return removed
+
+
+class OutputLock:
+    """An exclusive ``flock`` on an output folder for the length of a run; refused in one line when another
+    run holds it. The lock is on the folder itself, so it leaves nothing behind and dies with the process."""
+
+    def __init__(self, folder: Path, verb: str) -> None:
+        self.folder = folder
+        self.verb = verb
+        self.fd: int | None = None
+
+    def __enter__(self) -> OutputLock:
+        try:
+            fd = os.open(self.folder, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+        except OSError as exc:
+            raise output_error(self.folder, exc) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise OutputError(
+                f"{self.folder}: another rigctl run is writing this folder; wait for it to end or choose another --out"
+            ) from None
+        self.fd = fd
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+        if self.fd is not None:
+            os.close(self.fd)  # closing the descriptor drops the lock
+            self.fd = None
+
+
+@contextmanager
+def output_folder(out: Path, verb: str, what: str = "--out") -> Iterator[Path]:
+    """An output folder prepared (:func:`prepare_output`), locked for this run (:class:`OutputLock`) and
+    cleared of the temporary files of an interrupted run: the whole of a writing command's output side."""
+    prepare_output(out, what)
+    with OutputLock(out, verb):
+        remove_stale_temps(out)
+        yield out
+
+
+PARTIAL_SUFFIX = ".rigctl-partial"
+
+
+def partial_name(out: Path) -> Path:
+    """Where a new folder (a rectified take) is built before it is published under ``out``."""
+    return out.parent / f".{out.name}{PARTIAL_SUFFIX}"
+
+
+@contextmanager
+def publishing_folder(out: Path, verb: str, exists_message: str) -> Iterator[Path]:
+    """Build a new folder under a hidden partial name beside ``out`` (ours, locked for this run) and rename it
+    to ``out`` once whole. A run killed on the way leaves only the partial folder, which the same command run
+    again clears and rebuilds; a run holding it is refused in one line; an existing ``out`` is never touched."""
+    utf8_path(out)
+    if out.exists() or out.is_symlink():
+        raise TakeError(f"{out}: {exists_message}")
+    prepare_output(out.parent)
+    partial = partial_name(out)
+    if partial.is_symlink() or (partial.exists() and not partial.is_dir()):
+        raise OutputError(f"{partial}: is in the way of {out} and not a folder rigctl made; remove it")
+    try:
+        partial.mkdir(exist_ok=True)
+    except OSError as exc:
+        raise output_error(partial, exc) from None
+    with OutputLock(partial, verb):
+        leftovers = list(partial.iterdir())
+        for p in leftovers:  # an interrupted run of ours: begun again from nothing
+            shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
+        if leftovers:
+            log.warning("%s: removed the unfinished output of an interrupted run", partial)
+        try:
+            yield partial
+            if out.exists() or out.is_symlink():
+                raise TakeError(f"{out}: {exists_message}")
+            os.rename(partial, out)
+            _fsync_dir(out.parent)
+        except OSError as exc:
+            shutil.rmtree(partial, ignore_errors=True)
+            raise output_error(out, exc) from None
+        except BaseException:
+            shutil.rmtree(partial, ignore_errors=True)
+            raise
