@@ -24,6 +24,7 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from rigctl.errors import RigFileError, SpecVersionError
+from rigctl.regular import read_regular
 
 Loc = tuple[str | int, ...]
 
@@ -95,13 +96,8 @@ def _construct(node: yaml.Node, loader: _Loader, path: Loc, lines: dict[Loc, int
 def load_yaml_with_lines(path: Path, text: str | None = None) -> tuple[Any, dict[Loc, int]]:
     """Parse ``path`` (or ``text`` read from it) and return the data and a map from field path to line."""
     try:
-        if text is None:
-            size = path.stat().st_size
-            if size > MAX_FILE_BYTES:
-                raise RigFileError(f"{path}: file of {size:,} bytes is over the limit of {MAX_FILE_BYTES:,} bytes")
-            text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise RigFileError(f"{path}: no such file") from None
+        if text is None:  # a regular file, its size checked on the open descriptor (/dev/zero, a FIFO)
+            text = read_regular(path, MAX_FILE_BYTES, RigFileError).decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise RigFileError(f"{path}: cannot read: {exc}") from None
     if len(text) > MAX_FILE_BYTES:

@@ -22,6 +22,7 @@ frame, so a reader can tell a complete frame from one torn by a crash and never 
 
 from __future__ import annotations
 
+import os
 import struct
 import zlib
 from dataclasses import dataclass
@@ -30,8 +31,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.errors import TakeError
+from rigctl.errors import DamagedDataError, TakeError
 from rigctl.interfaces import FrameFlags
+from rigctl.regular import open_regular, read_regular
 from rigctl.timecode import Timecode
 
 MAGIC = b"RGIX"
@@ -39,6 +41,7 @@ VERSION = 1
 RECORD = struct.Struct("<4sHHQqqQIIiI4s")
 assert RECORD.size == 60
 RECORD_SIZE = 64
+MAX_INDEX_BYTES = RECORD_SIZE << 24  # 16 million frames: 6 days at 30 fps
 
 
 @dataclass(frozen=True)
@@ -101,17 +104,25 @@ class IndexProblem:
         return f"{self.path}: byte {self.offset}: {self.message}"
 
 
-def read_index(path: Path, essence_size: int | None = None) -> tuple[NDArray[np.void], list[IndexProblem]]:
+def read_index(
+    path: Path, essence_size: int | None = None, max_records: int | None = None
+) -> tuple[NDArray[np.void], list[IndexProblem]]:
     """All valid records of an index file, and the problems found.
 
     A short or corrupt record at the very end (a write cut by a crash), or a last frame whose bytes are
     not all in the essence file, is a torn tail: excluded and reported as such. Anything wrong before
-    the tail is corruption.
+    the tail is corruption. Only a regular file is read, and an index of more than ``max_records`` records
+    (more frames than its essence file can hold) is refused before it is read.
     """
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise TakeError(f"{path}: cannot read index: {exc.strerror}") from None
+    limit = (max_records + 1) * RECORD_SIZE - 1 if max_records is not None else MAX_INDEX_BYTES
+    fd, size = open_regular(path, TakeError, "index file")
+    os.close(fd)
+    if size > limit:
+        raise DamagedDataError(
+            f"{path}: byte {limit - limit % RECORD_SIZE}: index of {size:,} bytes holds more records than its essence "
+            f"file can hold frames ({limit // RECORD_SIZE:,})"
+        )
+    data = read_regular(path, limit, TakeError, "index file")
     n = len(data) // RECORD_SIZE
     problems: list[IndexProblem] = []
     if len(data) % RECORD_SIZE:
