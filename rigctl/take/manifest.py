@@ -35,6 +35,7 @@ from pydantic import (
 from pydantic.main import IncEx
 
 from rigctl.errors import TakeError
+from rigctl.layout import SAFE_CAMERA
 from rigctl.timecode import Timecode, TimecodeError, rate_of
 from rigctl.yamlfile import check_spec, describe_validation_error, load_yaml_with_lines
 
@@ -143,6 +144,14 @@ class Rectification(_Section):
     calibration: str | None = None  # rigctl rectify: the calibration file; an ideal take: "true (simulated)"
     truth_note: str | None = None
 
+    @field_validator("positions_m")
+    @classmethod
+    def _camera_names(cls, value: dict[str, list[float]]) -> dict[str, list[float]]:
+        for name in value:
+            if not SAFE_CAMERA.fullmatch(name):
+                raise ValueError(f"{name!r} is not a camera name r{{row}}c{{col}}")
+        return value
+
 
 class DamagedFrame(_Section):
     """A frame left out because it was damaged (``--skip-damaged``), with where it was found."""
@@ -181,6 +190,24 @@ class Manifest(BaseModel):
     rectification: Rectification | None = None
     verdict: Verdict | None = None
     damaged_skipped: list[DamagedFrame] | None = None
+
+    @field_validator("cameras")
+    @classmethod
+    def _camera_names(cls, value: dict[str, CameraEntry]) -> dict[str, CameraEntry]:
+        """Camera names become file names: only grid positions ``r{row}c{col}``, and at least one camera."""
+        if not value:
+            raise ValueError("the take has no cameras")
+        for name in value:
+            if not SAFE_CAMERA.fullmatch(name):
+                raise ValueError(f"{name!r} is not a camera name r{{row}}c{{col}}")
+        return value
+
+    @field_validator("status")
+    @classmethod
+    def _known_status(cls, value: str) -> str:
+        if value not in STATUSES:
+            raise ValueError(f"{value!r} is not a status ({', '.join(STATUSES)})")
+        return value
 
     @field_validator("timing", mode="before")
     @classmethod

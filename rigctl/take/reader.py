@@ -30,7 +30,8 @@ from numpy.typing import NDArray
 from rigctl.errors import DamagedDataError, TakeError
 from rigctl.interfaces import FrameFlags
 from rigctl.pixfmt import to_bgr8, to_gray8, to_rgb
-from rigctl.take import framesets
+from rigctl.regular import open_regular
+from rigctl.take import framesets, proof
 from rigctl.take.index import RECORD_SIZE, FrameRecord, IndexProblem, read_index
 from rigctl.take.manifest import DamagedFrame, Manifest, read_manifest
 from rigctl.take.reserve import remove_stale_reserves
@@ -39,6 +40,7 @@ from rigctl.timecode import Timecode, TimecodeError, rate_of, start_timecode
 log = logging.getLogger(__name__)
 
 BYTES_PER_PIXEL = {"UYVY": 2, "YUYV": 2, "BGR3": 3, "GREY": 1}
+INDEX_SLACK = 4096  # records beyond what the essence holds still read as damage (a cut essence), not refused
 ImageKind = Literal["bgr8", "gray8", "float"]
 KINDS: tuple[ImageKind, ...] = ("bgr8", "gray8", "float")
 
@@ -52,7 +54,7 @@ def _close_all(fds: dict[str, int]) -> None:
 class TakeReader:
     """A take folder opened for reading. Frames are addressed by camera and position in its index."""
 
-    def __init__(self, folder: Path, skip_damaged: bool = False) -> None:
+    def __init__(self, folder: Path, skip_damaged: bool = False, prove: bool = True) -> None:
         self.folder = Path(folder)
         self.skip_damaged = skip_damaged
         self.damaged: list[DamagedFrame] = []  # what was left out, with file and byte (skip_damaged)
@@ -70,21 +72,39 @@ class TakeReader:
                 f"bytes_per_frame {fmt.bytes_per_frame} is not a format rigctl reads "
                 f"({', '.join(BYTES_PER_PIXEL)}; width x height x bytes per pixel)"
             )
+        mpath = self.folder / "take.yaml"
+        self.proof: list[str] = proof.format_problems(self.manifest, mpath)  # what the take fails to prove
+        self._prove(prove)
         period = self.manifest.timing.frame_period_ns
         self.period_ns = period if period is not None and period > 0 else round(1e9 / fmt.fps)
         self.index: dict[str, NDArray[np.void]] = {}
         self.problems: dict[str, list[IndexProblem]] = {}
+        self.proof += proof.file_problems(
+            self.folder, {n: (self.essence_path(n), self.index_path(n)) for n in self.names}
+        )
+        self._prove(prove)
         for name in self.names:
             essence = self.essence_path(name)
             if not essence.exists():
                 raise TakeError(f"{essence}: essence file of camera {name} is missing")
-            size = essence.stat().st_size
-            idx, problems = read_index(self.index_path(name), size)
+            fd, size = open_regular(essence, TakeError, f"essence file of camera {name}")
+            self._fds[name] = fd  # the file proven regular is the one read
+            # an index holds at most a record a frame its essence can hold (and a torn or cut tail): bounded
+            idx, problems = read_index(self.index_path(name), size, size // self.bytes_per_frame + INDEX_SLACK)
             self.index[name] = idx
             self.problems[name] = problems
             self._check_claims(name, essence, size)
+            self.proof += proof.record_problems(self.index_path(name), idx, self.bytes_per_frame, self.period_ns)
+            self._prove(prove)
+        span = proof.span_problem(self.folder, self.index, self.period_ns)
+        self.proof += [span] if span else []
+        self._prove(prove)
         if self.status == "recording":  # a take cut off by a crash: free the space its recorder kept
             remove_stale_reserves({self.folder} | {self.essence_path(n).parent.parent for n in self.names})
+
+    def _prove(self, prove: bool) -> None:
+        if prove and self.proof:
+            raise TakeError(self.proof[0])
 
     def _check_claims(self, name: str, essence: Path, size: int) -> None:
         """Refuse (or, skipping, record) frames this camera's index or manifest claims but cannot deliver."""
@@ -123,7 +143,7 @@ class TakeReader:
     def _essence_fd(self, name: str) -> int:
         fd = self._fds.get(name)
         if fd is None:
-            fd = self._fds[name] = os.open(self.essence_path(name), os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+            fd = self._fds[name] = open_regular(self.essence_path(name), TakeError, f"essence file of camera {name}")[0]
         return fd
 
     @property
@@ -138,18 +158,22 @@ class TakeReader:
         real = p.resolve()
         try:
             real.relative_to(self.folder.resolve())
-            return p
         except ValueError:
-            pass
-        if (
-            real.name == f"{name}.{kind}"
-            and real.parent.name == "cameras"
-            and real.parent.parent.name == self.manifest.take
-        ):
-            return p
-        raise TakeError(
-            f"{self.folder / 'take.yaml'}: cameras.{name}.{kind} {text!r} points outside the take folder: refused"
-        ) from None
+            if not (
+                real.name == f"{name}.{kind}"
+                and real.parent.name == "cameras"
+                and real.parent.parent.name == self.manifest.take
+            ):
+                raise TakeError(
+                    f"{self.folder / 'take.yaml'}: cameras.{name}.{kind} {text!r} points outside the take folder: "
+                    "refused"
+                ) from None
+        if Path(text).name != f"{name}.{kind}":  # one camera's file is never another's
+            raise TakeError(
+                f"{self.folder / 'take.yaml'}: cameras.{name}.{kind} {text!r} is not camera {name}'s file "
+                f"({name}.{kind}): refused"
+            )
+        return p
 
     def essence_path(self, name: str) -> Path:
         return self._resolve(self.manifest.cameras[name].essence, name, "essence")
@@ -168,12 +192,12 @@ class TakeReader:
         rec = self.index[name][i]
         size, offset = int(rec["size"]), int(rec["offset"])
         path = self.essence_path(name)
-        data = os.pread(self._essence_fd(name), size, offset)
-        if size != self.bytes_per_frame:
+        if size != self.bytes_per_frame:  # checked before a byte is read: a record may claim 4 GiB
             raise DamagedDataError(
                 f"{self.index_path(name)}: byte {i * RECORD_SIZE}: frame of {size} bytes, the format needs "
                 f"{self.bytes_per_frame}"
             )
+        data = os.pread(self._essence_fd(name), size, offset)
         if len(data) != size:
             raise DamagedDataError(f"{path}: byte {offset}: frame of {size} bytes is cut short ({len(data)} read)")
         if verify and rec["crc"] and zlib.crc32(data) != int(rec["crc"]):
