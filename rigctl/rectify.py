@@ -18,7 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.calibration_model import ArrayCalibration, load_calibration
-from rigctl.errors import CalibrationError, TakeError
+from rigctl.errors import CalibrationError
+from rigctl.publish import publishing_folder
 from rigctl.rectgeom import RectifiedGrid, calibration_hash, common_plane, rectification_record
 from rigctl.take.manifest import TAKE_SPEC, DamagedFrame, Rectification, write_manifest
 from rigctl.take.reader import TakeReader
@@ -200,16 +201,28 @@ def rectify_take(
     t_tables = time.perf_counter()
     rect = rectifier_for_take(reader, calibration)
     t_tables = time.perf_counter() - t_tables
-    if out.exists():
-        raise TakeError(f"{out}: already exists; takes are never overwritten")
-    out.mkdir(parents=True)
+    with publishing_folder(out, "rectify", "already exists; takes are never overwritten") as folder:
+        return _rectify_into(folder, out, source, calibration, reader, rect, t_tables, progress)
+
+
+def _rectify_into(
+    folder: Path,
+    out: Path,
+    source: Path,
+    calibration: Path,
+    reader: TakeReader,
+    rect: Rectifier,
+    t_tables: float,
+    progress: Callable[[int, int], None] | None,
+) -> RectifyReport:
+    """The body of :func:`rectify_take`: the new take written into ``folder``, published later as ``out``."""
     w, h = rect.grid.image_size
     total = sum(len(reader.index[n]) for n in reader.names)
     done = 0
     t_remap = 0.0
     t_start = time.perf_counter()
     remapped = np.empty((h, w, 3), np.uint8)  # one output buffer, reused for every frame
-    with reader, TakeWriter(out, reader.fps) as writer:
+    with reader, TakeWriter(folder, reader.fps) as writer:
         for name in reader.names:
             writer.open(name)  # a camera whose every frame is damaged still has its (empty) files
             for i in range(len(reader.index[name])):
@@ -233,7 +246,7 @@ def rectify_take(
     )
     truth = source / "truth"
     if truth.is_dir():
-        shutil.copytree(truth, out / "truth")
+        shutil.copytree(truth, folder / "truth")
         record.truth_note = (
             "truth/ is copied from the source take; its disparity is exact in the geometry of the true calibration"
         )
@@ -251,7 +264,7 @@ def rectify_take(
             "damaged_skipped": list(reader.damaged) or src.damaged_skipped,
         }
     )
-    write_manifest(out, manifest)
+    write_manifest(folder, manifest)
     return RectifyReport(
         str(out),
         done,

@@ -4,12 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 from pathlib import Path
 
 from rigctl.cli.progress import Progress
 from rigctl.cli.take import damaged_exit
-from rigctl.errors import DamagedDataError
 from rigctl.rectify import rectify_take
 
 
@@ -37,13 +35,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     bar = Progress(f"rectifying {ns.take.name}")
-    existed = ns.out.exists()
-    try:
+    try:  # built under a partial name and renamed once whole: no half-rectified take is ever left behind
         summary = rectify_take(ns.take, ns.calibration, ns.out, bar.steps, skip_damaged=ns.skip_damaged)
-    except DamagedDataError:
-        if not existed:
-            shutil.rmtree(ns.out, ignore_errors=True)  # no half-rectified take is left behind
-        raise
     finally:
         bar.close()
     if ns.json:
