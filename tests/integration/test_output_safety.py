@@ -1,0 +1,243 @@
+"""Issue 25, through the installed ``rigctl``: names from data never leave the output folder, takes that lie
+are refused, outputs that cannot be written say so in one line, and a second run on a folder is refused."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+from pathlib import Path
+from typing import Any
+
+import pytest
+from hostile_support import one_line  # type: ignore[import-not-found]
+from reliab_support import (  # type: ignore[import-not-found]
+    camera_file,
+    copy_take,
+    edit_manifest,
+    in_mount,
+    make_tiny,
+    rewrite_records,
+    rigctl,
+)
+
+from rigctl.errors import EXIT_BAD_INPUT, EXIT_CHECK_FAILED, EXIT_DAMAGED, EXIT_DEVICE, EXIT_USAGE
+
+VICTIM = "../../../../../../tmp/rigctl-victim-{}/victim"
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    return make_tiny(tmp_path_factory.mktemp("tiny"))
+
+
+def nothing_in(folder: Path) -> bool:
+    return not folder.exists() or not any(folder.iterdir())
+
+
+# 1. one way to name files from data
+
+
+def test_a_camera_name_that_climbs_out_is_refused_by_check_export_and_depth(tiny, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    victim = Path(f"/tmp/rigctl-victim-{os.getpid()}")
+    name = VICTIM.format(os.getpid())
+    take = copy_take(tiny[0], tmp_path / "t")
+    edit_manifest(take, lambda m: m["cameras"].update({name: m["cameras"].pop("r0c0")}))
+    res = rigctl("take", "check", str(take))
+    assert res.returncode == EXIT_CHECK_FAILED and "is not a camera name" in res.stderr
+    one_line(rigctl("take", "export", str(take), "--out", str(tmp_path / "x")), EXIT_BAD_INPUT, "cameras", name)
+    rect = copy_take(tiny[1], tmp_path / "r")
+
+    def rename(m: dict[str, Any]) -> None:
+        m["cameras"][name] = m["cameras"].pop("r0c0")
+        m["rectification"]["positions_m"][name] = m["rectification"]["positions_m"].pop("r0c0")
+
+    edit_manifest(rect, rename)
+    one_line(rigctl("depth", str(rect), "--out", str(tmp_path / "y"), "--preset", "fast"), EXIT_BAD_INPUT, name)
+    edit_manifest(rect, lambda m: m["cameras"].update({"r0c0": m["cameras"].pop(name)}))
+    res = rigctl("depth", str(rect), "--out", str(tmp_path / "y"), "--preset", "fast")
+    one_line(res, EXIT_BAD_INPUT, "positions_m")
+    assert not victim.exists()
+    assert nothing_in(tmp_path / "x") and nothing_in(tmp_path / "y")
+
+
+@pytest.mark.parametrize(
+    ("case", "fragment"),
+    [
+        ("other_cameras_files", "is not camera r0c0's file"),
+        ("no_cameras", "the take has no cameras"),
+        ("bogus_status", "'bogus' is not a status"),
+        ("newline_name", "is not a camera name"),
+    ],
+)
+def test_manifest_lies_are_refused(tiny, tmp_path: Path, case: str, fragment: str) -> None:  # type: ignore[no-untyped-def]
+    take = copy_take(tiny[0], tmp_path / "t")
+
+    def edit(m: dict[str, Any]) -> None:
+        if case == "other_cameras_files":
+            m["cameras"]["r0c0"].update(essence=m["cameras"]["r0c1"]["essence"], index=m["cameras"]["r0c1"]["index"])
+        elif case == "no_cameras":
+            m["cameras"] = {}
+        elif case == "bogus_status":
+            m["status"] = "bogus"
+        else:
+            m["cameras"]["r0c0\n"] = m["cameras"].pop("r0c0")
+
+    edit_manifest(take, edit)
+    res = rigctl("take", "check", str(take))
+    assert res.returncode == EXIT_CHECK_FAILED and fragment in res.stderr, res.stderr
+    one_line(rigctl("take", "export", str(take), "--out", str(tmp_path / "x")), EXIT_BAD_INPUT, fragment)
+    assert nothing_in(tmp_path / "x")
+
+
+# 3. take check proves the take
+
+
+@pytest.mark.parametrize(
+    ("case", "fragment"),
+    [
+        ("all_offsets_zero", "lies inside or before the frame"),
+        ("negated_times", "capture time goes backwards"),
+        ("huge_capture_time", "span"),
+        ("too_fast", "faster than the rate allows"),
+        ("record_of_4gib", "runs past the end of the essence file"),
+    ],
+)
+def test_index_records_that_lie_with_a_valid_crc_are_refused(tiny, tmp_path: Path, case: str, fragment: str) -> None:  # type: ignore[no-untyped-def]
+    take = copy_take(tiny[0], tmp_path / "t")
+
+    def edit(i: int, f: dict[str, Any]) -> None:
+        if case == "all_offsets_zero":
+            f["offset"] = 0
+        elif case == "negated_times":
+            f["capture_ns"] = -f["capture_ns"]
+        elif case == "huge_capture_time" and i == 2:  # the last frame: times still increase
+            f["capture_ns"] = 9 * 10**18
+        elif case == "too_fast":
+            f["capture_ns"] = 10**9 + i
+        elif case == "record_of_4gib" and i == 0:
+            f["size"] = 2**32 - 1
+
+    rewrite_records(camera_file(take, "r0c0", "index"), edit)
+    res = rigctl("take", "check", str(take), timeout=60)
+    assert res.returncode == EXIT_CHECK_FAILED and fragment in res.stderr, res.stderr
+    res = rigctl("take", "export", str(take), "--out", str(tmp_path / "x"), timeout=60)
+    assert res.returncode in (EXIT_BAD_INPUT, EXIT_DAMAGED) and fragment in res.stderr, res.stderr
+    one_line(res, res.returncode)
+    assert nothing_in(tmp_path / "x")
+
+
+@pytest.mark.parametrize(
+    ("case", "fragment"),
+    [
+        ("swapped_size", "differs from the rig snapshot"),
+        ("period_of_1ns", "frame_period_ns 1 does not agree"),
+        ("huge_format", "format"),
+    ],
+)
+def test_format_and_timing_lies_are_refused(tiny, tmp_path: Path, case: str, fragment: str) -> None:  # type: ignore[no-untyped-def]
+    take = copy_take(tiny[0], tmp_path / "t")
+
+    def edit(m: dict[str, Any]) -> None:
+        f = m["format"]
+        if case == "swapped_size":
+            f["width"], f["height"] = f["height"], f["width"]
+        elif case == "period_of_1ns":
+            m["timing"]["frame_period_ns"] = 1
+        else:
+            f["width"] = f["height"] = 46000
+            f["bytes_per_frame"] = 46000 * 46000 * 2
+
+    edit_manifest(take, edit)
+    res = rigctl("take", "check", str(take), timeout=60)
+    assert res.returncode == EXIT_CHECK_FAILED and fragment in res.stderr, res.stderr
+    one_line(rigctl("take", "export", str(take), "--out", str(tmp_path / "x"), timeout=60), EXIT_BAD_INPUT, fragment)
+
+
+# 4. regular files only, bounded
+
+
+@pytest.mark.parametrize("what", ["manifest_dev_zero", "manifest_fifo", "index_fifo", "index_sparse", "essence_dir"])
+def test_files_that_are_not_regular_or_absurdly_large_are_refused(tiny, tmp_path: Path, what: str) -> None:  # type: ignore[no-untyped-def]
+    take = copy_take(tiny[0], tmp_path / "t")
+    if what == "manifest_dev_zero":
+        (take / "take.yaml").unlink()
+        (take / "take.yaml").symlink_to("/dev/zero")
+        fragment = "not a regular file"
+    elif what == "manifest_fifo":
+        (take / "take.yaml").unlink()
+        os.mkfifo(take / "take.yaml")
+        fragment = "not a regular file"
+    elif what == "index_fifo":
+        index = camera_file(take, "r0c0", "index")
+        index.unlink()
+        os.mkfifo(index)
+        fragment = "not a regular file"
+    elif what == "index_sparse":
+        with open(camera_file(take, "r0c0", "index"), "r+b") as f:
+            f.truncate(6 << 30)
+        fragment = "holds more records than its essence file can hold"
+    else:
+        essence = camera_file(take, "r0c0", "essence")
+        essence.unlink()
+        essence.mkdir()
+        fragment = "is a folder"
+    for argv in (("take", "info", str(take)), ("take", "export", str(take), "--out", str(tmp_path / "x"))):
+        res = rigctl(*argv, timeout=30)
+        assert res.returncode in (EXIT_BAD_INPUT, EXIT_DAMAGED), res.stderr
+        one_line(res, res.returncode, fragment)
+    rig = tmp_path / "rig.yaml"
+    rig.symlink_to("/dev/zero")
+    one_line(rigctl("plan", str(rig), timeout=30), EXIT_BAD_INPUT, "not a regular file")
+
+
+# 5. one line for every failure of the output side
+
+
+def test_a_path_that_is_not_utf8_is_refused_before_any_work(tiny, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    bad = os.fsdecode(os.fsencode(str(tmp_path)) + b"/out\xff")
+    for argv in (
+        ("take", "export", str(tiny[0]), "--out", bad),
+        ("depth", str(tiny[1]), "--out", bad, "--preset", "fast"),
+        ("rectify", str(tiny[0]), "--calibration", str(tiny[0] / "truth/calibration.yaml"), "--out", bad),
+    ):
+        one_line(rigctl(*argv), EXIT_USAGE, "not valid UTF-8")
+    assert not os.path.exists(os.fsencode(bad))
+
+
+def test_out_naming_a_file_is_one_line(tiny, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    (tmp_path / "f").write_text("mine")
+    one_line(rigctl("take", "export", str(tiny[0]), "--out", str(tmp_path / "f")), EXIT_DEVICE, "is a file")
+    one_line(rigctl("depth", str(tiny[1]), "--out", str(tmp_path / "f")), EXIT_DEVICE, "is a file")
+    assert (tmp_path / "f").read_text() == "mine"
+
+
+def test_read_only_and_full_destinations_are_one_line(tiny, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    mnt = tmp_path / "mnt"
+    cal = str(tiny[0] / "truth/calibration.yaml")
+    cases = [
+        ("ro", ("take", "export", str(tiny[0]), "--out", str(mnt / "x")), "read-only"),
+        ("ro", ("depth", str(tiny[1]), "--out", str(mnt), "--preset", "fast"), "read-only"),
+        ("ro", ("rectify", str(tiny[0]), "--calibration", cal, "--out", str(mnt / "r")), "read-only"),
+        ("size=48k", ("take", "export", str(tiny[0]), "--out", str(mnt / "x")), "no space left"),
+        ("size=48k", ("depth", str(tiny[1]), "--out", str(mnt), "--preset", "fast"), "no space left"),
+        ("size=48k", ("rectify", str(tiny[0]), "--calibration", cal, "--out", str(mnt / "r")), "no space left"),
+    ]
+    for options, argv, fragment in cases:
+        res = in_mount(mnt, options, *argv)
+        if res is None:
+            pytest.skip("mounting a tmpfs needs root or user namespaces")
+        one_line(res, EXIT_DEVICE, str(mnt), fragment)
+
+
+def test_a_second_run_on_a_locked_folder_is_refused(tiny, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "x"
+    out.mkdir()
+    fd = os.open(out, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # as a running rigctl holds it
+        one_line(rigctl("take", "export", str(tiny[0]), "--out", str(out)), EXIT_DEVICE, "another rigctl run")
+        one_line(rigctl("depth", str(tiny[1]), "--out", str(out), "--preset", "fast"), EXIT_DEVICE, "another rigctl")
+    finally:
+        os.close(fd)
+    assert nothing_in(out)
+    assert rigctl("take", "export", str(tiny[0]), "--out", str(out)).returncode == 0
