@@ -14,7 +14,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from rigctl.errors import RigFileError
 from rigctl.yamlfile import check_spec, describe_validation_error, line_of, load_yaml_with_lines
@@ -24,6 +24,8 @@ CAMERA_NAME = re.compile(r"^r(\d+)c(\d+)$")
 PIXEL_FORMATS = ("UYVY", "YUYV", "BGR3", "GREY")
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Millimetres = Annotated[float, Field(gt=0, le=1000, allow_inf_nan=False)]  # a sensor, a lens: under a metre
+MAX_FRAME_PIXELS = 1 << 27  # 134 million pixels (16384 x 8192); rigctl.take.proof holds takes to the same
 PositiveInt = Annotated[int, Field(gt=0)]
 
 
@@ -35,21 +37,29 @@ class _Section(BaseModel):
 class Sensor(_Section):
     """Active sensor area that the output format covers."""
 
-    width_mm: PositiveFloat
-    height_mm: PositiveFloat
+    width_mm: Millimetres
+    height_mm: Millimetres
 
 
 class OutputFormat(_Section):
     """What each camera delivers to the host."""
 
-    width_px: PositiveInt
-    height_px: PositiveInt
-    fps: Annotated[float, Field(gt=0, le=1000, allow_inf_nan=False)]
+    width_px: Annotated[int, Field(gt=0, le=65536)]
+    height_px: Annotated[int, Field(gt=0, le=65536)]
+    fps: Annotated[float, Field(ge=1, le=1000, allow_inf_nan=False)]  # a camera's rate, not a time-lapse's
     pixel_format: Literal["UYVY", "YUYV", "BGR3", "GREY"] = "UYVY"
+
+    @model_validator(mode="after")
+    def _pixel_budget(self) -> OutputFormat:
+        if self.width_px * self.height_px > MAX_FRAME_PIXELS:
+            raise ValueError(
+                f"{self.width_px}x{self.height_px} is over the budget of {MAX_FRAME_PIXELS:,} pixels a frame"
+            )
+        return self
 
 
 class Lens(_Section):
-    focal_length_mm: PositiveFloat
+    focal_length_mm: Millimetres
 
 
 class GridLayout(_Section):
@@ -57,8 +67,8 @@ class GridLayout(_Section):
 
     rows: Annotated[int, Field(ge=1, le=64)]
     columns: Annotated[int, Field(ge=1, le=64)]
-    spacing_x_m: PositiveFloat
-    spacing_y_m: PositiveFloat
+    spacing_x_m: Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)]  # cameras of one rig: within 10 m
+    spacing_y_m: Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)]
 
 
 class UsbIdentity(_Section):

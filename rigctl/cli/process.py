@@ -3,12 +3,51 @@
 from __future__ import annotations
 
 import argparse
+import os
+import re
 from pathlib import Path
 
 from rigctl.cli.args import add_pipeline_options, distance, far_distance
 from rigctl.cli.progress import Progress
 from rigctl.depth.presets import PRESETS
+from rigctl.publish import output_folder
 from rigctl.take.export import parse_range
+
+WORKERS_PER_CORE = 4  # local workers beyond this only queue for the cores (and each holds a frame set)
+MIN_MEMORY = 256 << 20
+_UNITS = {"": 1, "B": 1, "KB": 10**3, "MB": 10**6, "GB": 10**9, "TB": 10**12}
+_UNITS.update({"KIB": 1 << 10, "MIB": 1 << 20, "GIB": 1 << 30, "TIB": 1 << 40})
+
+
+def local_workers(text: str) -> int:
+    """1 to 4 local workers a core of this machine (a farm is reached with --scheduler)."""
+    most = WORKERS_PER_CORE * (os.cpu_count() or 1)
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+    if not 1 <= n <= most:
+        raise argparse.ArgumentTypeError(
+            f"{n}: 1 to {most} local workers on this machine ({WORKERS_PER_CORE} a core); use --scheduler for more"
+        )
+    return n
+
+
+def memory_limit(text: str) -> str | int:
+    """``auto`` or a size (``6GiB``, ``1500MB``, bytes) between 256 MiB and this machine's memory."""
+    if text == "auto":
+        return text
+    m = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([A-Za-z]*)\s*", text)
+    unit = m[2].upper() if m else ""
+    if m is None or unit not in _UNITS:
+        raise argparse.ArgumentTypeError(f"expected auto or a size such as 6GiB or 1500MB, got {text!r}")
+    value = int(float(m[1]) * _UNITS[unit])
+    total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    if not MIN_MEMORY <= value <= total:
+        raise argparse.ArgumentTypeError(
+            f"{text}: between 256MiB and this machine's memory ({total / (1 << 30):.1f}GiB) per worker"
+        )
+    return value
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,9 +65,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--calibration", type=Path, metavar="C", help="calibration.yaml for a take not yet rectified")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a running Dask scheduler")
-    where.add_argument("--workers", type=int, default=2, metavar="N", help="local worker processes (default 2)")
+    where.add_argument(
+        "--workers", type=local_workers, default=2, metavar="N", help="local worker processes (default 2)"
+    )
     p.add_argument(
         "--memory-limit",
+        type=memory_limit,
         default="auto",
         metavar="BYTES",
         help="local workers' memory limit, e.g. 6GiB (default: the bound measured for the take's frame size)",
@@ -47,7 +89,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     import math
-    import os
 
     if not ns.debug:  # Dask's own INFO lines (scheduler, nannies, workers inherit it) only with --debug
         os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "warning")
@@ -80,7 +121,8 @@ def run(ns: argparse.Namespace) -> int:
         bar(st.finished / max(st.total, 1), st.line())
 
     try:
-        summary = process_take(opt, progress=show)
+        with output_folder(ns.out, "process"):  # usable, and one run at a time on a folder
+            summary = process_take(opt, progress=show)
     finally:
         bar.close()
     if ns.json:

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from rigctl.cli.args import distance
 from rigctl.errors import ParameterError
+from rigctl.publish import output_folder, utf8_path
 
 if TYPE_CHECKING:
     from rigctl.render.views import LeaveOneOutRow
@@ -102,6 +103,7 @@ def leave_one_out_report(
 def _check_out(out: Path) -> None:
     """Refuse an output folder that cannot be made, before any input is read (without making it yet: a run
     that then fails on its input leaves nothing behind)."""
+    utf8_path(out)
     if out.exists():
         if not out.is_dir():
             raise ParameterError(f"{out}: cannot make the output folder: a file of that name exists")
@@ -154,7 +156,8 @@ def run(ns: argparse.Namespace) -> int:
         def eyes(frame: Any) -> list[Any]:
             return [e for c, r in ns.at for e in eyes_for(frame, c, r, ns.stereo)]
 
-    views = render_views(inp, numbers, eyes, ns.out, truth, box)
+    with output_folder(ns.out, "render"):  # locked for this run; an interrupted run's leftovers removed
+        views = render_views(inp, numbers, eyes, ns.out, truth, box)
     if ns.json:
         print(json.dumps({"views": views}))
         return 0

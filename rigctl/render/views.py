@@ -14,8 +14,9 @@ import numpy as np
 import OpenEXR
 from numpy.typing import NDArray
 
-from rigctl.errors import ParameterError
+from rigctl.errors import ParameterError, RigctlError
 from rigctl.exr import picture, picture_attributes, write_exr
+from rigctl.publish import publish_png
 from rigctl.render.inputs import F32, FrameViews, RenderInput
 from rigctl.render.score import Score, score
 from rigctl.render.warp import Rendered, Renderer, prepare
@@ -123,8 +124,7 @@ def write_view(folder: Path, stem: str, rgba: F32, attrs: dict[str, object]) -> 
     except OSError as exc:
         raise ParameterError(f"{folder}: cannot make the output folder: {exc.strerror}") from None
     png = np.clip(rgba * 255.0 + 0.5, 0, 255).astype(np.uint8)
-    if not cv2.imwrite(str(folder / f"{stem}.png"), cv2.cvtColor(png, cv2.COLOR_RGBA2BGRA)):
-        raise ParameterError(f"{folder / stem}.png: cannot write")
+    publish_png(folder / f"{stem}.png", cv2.cvtColor(png, cv2.COLOR_RGBA2BGRA))
     write_exr(
         folder / f"{stem}.exr",
         picture(rgba[..., :3], rgba[..., 3]),
@@ -185,7 +185,11 @@ def render_views(
                 "sources": res.sources,
                 "ms": round(ms, 2),
             }
-            got = truth(eye.col, eye.row) if truth else None
+            try:  # a comparison with the truth never stops a render
+                got = truth(eye.col, eye.row) if truth else None
+            except RigctlError as exc:
+                log.warning("no comparison with the truth: %s", exc)
+                got, truth = None, None
             if got is not None:
                 rgb, _subject = got
                 alpha = inp.keyer.matte(rgb)

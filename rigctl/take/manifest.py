@@ -72,7 +72,7 @@ class FormatEntry(_Section):
     width: Annotated[int, Field(gt=0, le=65536)]
     height: Annotated[int, Field(gt=0, le=65536)]
     pixel_format: str
-    fps: Annotated[float, Field(gt=0, le=1000, allow_inf_nan=False)]
+    fps: Annotated[float, Field(ge=1, le=1000, allow_inf_nan=False)]
     bytes_per_frame: Annotated[int, Field(gt=0)]
 
 

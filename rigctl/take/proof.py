@@ -21,10 +21,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from rigctl.rig import MAX_FRAME_PIXELS
 from rigctl.take.index import RECORD_SIZE
 from rigctl.take.manifest import Manifest
 
-MAX_PIXELS = 1 << 27  # 134 million pixels a frame (16384 x 8192): beyond it a manifest is lying
+MAX_PIXELS = MAX_FRAME_PIXELS  # 134 million pixels a frame (16384 x 8192): beyond it a manifest is lying
 SPAN_SLACK_FRAMES = 1000
 
 

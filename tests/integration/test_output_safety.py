@@ -241,3 +241,46 @@ def test_a_second_run_on_a_locked_folder_is_refused(tiny, tmp_path: Path) -> Non
         os.close(fd)
     assert nothing_in(out)
     assert rigctl("take", "export", str(tiny[0]), "--out", str(out)).returncode == 0
+
+
+# 4. numbers bounded to physical ranges; the machine bounds the workers
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "fragment"),
+    [
+        ("fps", 1e-9, "format.fps must be >= 1"),
+        ("width_px", 46000, "over the budget of 134,217,728 pixels"),
+        ("spacing_x_m", 120000.0, "grid.spacing_x_m"),
+    ],
+)
+def test_rig_numbers_beyond_physical_ranges_are_refused(tmp_path: Path, key: str, value: float, fragment: str) -> None:
+    from hostile_support import SIM_RIG, write_yaml  # type: ignore[import-not-found]
+
+    rig = {**SIM_RIG, "format": dict(SIM_RIG["format"]), "grid": dict(SIM_RIG["grid"])}
+    if key == "spacing_x_m":
+        rig["grid"][key] = value
+    else:
+        rig["format"][key] = value
+        if key == "width_px":
+            rig["format"]["height_px"] = value
+    path = write_yaml(tmp_path / "rig.yaml", rig)
+    one_line(rigctl("plan", str(path)), EXIT_BAD_INPUT, str(path), fragment)
+
+
+@pytest.mark.parametrize(
+    ("flag", "value", "fragment"),
+    [
+        ("--workers", "1000", "local workers on this machine"),
+        ("--workers", "0", "1 to"),
+        ("--memory-limit", "-1", "expected auto or a size"),
+        ("--memory-limit", "1PiB", "expected auto or a size"),
+        ("--memory-limit", "1000TB", "this machine's memory"),
+    ],
+)
+def test_process_workers_and_memory_are_bounded_by_the_machine(
+    tiny, tmp_path: Path, flag: str, value: str, fragment: str
+) -> None:  # type: ignore[no-untyped-def]
+    res = rigctl("process", str(tiny[1]), "--out", str(tmp_path / "p"), flag, value)
+    one_line(res, EXIT_USAGE, flag, fragment)
+    assert not (tmp_path / "p").exists()

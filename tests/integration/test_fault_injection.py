@@ -1,0 +1,129 @@
+"""Issue 25: each writing command killed (SIGKILL, SIGTERM) at several exact points, then run again with the
+same command. Every file published under a final name must be whole at every instant, the re-run must
+finish, and its result must equal an uninterrupted run's. The kill points are system calls of the real
+process (tests/fault_runner.py): a file written under its temporary name (``fsync``), a rename about to
+publish it (``replace``), bytes going into a rectified take's essence (``write``)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from reliab_support import make_tiny, rigctl  # type: ignore[import-not-found]
+
+from rigctl.exr import read_exr
+from rigctl.pfm import read_pfm
+from rigctl.publish import PARTIAL_SUFFIX, TEMP_SUFFIX
+from rigctl.take.check import check_take
+
+RUNNER = Path(__file__).resolve().parents[1] / "fault_runner.py"
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    root = tmp_path_factory.mktemp("fault")
+    take, rect = make_tiny(root)
+    (rect / "truth" / "settings.yaml").unlink()  # no simulator comparisons: render stays quick
+    res = rigctl("depth", str(rect), "--out", str(root / "disp"), "--preset", "fast")
+    assert res.returncode == 0, res.stderr
+    return {"take": take, "rect": rect, "disp": root / "disp", "root": root}
+
+
+def command(verb: str, paths: dict[str, Path], out: Path) -> list[str]:
+    if verb == "export":
+        return ["take", "export", str(paths["take"]), "--out", str(out)]
+    if verb == "export-exr":
+        return ["take", "export", str(paths["take"]), "--out", str(out), "--format", "exr"]
+    if verb == "rectify":
+        calibration = str(paths["take"] / "truth/calibration.yaml")
+        return ["rectify", str(paths["take"]), "--calibration", calibration, "--out", str(out)]
+    if verb == "depth":
+        return ["depth", str(paths["rect"]), "--out", str(out), "--preset", "fast"]
+    return ["render", str(paths["rect"]), "--disparity", str(paths["disp"]), "--at", "1,1", "--out", str(out)]
+
+
+def published(out: Path) -> dict[str, bytes]:
+    """Every file under ``out`` by its relative name, each proven whole by reading it as its format."""
+    files = {}
+    for p in sorted(out.rglob("*")):
+        if not p.is_file() or p.name.endswith(TEMP_SUFFIX):
+            continue
+        data = p.read_bytes()
+        if p.suffix == ".png":
+            import cv2
+            import numpy as np
+
+            assert cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED) is not None, p
+        elif p.suffix == ".exr":
+            read_exr(p)
+        elif p.suffix == ".pfm":
+            read_pfm(p)
+        elif p.suffix == ".json":
+            json.loads(data)
+        files[str(p.relative_to(out))] = data
+    return files
+
+
+def comparable(files: dict[str, bytes]) -> dict[str, bytes]:
+    """Outputs that must be the same in every run (reports hold timings, a take's manifest its paths)."""
+    return {k: v for k, v in files.items() if not k.endswith(("report.json", "take.yaml"))}
+
+
+CASES = [
+    ("export", "fsync", 1, "KILL"),
+    ("export", "fsync", 14, "TERM"),
+    ("export", "replace", 27, "KILL"),
+    ("export-exr", "replace", 9, "TERM"),
+    ("rectify", "write", 7, "KILL"),
+    ("rectify", "write", 40, "TERM"),
+    ("rectify", "replace", 1, "KILL"),  # the partial take's manifest about to be published
+    ("rectify", "replace", 2, "KILL"),  # the whole take about to be renamed to its name
+    ("depth", "fsync", 3, "KILL"),
+    ("depth", "replace", 50, "TERM"),
+    ("render", "fsync", 2, "KILL"),
+    ("render", "replace", 5, "TERM"),
+]
+
+
+@pytest.fixture(scope="module")
+def reference(tiny: dict[str, Path]) -> dict[str, dict[str, bytes]]:
+    """Each command's output from an uninterrupted run."""
+    out = {}
+    for verb in sorted({c[0] for c in CASES}):
+        dest = tiny["root"] / f"ref-{verb}"
+        res = rigctl(*command(verb, tiny, dest))
+        assert res.returncode == 0, res.stderr
+        out[verb] = comparable(published(dest))
+    return out
+
+
+@pytest.mark.parametrize(("verb", "call", "nth", "sig"), CASES, ids=["-".join(map(str, c)) for c in CASES])
+def test_a_killed_command_leaves_only_whole_files_and_the_same_command_finishes(
+    tiny: dict[str, Path],
+    reference: dict[str, dict[str, bytes]],
+    tmp_path: Path,
+    verb: str,
+    call: str,
+    nth: int,
+    sig: str,
+) -> None:
+    out = tmp_path / "out"
+    argv = command(verb, tiny, out)
+    killed = subprocess.run(
+        [sys.executable, str(RUNNER), call, str(nth), sig, "--", *argv],
+        capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL,
+    )  # fmt: skip
+    assert killed.returncode == -{"KILL": 9, "TERM": 15}[sig], (killed.returncode, killed.stderr)
+    if verb == "rectify":
+        assert not out.exists(), "a half-rectified take carries the name asked for"
+    else:
+        published(out)  # every file at its final name is whole
+    res = rigctl(*argv)
+    assert res.returncode == 0, res.stderr
+    assert comparable(published(out)) == reference[verb]
+    assert not list(tmp_path.rglob(f"*{TEMP_SUFFIX}")) and not list(tmp_path.glob(f".*{PARTIAL_SUFFIX}"))
+    if verb == "rectify":
+        assert check_take(out).ok
