@@ -10,6 +10,7 @@ reach the matcher without a float round trip and the float picture is not quanti
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
@@ -21,11 +22,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.errors import ParameterError, RigFileError, TakeError
+from rigctl.imagefile import MAX_SIDE, png_size, read_png
+from rigctl.layout import SAFE_CAMERA
 from rigctl.pixfmt import bgr8_to_rgb, to_bgr8, to_rgb, to_u8
 from rigctl.rig import CAMERA_NAME
 from rigctl.take.reader import TakeReader
 from rigctl.timecode import Timecode
 from rigctl.yamlfile import load_yaml
+
+log = logging.getLogger(__name__)
 
 F32 = NDArray[np.float32]
 U8 = NDArray[np.uint8]
@@ -196,32 +201,31 @@ def load_grid_folder(folder: Path) -> Grid:
             raise RigFileError(f"{path}: {key}: must be a finite number, got {v!r}")
         if (key in ("focal_px", "spacing_x") and v <= 0) or (key == "spacing_y" and v < 0):
             raise RigFileError(f"{path}: {key}: must be positive, got {v!r}")
-    images = {}
-    for p in sorted(folder.glob("r*c*.png")):
-        img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-        if img is None:
-            raise RigFileError(f"{p}: cannot read the image")
-        images[p.stem] = img
-    if not images:
+    rng = _disparity_range(path, spec.get("disparity_range_px"))
+    files = sorted(p for p in folder.glob("r*c*.png") if SAFE_CAMERA.fullmatch(p.stem))
+    for p in sorted(set(folder.glob("r*c*.png")) - set(files))[:8]:
+        log.warning("%s: not named r{row}c{col}.png: left out of the grid", p)
+    if not files:
         raise RigFileError(f"{folder}: no r{{row}}c{{col}}.png images")
+    sizes = {p: png_size(p) for p in files}  # every header within the budget before any picture is decoded
+    total = sum(w * h for w, h in sizes.values())
+    if total > MAX_GRID_PIXELS:
+        raise RigFileError(f"{folder}: {len(files)} images of {total:,} pixels together: over {MAX_GRID_PIXELS:,}")
+    images = {p.stem: read_png(p) for p in files}
     first = next(iter(images))
     for n, img in images.items():
         if img.shape[:2] != images[first].shape[:2]:
             h, w = img.shape[:2]
             h0, w0 = images[first].shape[:2]
             raise RigFileError(f"{folder / (n + '.png')}: image is {w}x{h}, but {first}.png is {w0}x{h0}: sizes differ")
-    rng = spec.get("disparity_range_px")
-    try:
-        grid = grid_from_arrays(
-            {n: _png_picture(img) for n, img in images.items()},
-            float(spec["focal_px"]),
-            float(spec["spacing_x"]),
-            float(spec.get("spacing_y") or spec["spacing_x"]),
-            float(spec.get("doffs") or 0.0),
-            (float(rng[0]), float(rng[1])) if rng else None,
-        )
-    except (TypeError, ValueError, IndexError):
-        raise RigFileError(f"{path}: spacing_x, spacing_y, focal_px, doffs must be numbers") from None
+    grid = grid_from_arrays(
+        {n: _png_picture(img) for n, img in images.items()},
+        float(spec["focal_px"]),
+        float(spec["spacing_x"]),
+        float(spec.get("spacing_y") or spec["spacing_x"]),
+        float(spec.get("doffs") or 0.0),
+        rng,
+    )
     grid.truth = _folder_truth(folder / "truth", grid)
     return grid
 
@@ -262,6 +266,26 @@ def camera_offsets(
 def grid_order(offsets: Mapping[str, tuple[float, float]]) -> list[str]:
     """Camera names row by row, left to right."""
     return sorted(offsets, key=lambda n: (offsets[n][1], offsets[n][0]))
+
+
+def _disparity_range(path: Path, rng: object) -> tuple[float, float] | None:
+    """``disparity_range_px: [min, max]``: two finite numbers, min below max, within a picture's width."""
+    if rng is None:
+        return None
+    ok = (
+        isinstance(rng, list)
+        and len(rng) == 2
+        and all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in rng)
+    )
+    if not ok or not (-MAX_SIDE <= rng[0] < rng[1] <= MAX_SIDE):  # type: ignore[index]
+        raise RigFileError(
+            f"{path}: disparity_range_px: expected [min, max], two numbers with min < max within "
+            f"+-{MAX_SIDE} px, got {rng!r}"
+        )
+    return float(rng[0]), float(rng[1])  # type: ignore[index]
+
+
+MAX_GRID_PIXELS = 1 << 28  # all pictures of a grid folder together (nine UHD pictures are 75 million)
 
 
 class SkippedFrameSet(Exception):
