@@ -5,11 +5,14 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import socket
+import struct
 from pathlib import Path
 
 from rigctl.cli.args import add_pipeline_options, distance, far_distance
 from rigctl.cli.progress import Progress
 from rigctl.depth.presets import PRESETS
+from rigctl.errors import DeviceError
 from rigctl.publish import output_folder
 from rigctl.take.export import parse_range
 
@@ -48,6 +51,35 @@ def memory_limit(text: str) -> str | int:
             f"{text}: between 256MiB and this machine's memory ({total / (1 << 30):.1f}GiB) per worker"
         )
     return value
+
+
+PROBE_TIMEOUT_S = 5.0
+MAX_HANDSHAKE_BYTES = 1 << 20
+
+
+def probe_scheduler(url: str, timeout: float = PROBE_TIMEOUT_S) -> None:
+    """Refuse, in one line and within ``timeout``, an address that does not answer as a Dask scheduler does:
+    on a connection it sends its handshake unasked, a length (8 bytes) and a small message. A silent listener
+    would hold the client, and garbage read as a length asked numpy for exabytes."""
+    host, _, port = url.removeprefix("tcp://").rpartition(":")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout) as conn:
+            conn.settimeout(timeout)
+            head = b""
+            while len(head) < 8:
+                chunk = conn.recv(8 - len(head))
+                if not chunk:
+                    break
+                head += chunk
+    except TimeoutError:
+        raise DeviceError(f"--scheduler {url}: no answer within {timeout:g} s: not a Dask scheduler") from None
+    except OSError as exc:
+        raise DeviceError(f"--scheduler {url}: cannot reach it ({exc.strerror or exc})") from None
+    if len(head) < 8:
+        raise DeviceError(f"--scheduler {url}: closed the connection without a handshake: not a Dask scheduler")
+    (size,) = struct.unpack("<Q", head)
+    if not 0 < size <= MAX_HANDSHAKE_BYTES:
+        raise DeviceError(f"--scheduler {url}: its first message claims {size:,} bytes: not a Dask scheduler")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -96,6 +128,8 @@ def run(ns: argparse.Namespace) -> int:
     from rigctl.depth.options import DepthOptions
     from rigctl.farm.run import FarmOptions, Status, process_take, scheduler_url
 
+    if ns.scheduler:
+        probe_scheduler(scheduler_url(ns.scheduler))
     opt = FarmOptions(
         take=ns.take,
         out=ns.out,
