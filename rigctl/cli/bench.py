@@ -8,6 +8,7 @@ from pathlib import Path
 
 from rigctl.cli import render
 from rigctl.cli.progress import Progress
+from rigctl.errors import ParameterError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -67,6 +68,20 @@ def run_depth_bench(ns: argparse.Namespace) -> int:
     return 0
 
 
+def check_depth_bench_memory(size: tuple[int, int], cameras: int, free: int | None) -> None:
+    """Refuse a size whose frame set would not fit in ``free`` bytes: the worker bound of ``rigctl process``
+    (measured per camera pixel), as ``bench render`` refuses its own (no check without a figure)."""
+    from rigctl.farm.run import worker_memory_bytes
+
+    w, h = size
+    need = worker_memory_bytes(w, h, cameras)
+    if free is not None and need > free:
+        raise ParameterError(
+            f"--size {w}x{h}: one frame set of {cameras} cameras needs about {need / 2**30:.1f} GB, "
+            f"{free / 2**30:.1f} GB available"
+        )
+
+
 def run_size_bench(ns: argparse.Namespace) -> int:
     """One frame set at the given size in a fresh process: seconds and peak resident memory."""
     import functools
@@ -76,6 +91,7 @@ def run_size_bench(ns: argparse.Namespace) -> int:
 
     w, h = parse_size(ns.size)
     cams = tuple(ns.cameras) if ns.cameras else None
+    check_depth_bench_memory((w, h), len(cams) if cams else 9, render._available_memory())
     r = measure_size(functools.partial(presenter, True), w, h, ns.preset, cams)
     if ns.json:
         print(json.dumps(r))

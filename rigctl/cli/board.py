@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from PIL import Image
@@ -28,6 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+MAX_BOARD_PIXELS = 1 << 28  # 256 MB of grey: a 2 x 1.5 m board at 200 dpi
+
+
 def run(ns: argparse.Namespace) -> int:
     try:
         sx, sy = (int(v) for v in ns.squares.lower().split("x"))
@@ -39,8 +43,16 @@ def run(ns: argparse.Namespace) -> int:
         raise ParameterError(f"--marker-mm {ns.marker_mm} must be positive and smaller than --square-mm {ns.square_mm}")
     if not 30 <= ns.dpi <= 2400 or ns.margin_mm < 0:
         raise ParameterError("--dpi must be 30..2400 and --margin-mm at least 0")
+    if not (math.isfinite(ns.square_mm) and ns.square_mm <= 1000 and math.isfinite(ns.margin_mm)):
+        raise ParameterError(f"--square-mm {ns.square_mm:g}: at most 1000 mm (and a finite --margin-mm)")
     spec = BoardSpec(sx, sy, ns.square_mm / 1000, ns.marker_mm / 1000, ns.dictionary)
     px_per_square = round(ns.square_mm / 25.4 * ns.dpi)
+    margin_px = 2 * round(ns.margin_mm / 25.4 * ns.dpi)
+    if (sx * px_per_square + margin_px) * (sy * px_per_square + margin_px) > MAX_BOARD_PIXELS:
+        raise ParameterError(
+            f"--squares {sx}x{sy} of {ns.square_mm:g} mm with {ns.margin_mm:g} mm margins at {ns.dpi:g} dpi is over "
+            f"{MAX_BOARD_PIXELS:,} pixels: lower --dpi, --square-mm or --margin-mm"
+        )
     if px_per_square < 20:
         raise ParameterError(f"{ns.square_mm} mm at {ns.dpi} dpi is {px_per_square} px per square: raise --dpi")
     margin = round(ns.margin_mm / 25.4 * ns.dpi)
