@@ -15,7 +15,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from rigctl.errors import ParameterError
+from rigctl.errors import OutputError, ParameterError
+from rigctl.publish import prepare_output, publish_png, utf8_path
 
 Say = Callable[[str], None]
 MARKER = ".rigctl-demo"
@@ -36,12 +37,15 @@ def _montage(folder: Path, names: list[str], out: Path) -> Path:
         r, c = rows.index(int(n[1 : n.index("c")])), cols.index(int(n[n.index("c") + 1 :]))
         canvas[r * h : (r + 1) * h, c * w : (c + 1) * w] = img
         cv2.putText(canvas, n, (c * w + 6, r * h + 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1)
-    cv2.imwrite(str(out), canvas)
+    publish_png(out, canvas)
     return out
 
 
 def prepare_folder(out: Path, fresh: bool) -> None:
     """Make ``out`` the demo's empty folder, marked as an unfinished demo until its report is written."""
+    utf8_path(out)
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"--out {out}: is a file, not a folder")
     if out.exists() and any(out.iterdir()):
         # an unfinished demo (a step failed or was interrupted) is replaced without asking; a finished demo's
         # figures, or a folder that is no demo's, only with --fresh
@@ -49,7 +53,7 @@ def prepare_folder(out: Path, fresh: bool) -> None:
         if not fresh and not unfinished:
             raise ParameterError(f"{out}: exists and is not empty (choose another --out, or --fresh to replace it)")
         shutil.rmtree(out)
-    out.mkdir(parents=True, exist_ok=True)
+    prepare_output(out)
     (out / MARKER).write_text("rigctl demo: until report.md is written, the next demo here replaces this folder\n")
 
 

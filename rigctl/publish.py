@@ -26,12 +26,13 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
-
-import cv2
-import numpy as np
-from numpy.typing import NDArray
+from typing import TYPE_CHECKING
 
 from rigctl.errors import DiskFullError, OutputError, ParameterError, RigctlError, TakeError
+
+if TYPE_CHECKING:  # numpy and OpenCV load when a picture is written, not with every command line
+    import numpy as np
+    from numpy.typing import NDArray
 
 log = logging.getLogger(__name__)
 
@@ -130,6 +131,8 @@ def publish_json(path: Path, data: object, **kwargs: object) -> None:
 
 def publish_png(path: Path, image: NDArray[np.integer] | NDArray[np.floating]) -> None:
     """Encode ``image`` (8- or 16-bit, 1, 3 or 4 channels, OpenCV's channel order) as PNG and publish it."""
+    import cv2
+
     ok, buf = cv2.imencode(".png", image)
     if not ok:
         raise OutputError(f"{path}: the image could not be encoded as PNG")

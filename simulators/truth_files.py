@@ -7,11 +7,11 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import cv2
 import numpy as np
 import yaml
 
 from rigctl.pfm import write_pfm
+from rigctl.publish import publish_png
 
 if TYPE_CHECKING:
     from rigctl.simulators.array import SimArray
@@ -52,7 +52,7 @@ def write_truth(array: SimArray, folder: Path, frame_sets: list[tuple[int, dict[
                 if kind == "disparity":
                     write_pfm(target, disp[i])
                 else:
-                    cv2.imwrite(str(target), mattes[i].astype(np.uint8) * 255)
+                    publish_png(target, mattes[i].astype(np.uint8) * 255)
                 first_file[key] = target
     if poses:
         doc = {"board": array.board.as_dict(), "poses": poses}

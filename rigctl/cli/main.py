@@ -18,10 +18,12 @@ import argparse
 import importlib
 import logging
 import sys
+from pathlib import Path
 
 from rigctl import __version__
 from rigctl.cli import args
 from rigctl.errors import EXIT_INTERRUPTED, EXIT_USAGE, RigctlError
+from rigctl.publish import output_error
 
 log = logging.getLogger(__name__)
 
@@ -94,6 +96,12 @@ def main(argv: list[str] | None = None) -> int:
             raise
         sys.stderr.write(f"rigctl {ns.verb}: error: {exc}\n")
         return exc.exit_code
+    except OSError as exc:  # the output side's last line of defence: a file that could not be written or read
+        if ns.debug or exc.filename is None:
+            raise
+        error = output_error(Path(os.fsdecode(exc.filename)), exc)
+        sys.stderr.write(f"rigctl {ns.verb}: error: {error}\n")
+        return error.exit_code
     except KeyboardInterrupt:
         sys.stderr.write(f"rigctl {ns.verb}: interrupted\n")
         return EXIT_INTERRUPTED

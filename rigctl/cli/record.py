@@ -10,6 +10,7 @@ from pathlib import Path
 from rigctl.cli.progress import Progress
 from rigctl.errors import ParameterError
 from rigctl.preflight import PreflightReport
+from rigctl.publish import utf8_path
 from rigctl.recording import record_take
 from rigctl.rig import load_rig
 from rigctl.take.names import check_take_name
@@ -78,6 +79,8 @@ def run(ns: argparse.Namespace) -> int:
             if not line.startswith("preflight refuse"):  # a refusal is the command's error line
                 say(line)
 
+    for dest in (ns.out, *ns.dest):  # refused before a frame is taken, not after the manifest says complete
+        utf8_path(dest, "--out" if dest is ns.out else "--dest")
     try:
         result = record_take(
             rig,

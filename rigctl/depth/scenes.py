@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from rigctl.depth.grid import Grid, grid_from_arrays
 from rigctl.pfm import write_pfm
+from rigctl.publish import publish_png
 
 F32 = NDArray[np.float32]
 Field = Callable[[F32, F32], F32]
@@ -172,7 +173,7 @@ def write_grid_folder(grid: Grid, folder: Path) -> Path:
     """The grid as a grid folder (r{row}c{col}.png + grid.yaml), with the truth as truth/<camera>.pfm."""
     folder.mkdir(parents=True, exist_ok=True)
     for n in grid.names:
-        cv2.imwrite(str(folder / f"{n}.png"), grid.bgr8(n))
+        publish_png(folder / f"{n}.png", grid.bgr8(n))
     spacing_y = min((abs(o[1]) for o in grid.offsets.values() if abs(o[1]) > 1e-6), default=1.0) * grid.spacing
     spec: dict[str, object] = {
         "spacing_x": grid.spacing,

@@ -9,6 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from rigctl.publish import publish_png
 from rigctl.render.inputs import RenderInput
 from rigctl.render.views import leave_one_out, path_positions, renderer_for
 
@@ -39,7 +40,7 @@ def novel_views_section(
         comp = rgba[..., :3] * rgba[..., 3:] + 0.5 * (1 - rgba[..., 3:])
         tiles.append(cv2.resize(comp, (comp.shape[1] // 3, comp.shape[0] // 3), interpolation=cv2.INTER_AREA))
     strip = np.concatenate(tiles, axis=1)
-    cv2.imwrite(str(out / "novel-views.png"), np.clip(strip[..., ::-1] * 255 + 0.5, 0, 255).astype(np.uint8))
+    publish_png(out / "novel-views.png", np.clip(strip[..., ::-1] * 255 + 0.5, 0, 255).astype(np.uint8))
     lines += ["", f"Novel views with our depth along the middle row from 0,1 to 2,1 ({steps} positions):", "",
               "![novel views along a path](novel-views.png)", ""]  # fmt: skip
     return lines
