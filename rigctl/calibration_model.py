@@ -176,6 +176,16 @@ def load_calibration(path: Path) -> ArrayCalibration:
         if problem:
             field_name, text = problem
             raise CalibrationError(f"{path}:{line_of(lines, (*loc, field_name))}: cameras.{name}.{field_name} {text}")
+    names = list(models)
+    centres = np.array([models[n].centre for n in names])
+    middle = np.median(centres, axis=0)  # the array's middle, which one camera placed far off cannot move
+    off = np.linalg.norm(centres - middle, axis=1)
+    if not np.all(np.isfinite(off)) or off.max() > MAX_ARRAY_SPAN_M / 2:
+        name = names[int(np.nanargmax(np.where(np.isfinite(off), off, np.inf)))]
+        raise CalibrationError(
+            f"{path}:{line_of(lines, ('cameras', name, 't'))}: cameras.{name} lies {float(off.max()):,.0f} m from "
+            f"the array's middle: the cameras of one array lie within {MAX_ARRAY_SPAN_M:g} m of each other"
+        )
     ref = data.get("reference_camera", next(iter(models)))
     if not isinstance(ref, str) or ref not in models:
         raise RigFileError(f"{path}:{line_of(lines, ('reference_camera',))}: reference_camera {ref!r} is not a camera")
@@ -184,6 +194,8 @@ def load_calibration(path: Path) -> ArrayCalibration:
         raise RigFileError(f"{path}:{line_of(lines, ('meta',))}: meta must be a mapping")
     return ArrayCalibration(rig=str(data.get("rig", "")), cameras=models, reference=ref, meta=meta)
 
+
+MAX_ARRAY_SPAN_M = 1000.0  # the rig file allows 64 cameras 10 m apart (630 m); a calibration of one array no more
 
 # A rectilinear lens seen by the model: from a 170 degree to a 0.6 degree field of view.
 FOCAL_RANGE_WIDTHS = (0.05, 100.0)

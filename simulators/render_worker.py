@@ -26,6 +26,22 @@ from rigctl.simulators.states import Frames
 
 log = logging.getLogger(__name__)
 
+PREFIX = "rigctl-sim-render-"  # then the owning process's id: a folder whose process is gone is removed
+
+
+def _sweep_stale_folders() -> None:
+    """Remove the temporary folders of processes that died without closing their worker (a signal)."""
+    for folder in Path(tempfile.gettempdir()).glob(f"{PREFIX}*"):
+        pid = folder.name.removeprefix(PREFIX).split("-", 1)[0]
+        if not pid.isdigit() or folder.is_symlink() or not folder.is_dir() or folder.stat().st_uid != os.getuid():
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            shutil.rmtree(folder, ignore_errors=True)
+        except PermissionError:
+            pass
+
 _array: Any = None  # the child's own simulated array
 
 
@@ -67,7 +83,8 @@ class RenderWorker:
             self._begin()
 
     def _begin(self) -> None:
-        self.folder = Path(tempfile.mkdtemp(prefix="rigctl-sim-render-"))
+        _sweep_stale_folders()
+        self.folder = Path(tempfile.mkdtemp(prefix=f"{PREFIX}{os.getpid()}-"))
         context = multiprocessing.get_context("spawn")  # never fork a process with running threads
         self._pool = context.Pool(1, initializer=_start, initargs=self._args)
         atexit.register(self.close)  # a short take ends before the last state: no process or files left
