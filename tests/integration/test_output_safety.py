@@ -284,3 +284,154 @@ def test_process_workers_and_memory_are_bounded_by_the_machine(
     res = rigctl("process", str(tiny[1]), "--out", str(tmp_path / "p"), flag, value)
     one_line(res, EXIT_USAGE, flag, fragment)
     assert not (tmp_path / "p").exists()
+
+
+def grid_folder(folder: Path) -> Path:
+    import cv2
+    import numpy as np
+
+    folder.mkdir()
+    rng = np.random.default_rng(1)
+    left = rng.integers(0, 255, (48, 64, 3), dtype=np.uint8)
+    cv2.imwrite(str(folder / "r0c0.png"), left)
+    cv2.imwrite(str(folder / "r0c1.png"), np.roll(left, -3, axis=1))
+    (folder / "grid.yaml").write_text("spacing_x: 1\nspacing_y: 1\nfocal_px: 100\n")
+    return folder
+
+
+def png_header(width: int, height: int) -> bytes:
+    import struct
+    import zlib
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + ihdr + struct.pack(">I", zlib.crc32(b"IHDR" + ihdr))
+
+
+@pytest.mark.parametrize(
+    ("case", "fragment"),
+    [
+        ("32000x32000", "outside what rigctl decodes"),
+        ("100000x1", "outside what rigctl decodes"),
+        ("4000x60", "more than 64:1"),
+        ("not_png", "not a PNG image"),
+        ("fifo", "not a regular file"),
+        ("bad_range", "disparity_range_px: expected [min, max]"),
+        ("reversed_range", "disparity_range_px"),
+    ],
+)
+def test_grid_folder_pictures_are_checked_before_decoding(tmp_path: Path, case: str, fragment: str) -> None:
+    grid = grid_folder(tmp_path / "g")
+    if case == "not_png":
+        (grid / "r0c1.png").write_bytes(b"GIF89a" + bytes(100))
+    elif case == "fifo":
+        (grid / "r0c1.png").unlink()
+        os.mkfifo(grid / "r0c1.png")
+    elif case == "bad_range":
+        (grid / "grid.yaml").write_text("spacing_x: 1\nfocal_px: 100\ndisparity_range_px: [0, .nan]\n")
+    elif case == "reversed_range":
+        (grid / "grid.yaml").write_text("spacing_x: 1\nfocal_px: 100\ndisparity_range_px: [9, 2]\n")
+    else:
+        w, h = (int(v) for v in case.split("x"))
+        (grid / "r0c1.png").write_bytes(png_header(w, h) + bytes(1 << 20))
+    one_line(rigctl("depth", str(grid), "--out", str(tmp_path / "d"), timeout=60), EXIT_BAD_INPUT, fragment)
+
+
+def test_a_stray_png_beside_the_grid_is_left_out_not_misreported(tmp_path: Path) -> None:
+    grid = grid_folder(tmp_path / "g")
+    (grid / "rXcY.png").write_bytes((grid / "r0c0.png").read_bytes())
+    res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert "rXcY.png: not named r{row}c{col}.png" in res.stderr
+    assert sorted(p.name for p in (tmp_path / "d").glob("*.pfm")) == ["r0c0.pfm", "r0c1.pfm"]
+
+
+def test_bench_depth_size_is_checked_against_the_memory_it_needs() -> None:
+    from rigctl.cli.bench import check_depth_bench_memory
+    from rigctl.errors import ParameterError
+
+    check_depth_bench_memory((960, 540), 9, 8 << 30)
+    check_depth_bench_memory((16384, 16384), 9, None)  # no figure, no check
+    with pytest.raises(ParameterError, match=r"needs about 141\.3 GB, 8\.0 GB available"):
+        check_depth_bench_memory((16384, 16384), 9, 8 << 30)
+    one_line(rigctl("bench", "depth", "--size", "16384x16384"), EXIT_USAGE, "--size 16384x16384", "GB available")
+
+
+@pytest.mark.parametrize("peer", ["silent", "garbage", "closes"])
+def test_a_scheduler_address_that_is_no_dask_scheduler_is_one_line(tiny, tmp_path: Path, peer: str) -> None:  # type: ignore[no-untyped-def]
+    import socket
+    import threading
+
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+
+    def serve() -> None:
+        conn, _ = server.accept()
+        with conn:
+            if peer == "garbage":
+                conn.sendall(b"\xff" * 64)
+                conn.recv(1)
+
+    if peer != "silent":  # silent: the kernel accepts into the backlog and nobody ever speaks
+        threading.Thread(target=serve, daemon=True).start()
+    try:
+        res = rigctl("process", str(tiny[1]), "--out", str(tmp_path / "p"), "--scheduler", f"tcp://127.0.0.1:{port}")
+    finally:
+        server.close()
+    one_line(res, EXIT_DEVICE, "--scheduler", "not a Dask scheduler")
+
+
+@pytest.mark.parametrize(
+    ("argv", "fragment"),
+    [
+        (("--square-mm", "1000", "--marker-mm", "900", "--dpi", "2400", "--squares", "40x40"), "pixels: lower"),
+        (("--square-mm", "inf", "--marker-mm", "5"), "--square-mm inf"),
+        (("--margin-mm", "1e12"), "pixels: lower"),
+    ],
+)
+def test_board_sizes_that_need_terabytes_are_one_line(tmp_path: Path, argv: tuple[str, ...], fragment: str) -> None:
+    one_line(rigctl("board", "--out", str(tmp_path / "b"), *argv), EXIT_USAGE, fragment)
+    assert not list(tmp_path.iterdir())
+
+
+def test_any_verb_writing_to_a_read_only_place_is_one_line(tmp_path: Path) -> None:
+    res = in_mount(tmp_path / "mnt", "ro", "board", "--out", str(tmp_path / "mnt" / "b"))
+    if res is None:
+        pytest.skip("mounting a tmpfs needs root or user namespaces")
+    one_line(res, EXIT_USAGE, "Read-only file system")
+
+
+@pytest.mark.parametrize(("errno_", "code", "fragment"), [(30, EXIT_DEVICE, "read-only"), (28, 4, "no space left")])
+def test_an_os_error_no_verb_caught_is_still_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], errno_: int, code: int, fragment: str
+) -> None:
+    import rigctl.cli.plan
+    from rigctl.cli.main import main
+
+    def fails(ns: object) -> int:
+        raise OSError(errno_, os.strerror(errno_), "/somewhere/file.png")
+
+    monkeypatch.setattr(rigctl.cli.plan, "run", fails)
+    assert main(["plan"]) == code
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "/somewhere/file.png" in err and fragment in err, err
+
+
+def test_demo_and_record_refuse_an_unusable_out_before_any_work(tmp_path: Path) -> None:
+    (tmp_path / "f").write_text("mine")
+    one_line(rigctl("demo", "--out", str(tmp_path / "f")), EXIT_DEVICE, "is a file, not a folder")
+    assert (tmp_path / "f").read_text() == "mine"
+    bad = os.fsdecode(os.fsencode(str(tmp_path)) + b"/takes\xff")
+    one_line(rigctl("record", "--take", "t", "--frames", "2", "--out", bad, "--force"), EXIT_USAGE, "not valid UTF-8")
+    assert not os.path.exists(os.fsencode(bad))
+
+
+def test_a_calibration_whose_cameras_are_kilometres_apart_is_refused(tiny, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    import yaml
+
+    cal = yaml.safe_load((tiny[0] / "truth/calibration.yaml").read_text())
+    cal["cameras"]["r2c2"]["t"][0] += 120_000.0
+    path = tmp_path / "far.yaml"
+    path.write_text(yaml.safe_dump(cal))
+    res = rigctl("rectify", str(tiny[0]), "--calibration", str(path), "--out", str(tmp_path / "r"))
+    one_line(res, EXIT_BAD_INPUT, "cameras.r2c2 lies", "within 1000 m")
+    assert not (tmp_path / "r").exists()
