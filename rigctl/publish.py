@@ -69,7 +69,9 @@ def prepare_output(out: Path, what: str = "--out") -> Path:
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise output_error(out, exc) from None
+        if exc.errno in (errno.ENOSPC, errno.EROFS, errno.EACCES, errno.EPERM):
+            raise output_error(out, exc) from None
+        raise OutputError(f"{out}: cannot make the output folder: {exc.strerror or exc}") from None
     if not os.access(out, os.W_OK | os.X_OK):
         ro = os.statvfs(out).f_flag & os.ST_RDONLY
         raise OutputError(f"{what} {out}: {'the file system is read-only' if ro else 'not writable'}")

@@ -156,6 +156,8 @@ def run(ns: argparse.Namespace) -> int:
         def eyes(frame: Any) -> list[Any]:
             return [e for c, r in ns.at for e in eyes_for(frame, c, r, ns.stereo)]
 
+    for eye in eyes(first):  # positions no camera sees are refused before the output folder is made
+        first.position(eye.col, eye.row)
     with output_folder(ns.out, "render"):  # locked for this run; an interrupted run's leftovers removed
         views = render_views(inp, numbers, eyes, ns.out, truth, box)
     if ns.json:

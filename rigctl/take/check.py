@@ -59,15 +59,13 @@ def check_take(folder: Path, verify_data: bool = True) -> CheckReport:
             report.errors.append(
                 f"{epath}: byte 0: essence file of camera {name} is empty, {man.cameras[name].frames} frames claimed"
             )
-        if len(idx) == 0:
-            continue
         entry = man.cameras[name]
         if man.status != "recording" and entry.frames != len(idx):
             report.errors.append(
                 f"{folder / 'take.yaml'}: cameras.{name}.frames claims {entry.frames} frames, {ipath.name} holds "
                 f"{len(idx)} readable"
             )
-        if verify_data:
+        if verify_data and len(idx):
             fd = open_regular(epath, TakeError, f"essence file of camera {name}")[0]
             try:
                 for rec in idx:
