@@ -12,6 +12,7 @@ import yaml
 from numpy.typing import NDArray
 
 from rigctl.errors import RigFileError
+from rigctl.publish import publish_text
 from rigctl.yamlfile import load_yaml
 
 DICTIONARIES = {
@@ -55,7 +56,7 @@ class BoardSpec:
         return {"spec": 1, "type": "charuco", **asdict(self)}
 
     def save(self, path: Path) -> None:
-        path.write_text(yaml.safe_dump(self.as_dict(), sort_keys=False))
+        publish_text(path, yaml.safe_dump(self.as_dict(), sort_keys=False))
 
     @classmethod
     def load(cls, path: Path) -> BoardSpec:

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from rigctl.errors import OutputError, ParameterError
-from rigctl.publish import prepare_output, publish_png, utf8_path
+from rigctl.publish import prepare_output, publish_png, publish_text, utf8_path
 
 Say = Callable[[str], None]
 MARKER = ".rigctl-demo"
@@ -239,7 +239,7 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
         "`calibration.yaml`; depth: `depth/` (EXR, PFM, PNG, report.json).",
     ]
     report = out / "report.md"
-    report.write_text("\n".join(lines) + "\n")
-    (out / "timings.json").write_text(json.dumps(timings, indent=1))
+    publish_text(out / "timings.json", json.dumps(timings, indent=1))
+    publish_text(report, "\n".join(lines) + "\n")  # last: report.md marks the demo finished
     _ = (montage, bench_plot)
     return report

@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.calibration_model import ArrayCalibration
+from rigctl.publish import publish_text
 
 
 def quaternion(R: NDArray[np.floating]) -> NDArray[np.float64]:
@@ -121,6 +122,6 @@ def write_colmap(calib: ArrayCalibration, folder: Path, image_ext: str = ".png")
     out = []
     for name, lines in files.items():
         path = folder / name
-        path.write_text("\n".join(lines) + "\n")
+        publish_text(path, "\n".join(lines) + "\n")
         out.append(path)
     return out

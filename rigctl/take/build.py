@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl import __version__
-from rigctl.errors import RigctlError
+from rigctl.errors import DiskFullError, OutputError, RigctlError
 from rigctl.interfaces import CaptureFormat, TruthProvider
 from rigctl.rig import Rig
 from rigctl.take import framesets, sidecars
@@ -193,8 +193,8 @@ def finalise(
     extras_failed = False
     try:
         write_sidecars(state, sets, {n: state.rig.camera(n).device for n in state.names})
-    except OSError as exc:
-        state.notes.append(f"sidecar logs not written: {exc.strerror}")
+    except (OSError, OutputError, DiskFullError) as exc:  # rigctl.publish says a failed write in one line
+        state.notes.append(f"sidecar logs not written: {getattr(exc, 'strerror', None) or exc}")
         extras_failed = True
     if truth is not None:
         if disk_full:
@@ -207,8 +207,8 @@ def finalise(
             ]
             try:
                 truth.write_truth(folder / "truth", members)
-            except OSError as exc:
-                state.notes.append(f"ground truth not written: {exc.strerror}")
+            except (OSError, OutputError, DiskFullError) as exc:
+                state.notes.append(f"ground truth not written: {getattr(exc, 'strerror', None) or exc}")
                 extras_failed = True
     manifest = take_manifest(state, status, sets, end, rectification)
     if extras_failed:

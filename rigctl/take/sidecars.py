@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from rigctl.interfaces import CaptureFormat
+from rigctl.publish import publish_text
 from rigctl.take.accounting import CameraStats
 from rigctl.take.framesets import FrameSet
 from rigctl.timecode import Timecode, start_timecode
@@ -99,4 +100,4 @@ def write_ale(
         end = start + span
         drops = len(st.source_drops) + len(st.writer_drops) + len(st.error_frames) + len(st.not_written)
         rows.append("\t".join([f"{take}_{name}", "V", str(start), str(end), take, name, str(n), str(drops)]))
-    path.write_text("\n".join(header + rows) + "\n")
+    publish_text(path, "\n".join(header + rows) + "\n")
