@@ -94,6 +94,10 @@ class Bundles:
             self._future(later)
         return wanted.result()
 
+    def close(self) -> None:
+        """Drop the bundles queued ahead (at exit the interpreter waits only for the one being made)."""
+        self._worker.shutdown(wait=False, cancel_futures=True)
+
     def _future(self, number: int) -> Future[bytes]:
         with self._lock:
             if number in self._cache:

@@ -65,6 +65,10 @@ class ViewerServer(ThreadingHTTPServer):
         except OSError as exc:
             raise ParameterError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
 
+    def server_close(self) -> None:
+        super().server_close()
+        self.bundles.close()
+
     def handle_error(self, request: object, client_address: object) -> None:
         """A browser that goes away mid-request (a closed tab, a stopped test) is not an error worth a traceback."""
         log.debug("request from %s ended early", client_address, exc_info=True)

@@ -56,13 +56,15 @@ def server(take: Path) -> Iterator[ViewerServer]:
 @pytest.fixture(scope="module")
 def shots(server: ViewerServer) -> dict[str, np.ndarray]:
     """The page's views of frame set 0 at POSITIONS and r1c1 left out, as it read them back (RGBA8)."""
-    with Probe(server, probe="shots", frame="0", at=";".join(POSITIONS), loo="r1c1", stereo="1,1", ipd="60") as probe:
+    with Probe(server, probe="shots", frame="0", at=";".join(POSITIONS), loo="r1c1", stereo="1,1", ipd="60",
+               keys=",".join(["ArrowRight"] * 5 + ["ArrowUp"] * 3 + ["ArrowDown"] * 3)) as probe:  # fmt: skip
         got = probe.collect()
     assert done_info(got)["gl"]  # the page names the GL implementation it ran on
     h, w = server.bundles.height, server.bundles.width
-    pictures = ("at:", "loo:", "eye:")
+    pictures = ("at:", "loo:", "eye:", "keys:")
     views = {t: np.frombuffer(b, np.uint8).reshape(h, w, 4) for t, b in got.items() if t.startswith(pictures)}
-    return views | {"sources": {t[8:]: json.loads(b) for t, b in got.items() if t.startswith("sources:")}}  # type: ignore[dict-item]
+    sources = {t[8:]: json.loads(b) for t, b in got.items() if t.startswith("sources:")}
+    return views | {"keys": json.loads(got["keys"]), "sources": sources}  # type: ignore[dict-item]
 
 
 def psnr_keyed(cpu: np.ndarray, gpu: np.ndarray) -> float:
@@ -158,6 +160,13 @@ def test_our_depth_serves_and_matches_too(take: Path, tmp_path: Path) -> None:
     figure = psnr_keyed(cpu, gpu)
     print(f"our depth, view at 1.25,1: the page against rigctl render --at: {figure:.1f} dB")
     assert figure >= 35.0
+
+
+def test_the_arrow_keys_move_the_eye(shots: dict[str, np.ndarray]) -> None:
+    """Five presses of the right arrow from 1,1 (and three up, three down): the view at 1.5,1."""
+    place = shots["keys"]
+    assert place["col"] == pytest.approx(1.5) and place["row"] == pytest.approx(1.0), place
+    assert psnr_keyed(shots["at:1.5,1"], shots["keys:view"]) >= 35.0
 
 
 def best_shift(ref: np.ndarray, moved: np.ndarray, mask: np.ndarray) -> int:

@@ -1,7 +1,8 @@
 // Probes for tests and the benchmark, run only when the server was started to accept results (never by
 // `rigctl view` itself). Each posts what it measured to /api/result?tag=...:
 //   probe=shots&frame=I&at=C,R;C,R&loo=CAM,CAM  the views' RGBA8 pixels as rendered (tags at:C,R / loo:CAM;
-//     &stereo=C,R&ipd=MM                          eye:L and eye:R, the page's stereo pair there)
+//     &stereo=C,R&ipd=MM                          eye:L and eye:R, the page's stereo pair there;
+//     &keys=K,K                                   keys pressed at 1,1: the eye's place and keys:view)
 //   probe=play                                  plays the take once; per frame shown, which frame set each
 //                                               source's colour and disparity textures came from (tag play)
 //   probe=bench&repeats=N&ipd=MM                eye pairs at the centre, timed (tag bench)
@@ -34,6 +35,15 @@ async function shots(params, v) {
       v.r.render(...v.r.position(ec, er), view);
       await post(`eye:${i ? "R" : "L"}`, v.r.read(view));
     }
+  }
+  if (params.has("keys")) {  // key presses from the centre camera, through the page's own handlers and draw
+    document.getElementById("stereo").checked = false;
+    v.layout();
+    v.move(1, 1);
+    for (const key of params.get("keys").split(",")) document.dispatchEvent(new KeyboardEvent("keydown", { key }));
+    v.tick(performance.now());
+    await post("keys", JSON.stringify({ col: v.col, row: v.row }));
+    await post("keys:view", v.r.read(v.views[0]));
   }
   for (const cam of (params.get("loo") || "").split(",").filter(Boolean)) {
     const offset = v.take.cameras.find((c) => c.name === cam).offset;
