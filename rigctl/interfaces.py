@@ -19,6 +19,11 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 from rigctl.timecode import Timecode
 
 if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from rigctl.calibration_model import ArrayCalibration
+    from rigctl.rectgeom import RectifiedGrid
     from rigctl.take.manifest import Rectification
 
 
@@ -189,3 +194,25 @@ class TruthProvider(Protocol):
     def rectification(self) -> Rectification | None:
         """The rectified geometry the frames already are in (an ideal simulation: its true calibration's
         common plane), for the take's manifest; None when the frames need ``rigctl rectify``."""
+
+
+class SimulatedArray(Protocol):
+    """A simulated array as the demo and the benchmarks read it without recording a take: its cameras and
+    format, its true calibration and their common plane, each scene state's rendered frames (one per
+    camera, in ``names`` order) and exact truth (per camera: disparity, +inf off the subject, and the
+    subject matte), and where the subject lies (near, far in metres)."""
+
+    names: list[str]
+    format: CaptureFormat
+
+    @property
+    def calibration(self) -> ArrayCalibration: ...
+
+    @property
+    def rectified(self) -> RectifiedGrid: ...
+
+    def frames(self, state: int) -> list[NDArray[np.uint8]]: ...
+
+    def truth(self, state: int) -> tuple[list[NDArray[np.float32]], list[NDArray[np.bool_]]]: ...
+
+    def near_far(self) -> tuple[float, float]: ...

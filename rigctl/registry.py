@@ -13,13 +13,19 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from rigctl.address import Address, camera_address, line_address
 from rigctl.errors import DeviceError, RigFileError
-from rigctl.interfaces import Camera, CameraControl, TallyOutput, TruthProvider
+from rigctl.interfaces import Camera, CameraControl, SimulatedArray, TallyOutput, TruthProvider
 from rigctl.rig import Rig
 from rigctl.tally import tsl_addresses
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from rigctl.drivers.sdi_bridge import SdiBridge
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +41,7 @@ class DeviceSet:
     truth: TruthProvider | None = None
     settings: dict[str, object] = field(default_factory=dict)  # the simulator's, recorded in the take's manifest
     description: str = ""
-    simulation: Any = None
+    simulation: SimulatedArray | None = None
     paced: bool = False
 
     def close(self) -> None:
@@ -131,7 +137,7 @@ def open_tally(rig: Rig, devices: DeviceSet | None = None) -> TallyOutput:
     return EmbeddedTallyOutput(open_bridge(rig, tally.port, devices), ids)
 
 
-def open_bridge(rig: Rig, url: str, devices: DeviceSet | None = None) -> Any:
+def open_bridge(rig: Rig, url: str, devices: DeviceSet | None = None) -> SdiBridge:
     """An SDI bridge (``rigctl.drivers.sdi_bridge.SdiBridge``) at ``url``. ``sim://bridge`` starts a simulated
     bridge on a pseudo-terminal in this process, applying what it is sent to ``devices``' simulated cameras;
     ``sim://bridge?blind=1`` simulates a bridge that cannot read values back."""
@@ -145,10 +151,12 @@ def open_bridge(rig: Rig, url: str, devices: DeviceSet | None = None) -> Any:
     if address.target != "bridge":
         raise DeviceError(f"bridge address {url!r}: the simulated bridge is sim://bridge")
     from rigctl.camera_control import camera_ids
+    from rigctl.simulators.array import SimArray
     from rigctl.simulators.sdi_bridge import SimSdiBridge
 
     ids = camera_ids(rig) if rig.model.camera_control else {n: i + 1 for i, n in enumerate(rig.camera_names)}
     array = devices.simulation if devices is not None else None
+    assert array is None or isinstance(array, SimArray)  # the only simulation there is
     sim = SimSdiBridge(array, ids, readback=address.options.get("blind", "0") in ("0", "false"))
     try:
         bridge = SdiBridge(sim.port)
@@ -171,7 +179,7 @@ def open_control(rig: Rig, devices: DeviceSet | None = None) -> CameraControl:
     return BmdBridgeControl(open_bridge(rig, cc.bridge, devices), camera_ids(rig))
 
 
-def simulated_array(rig: Rig, sim: list[str]) -> Any:
+def simulated_array(rig: Rig, sim: list[str]) -> SimulatedArray:
     """A simulated array (``rigctl.simulators.array.SimArray``) with ``--sim`` settings, for benchmarks and
     the demo that need the simulator's scenes and truth without recording a take."""
     from rigctl.simulators.array import SimArray
@@ -180,7 +188,7 @@ def simulated_array(rig: Rig, sim: list[str]) -> Any:
     return SimArray(rig, parse_sim_args(sim))
 
 
-def simulated_view(take: Path, col: float, row: float) -> Any:
+def simulated_view(take: Path, col: float, row: float) -> tuple[NDArray[np.float32], NDArray[np.bool_]] | None:
     """What a camera at grid position (col, row) of a simulated, motion-free take would have seen: (RGB in
     [0, 1], subject mask) from the simulator, or None when the take is not simulated. Only processing's
     callers reach the simulator, through here."""
@@ -205,10 +213,15 @@ def simulated_view(take: Path, col: float, row: float) -> Any:
     return virtual_view(array, 0, col, row)
 
 
-def simulated_array_view(array: Any, col: float, row: float) -> Any:
+def simulated_array_view(
+    array: SimulatedArray, col: float, row: float
+) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
     """(RGB, subject mask) of a virtual camera at grid position (col, row) of a simulated array's first
     scene state."""
+    from rigctl.simulators.array import SimArray
     from rigctl.simulators.views import virtual_view
+
+    assert isinstance(array, SimArray), "an array from simulated_array()"
 
     return virtual_view(array, 0, col, row)
 

@@ -157,3 +157,16 @@ def test_no_two_public_classes_share_a_name() -> None:
                 where.setdefault(node.name, []).append(name)
     clashes = {cls: mods for cls, mods in where.items() if len(mods) > 1}
     assert not clashes, f"classes defined more than once: {clashes}"
+
+
+def test_the_registry_hands_out_interfaces_never_any() -> None:
+    """What the registry returns (and what a DeviceSet holds) is typed with the interfaces, not ``Any``."""
+    path = REPO / "rigctl" / "registry.py"
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    annotations = [
+        (node.lineno, node.returns) for node in ast.walk(tree) if isinstance(node, ast.FunctionDef) and node.returns
+    ]
+    annotations += [(node.lineno, node.annotation) for node in ast.walk(tree) if isinstance(node, ast.AnnAssign)]
+    assert len(annotations) > 10
+    for line, annotation in annotations:
+        assert "Any" not in ast.unparse(annotation), f"rigctl/registry.py:{line}: {ast.unparse(annotation)}"
