@@ -14,10 +14,10 @@ import time
 import numpy as np
 
 from rigctl.depth.estimate import estimate
-from rigctl.depth.key import Keyer
 from rigctl.depth.metrics import score
 from rigctl.depth.presets import PRESETS
 from rigctl.depth.take_range import unplanned_range
+from rigctl.keying import Keyer
 from rigctl.simulated_presenter import presenter
 
 

@@ -40,7 +40,7 @@ def rig_text(n: int) -> str:
 
 CHILD = """
 import json, resource, sys, time
-from rigctl.plan_report import plan_rig
+from rigctl.planning.report import plan_rig
 from rigctl.rig import load_rig
 t0 = time.perf_counter()
 rig = load_rig(sys.argv[1])

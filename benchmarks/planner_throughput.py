@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from rigctl import planner
+from rigctl.planning import planner
 
 
 def loop(f: list[float], sp: list[float], b: list[float], d: list[float], bpx: float) -> list[float]:

@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rigctl.capture.recorder import Recorder, TakePlan
 from rigctl.interfaces import CameraStatus, CaptureFormat, Frame, FrameFlags
-from rigctl.recorder import Recorder, TakePlan
 from rigctl.registry import DeviceSet
 from rigctl.rig import load_rig, rig_from_dict
 from rigctl.take import writer as writer_module

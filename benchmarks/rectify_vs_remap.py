@@ -22,7 +22,7 @@ from rigctl.simulators.array import SimArray
 from rigctl.simulators.settings import SimSettings
 
 from rigctl.pixfmt import from_rgb, uyvy_to_rgb
-from rigctl.rectify import Rectifier
+from rigctl.rectification.rectify import Rectifier
 from rigctl.rig import load_rig
 
 

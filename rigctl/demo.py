@@ -61,12 +61,12 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
     from rigctl.calib.report import format_table as calib_table
     from rigctl.calib.report import write_plots
     from rigctl.calib.run import calibrate
+    from rigctl.capture.recording import record_take
     from rigctl.depth.bench import better, comparisons, motorcycle, plot, run_bench
     from rigctl.depth.bench import format_table as bench_table
     from rigctl.depth.run import DepthOptions, run_depth
-    from rigctl.plan_report import format_plan, plan_rig
-    from rigctl.recording import record_take
-    from rigctl.rectify import rectify_take
+    from rigctl.planning.report import format_plan, plan_rig
+    from rigctl.rectification.rectify import rectify_take
     from rigctl.registry import simulated_burnin_box
     from rigctl.render.demo import novel_views_section
     from rigctl.rig import load_rig

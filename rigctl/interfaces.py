@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from rigctl.calibration_model import ArrayCalibration
-    from rigctl.rectgeom import RectifiedGrid
+    from rigctl.rectification.geometry import RectifiedGrid
     from rigctl.take.manifest import Rectification
 
 

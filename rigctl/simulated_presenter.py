@@ -40,7 +40,7 @@ def presenter_render(rig_name: str = "sim-3x3", seed: int = 0) -> Any:
     """The ideal simulated presenter as render input (colour, key, true disparity) with the simulator's own
     view at 1.5,1 (``rigctl.render.bench.RenderBenchData``)."""
     from rigctl.depth.grid import camera_offsets
-    from rigctl.depth.key import Keyer
+    from rigctl.keying import Keyer
     from rigctl.pixfmt import to_rgb
     from rigctl.registry import simulated_array, simulated_array_view
     from rigctl.render.bench import RenderBenchData, frame_from_arrays

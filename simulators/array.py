@@ -39,7 +39,7 @@ from rigctl.board import BoardSpec
 from rigctl.calibration_model import ArrayCalibration, CameraModel
 from rigctl.interfaces import CaptureFormat
 from rigctl.pixfmt import from_rgb
-from rigctl.rectgeom import RectifiedGrid, common_plane
+from rigctl.rectification.geometry import RectifiedGrid, common_plane
 from rigctl.rig import Rig, rig_from_dict
 
 log = logging.getLogger(__name__)

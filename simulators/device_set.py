@@ -12,7 +12,7 @@ from rigctl.simulators.settings import parse_sim_args
 from rigctl.address import Address
 from rigctl.errors import DeviceError
 from rigctl.interfaces import Camera
-from rigctl.rectgeom import rectification_record
+from rigctl.rectification.geometry import rectification_record
 from rigctl.rig import Rig
 from rigctl.take.manifest import Rectification
 

@@ -14,7 +14,7 @@ from rigctl.calib.detect import Observations
 from rigctl.calib.report_model import DisparityRatio, ErrorStats, PairResidual, RawNet, RectificationResiduals
 from rigctl.calib.solution import F64, Solution, chordal_mean
 from rigctl.calibration_model import ArrayCalibration, CameraModel, rotation_angle_deg
-from rigctl.rectgeom import common_plane
+from rigctl.rectification.geometry import common_plane
 
 MIN_POSES = 4
 MIN_VIEWS_CAMERA = 3

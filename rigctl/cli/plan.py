@@ -6,7 +6,7 @@ import argparse
 import json
 
 from rigctl.cli import args
-from rigctl.plan_report import format_plan, plan_rig
+from rigctl.planning.report import format_plan, plan_rig
 from rigctl.rig import load_rig
 
 

@@ -7,11 +7,11 @@ import json
 import sys
 from pathlib import Path
 
+from rigctl.capture.preflight import PreflightReport
+from rigctl.capture.recording import record_take
 from rigctl.cli.progress import Progress
 from rigctl.errors import ParameterError
-from rigctl.preflight import PreflightReport
 from rigctl.publish import utf8_path
-from rigctl.recording import record_take
 from rigctl.rig import load_rig
 from rigctl.take.names import check_take_name
 from rigctl.take.reader import TakeReader

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from rigctl.cli.progress import Progress
 from rigctl.cli.take import damaged_exit
-from rigctl.rectify import rectify_take
+from rigctl.rectification.rectify import rectify_take
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -32,7 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(ns: argparse.Namespace) -> int:
     from rigctl.calibration_model import load_calibration
     from rigctl.interop.usd import rectified_calibration, write_stage
-    from rigctl.plan_report import plan_rig
+    from rigctl.planning.report import plan_rig
     from rigctl.rig import load_rig, rig_from_dict
     from rigctl.take.manifest import read_manifest
 

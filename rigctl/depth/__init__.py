@@ -1,1 +1,2 @@
-"""Depth across a rectified camera grid: keying, multi-baseline matching, outputs, and the benchmark."""
+"""Depth across a rectified camera grid: the keyed subject (rigctl.keying), multi-baseline matching, outputs, and
+the benchmark."""

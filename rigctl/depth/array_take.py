@@ -12,7 +12,7 @@ import cv2
 
 from rigctl.depth.grid import Grid, camera_offsets, grid_order
 from rigctl.errors import ParameterError
-from rigctl.planner import search_range_px
+from rigctl.planning.planner import search_range_px
 from rigctl.timecode import Timecode
 
 PLAN_MARGIN_PX = 2.0
@@ -25,7 +25,7 @@ class ArrayTake:
     doffs = 0.0
 
     def __init__(self, array: Any, frames: int, name: str, noise: bool = True) -> None:
-        from rigctl.rectify import Rectifier
+        from rigctl.rectification.rectify import Rectifier
 
         if frames < 1:
             raise ParameterError(f"a simulated take needs at least one frame set, got {frames}")

@@ -16,13 +16,13 @@ from numpy.typing import NDArray
 
 from rigctl.depth.cost import F32, TRUNCATE
 from rigctl.depth.grid import Grid
-from rigctl.depth.key import Keyer, subject_box
 from rigctl.depth.pair_fusion import pairs_engine
 from rigctl.depth.presets import Preset
 from rigctl.depth.search import EstimateStats, SearchJob
 from rigctl.depth.sweep import sweep_engine
 from rigctl.depth.volume_engine import volume_engine
 from rigctl.errors import ParameterError
+from rigctl.keying import Keyer, subject_box
 
 DEFAULT_KEYER = Keyer()
 

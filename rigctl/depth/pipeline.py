@@ -26,7 +26,6 @@ import numpy as np
 from rigctl.depth.estimate import DepthResult, cross_check, estimate
 from rigctl.depth.export import Exporter, FileRecord
 from rigctl.depth.grid import Grid, SkippedFrameSet
-from rigctl.depth.key import Keyer
 from rigctl.depth.metrics import score
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.presets import PRESETS, Preset
@@ -43,6 +42,7 @@ from rigctl.depth.take_range import (
 )
 from rigctl.depth.temporal import Temporal, TemporalParams
 from rigctl.errors import ParameterError
+from rigctl.keying import Keyer
 
 Progress = Callable[[str], None]
 

@@ -43,7 +43,7 @@ class RectifyingGrid(TakeFrames):
     one ``rigctl rectify`` then ``rigctl depth`` would see: the same tables and the same 8-bit BGR step)."""
 
     def __init__(self, take: Path, calibration: Path) -> None:
-        from rigctl.rectify import rectifier_for_take
+        from rigctl.rectification.rectify import rectifier_for_take
         from rigctl.take.reader import TakeReader
 
         self.reader = TakeReader(take)
@@ -56,7 +56,7 @@ class RectifyingGrid(TakeFrames):
         self.folder = take
 
     def grid(self, number: int) -> Grid:
-        from rigctl.rectify import frame_bgr
+        from rigctl.rectification.rectify import frame_bgr
 
         members = self.members(number)
         images = {n: self.rect.frame(n, frame_bgr(self.reader, n, members[n])) for n in self.names}

@@ -20,7 +20,7 @@ from rigctl.depth.grid import Grid, SkippedFrameSet
 from rigctl.depth.measured_range import measured_range
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.sources import FrameSource
-from rigctl.planner import search_range_px
+from rigctl.planning.planner import search_range_px
 
 log = logging.getLogger(__name__)
 

@@ -132,7 +132,7 @@ def frames_to_do(options: FarmOptions) -> Work:
         raise ParameterError(f"{take}: already rectified; --calibration is only for takes that are not")
     reader = TakeReader(take)
     if options.calibration is not None:
-        from rigctl.rectify import rectifier_for_take
+        from rigctl.rectification.rectify import rectifier_for_take
 
         rectifier_for_take(reader, options.calibration)  # refuses a calibration of other cameras or size now
     cams = options.depth.cameras

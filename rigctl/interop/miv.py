@@ -10,7 +10,7 @@ planar depth Z (along the optical axis, which is MIV's x) projects to u = -f y /
 u = f X / Z + cx' in ours: the focal length is the same and MIV's principal point is ours + 0.5 px, because
 MIV puts pixel centres at (j + 0.5, i + 0.5) and OpenCV at (j, i).
 
-**Depth.** Z = f * spacing_x / disparity (rectgeom's definition). Level = round(65535 (1/Z - 1/far) /
+**Depth.** Z = f * spacing_x / disparity (rectification.geometry's definition). Level = round(65535 (1/Z - 1/far) /
 (1/near - 1/far)), at least 1; level 0 marks a pixel without depth (+inf disparity: off the subject),
 which RVS treats as a hole. ``Depth_range`` [near, far] spans every valid depth of every exported frame and camera: the
 nearest codes as 65535 and the farthest as 1 (far is set one level beyond it), so no depth is clipped;

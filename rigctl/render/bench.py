@@ -146,7 +146,7 @@ def bench_render(data: RenderBenchData, size: tuple[int, int], repeats: int = 10
     loo = ren.render(*centre.offset, exclude=("r1c1",))
     loo_score = score(loo.rgba[..., :3], centre.rgb, centre.alpha, data.ignore)
     novel = ren.render(*frame.position(*data.truth_at))
-    from rigctl.depth.key import Keyer
+    from rigctl.keying import Keyer
 
     truth_score = score(novel.rgba[..., :3], data.truth_rgb, Keyer().matte(data.truth_rgb), data.ignore)
     width, height = size

@@ -14,9 +14,9 @@ from typing import NoReturn
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.depth.key import Keyer
 from rigctl.depth.sources import FrameSource, open_source
 from rigctl.errors import ParameterError, TakeError
+from rigctl.keying import Keyer
 from rigctl.pfm import read_pfm
 from rigctl.rig import CAMERA_NAME
 from rigctl.timecode import Timecode

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rigctl.depth.key import Keyer
 from rigctl.errors import ParameterError, TakeError
 from rigctl.exr import picture, picture_attributes, to_colour, write_exr
+from rigctl.keying import Keyer
 from rigctl.layout import check_layout, output_path
 from rigctl.publish import publish_json, publish_png
 from rigctl.take.reader import TakeReader

@@ -129,7 +129,7 @@ class Devices(_Section):
 
 
 class Rectification(_Section):
-    """The common-plane geometry a take's frames are in (``rigctl.rectgeom``): what depth reads."""
+    """The common-plane geometry a take's frames are in (``rigctl.rectification.geometry``): what depth reads."""
 
     calibration_sha256: str
     R: list[list[float]]

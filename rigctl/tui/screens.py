@@ -15,7 +15,7 @@ from textual.screen import ModalScreen, Screen
 from textual.widgets import Input, Static
 
 from rigctl.errors import RigctlError
-from rigctl.plan_report import format_plan, plan_rig
+from rigctl.planning.report import format_plan, plan_rig
 
 KEYS = [
     ("r", "start / stop recording on every camera"),

@@ -18,12 +18,12 @@ from typing import Any
 import numpy as np
 
 from rigctl.camera_control import check_settings
+from rigctl.capture.preflight import LOW_TIME_S, PreflightReport, WriteSpeed, measure_write
+from rigctl.capture.recorder import Recorder, TakePlan
+from rigctl.capture.recording import enforce, preflight_take
 from rigctl.errors import ParameterError, PreflightError, RigctlError
 from rigctl.interfaces import SettingResult, SettingState, TallyState
-from rigctl.plan_report import plan_rig
-from rigctl.preflight import LOW_TIME_S, PreflightReport, WriteSpeed, measure_write
-from rigctl.recorder import Recorder, TakePlan
-from rigctl.recording import enforce, preflight_take
+from rigctl.planning.report import plan_rig
 from rigctl.registry import DeviceSet, open_cameras, open_control, open_tally
 from rigctl.rig import Rig
 from rigctl.take.manifest import read_manifest, write_manifest

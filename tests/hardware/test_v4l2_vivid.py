@@ -187,7 +187,7 @@ def test_ten_second_take_from_nine_devices(v4l2_devices, tmp_path: Path) -> None
 
 
 def test_vanishing_device_ends_its_stream_while_others_record(v4l2_devices, tmp_path: Path, caplog) -> None:  # type: ignore[no-untyped-def]
-    from rigctl.recorder import Recorder, TakePlan
+    from rigctl.capture.recorder import Recorder, TakePlan
     from rigctl.registry import open_cameras
     from rigctl.rig import load_rig
 
@@ -226,7 +226,7 @@ def test_devices_lists_vivid_and_maps_the_rig(v4l2_devices, tmp_path: Path) -> N
 
 
 def test_no_signal_refuses_to_arm_and_a_signal_change_is_recorded(v4l2_devices, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    from rigctl.recorder import Recorder, TakePlan
+    from rigctl.capture.recorder import Recorder, TakePlan
     from rigctl.registry import open_cameras
     from rigctl.rig import load_rig
 

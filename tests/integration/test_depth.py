@@ -147,7 +147,7 @@ def test_an_ideal_take_is_recorded_with_its_rectification_and_an_old_one_is_rect
 
     from rigctl.calibration_model import load_calibration
     from rigctl.depth.grid import TakeGrid
-    from rigctl.rectgeom import common_plane
+    from rigctl.rectification.geometry import common_plane
     from rigctl.take.manifest import read_manifest, write_manifest
 
     rect = read_manifest(ideal_take).rectification

@@ -75,7 +75,7 @@ def test_plan_nearer_than_double_range_is_one_line(run_cli) -> None:  # type: ig
 
 
 def test_64x64_plan_groups_pairs_by_offset(tmp_path: Path) -> None:
-    from rigctl.plan_report import plan_rig
+    from rigctl.planning.report import plan_rig
     from rigctl.rig import load_rig
 
     n = 64
@@ -94,7 +94,7 @@ def test_64x64_plan_groups_pairs_by_offset(tmp_path: Path) -> None:
 
 
 def test_grouped_and_listed_plans_agree(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from rigctl import plan_report
+    from rigctl.planning import report as plan_report
     from rigctl.rig import load_rig
 
     rig = load_rig("sim-3x3")
@@ -288,7 +288,7 @@ def test_writers_close_only_after_the_flush_thread_ends(tmp_path: Path) -> None:
     ending take had closed. A flush that began before the end must end before any writer closes."""
     import threading
 
-    from rigctl.recorder import Recorder, TakePlan
+    from rigctl.capture.recorder import Recorder, TakePlan
     from rigctl.registry import open_cameras
     from rigctl.rig import load_rig
     from rigctl.take.writer import CameraWriter

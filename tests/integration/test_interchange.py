@@ -271,7 +271,7 @@ def test_board_png_prints_at_its_size(tmp_path: Path, run_cli, square_mm: float,
 def test_the_recorder_assembles_by_timecode_as_the_reader_does(tmp_path: Path) -> None:
     """Simulated cameras whose frames carry timecode (r0c1's one frame ahead, as a mis-jammed camera would be):
     the recorder's frame sets, sets.csv and ALE follow the timecode, and agree with the reader's."""
-    from rigctl.recorder import Recorder, TakePlan
+    from rigctl.capture.recorder import Recorder, TakePlan
     from rigctl.registry import open_cameras
     from rigctl.rig import load_rig
 

@@ -18,11 +18,11 @@ from tests_support import run_rigctl
 
 from rigctl import registry
 from rigctl.depth.grid import TakeGrid
-from rigctl.depth.key import Keyer
 from rigctl.interop import yuv
 from rigctl.interop.ivpsnr import upsample_420
 from rigctl.interop.miv import depth_name, texture_name
 from rigctl.interop.miv_import import read_content
+from rigctl.keying import Keyer
 from rigctl.pfm import read_pfm
 from rigctl.render.score import score
 

@@ -69,7 +69,7 @@ def test_rectified_take_lines_up_with_the_truth(take: Path, tmp_path: Path, run_
 
 
 def test_tables_are_cached_by_calibration_hash(take: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from rigctl.rectify import Rectifier
+    from rigctl.rectification.rectify import Rectifier
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     calib = load_calibration(take / "truth" / "calibration.yaml")

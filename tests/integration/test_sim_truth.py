@@ -11,7 +11,7 @@ from rigctl.simulators.settings import SimSettings
 from warp_check import STEP, lattice_offsets, mae_against_neighbours
 
 from rigctl.pixfmt import luma, uyvy_to_rgb
-from rigctl.rectgeom import common_plane
+from rigctl.rectification.geometry import common_plane
 from rigctl.rig import load_rig
 
 RIG = load_rig("sim-3x3")

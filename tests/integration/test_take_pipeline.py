@@ -162,7 +162,7 @@ def test_no_module_under_cli_tui_demo_or_farm_runs_the_depth_stages_itself() -> 
                 used = {a.name for a in node.names} & DEPTH_STAGES
                 if used:
                     offenders.append(f"{path.relative_to(REPO)} imports {sorted(used)} from {node.module}")
-                if node.module in ("rigctl.depth.estimate", "rigctl.depth.key", "rigctl.depth.measured_range"):
+                if node.module in ("rigctl.depth.estimate", "rigctl.keying", "rigctl.depth.measured_range"):
                     offenders.append(f"{path.relative_to(REPO)} imports {node.module}")
     assert offenders == []
 

@@ -14,8 +14,8 @@ import pytest
 import yaml
 from tests_support import rigctl_exe  # type: ignore[import-not-found]
 
+from rigctl.capture.recorder import Recorder, TakePlan
 from rigctl.errors import TakeError
-from rigctl.recorder import Recorder, TakePlan
 from rigctl.registry import open_cameras
 from rigctl.rig import load_rig
 from rigctl.take.check import check_take

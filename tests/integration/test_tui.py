@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from tests_support import rigctl_exe
 
+from rigctl.capture.preflight import WriteSpeed
 from rigctl.interfaces import SettingResult, SettingState
-from rigctl.preflight import WriteSpeed
 from rigctl.rig import load_rig, rig_from_dict
 from rigctl.take.reader import TakeReader
 from rigctl.tui.app import ShootApp
@@ -263,7 +263,7 @@ def test_log_records_from_threads_go_into_the_ui_and_everything_is_put_back() ->
     app = fixed_app()
 
     def capture_thread() -> None:
-        logging.getLogger("rigctl.recorder").warning("r1c2: writer queue %d %% full", 90)
+        logging.getLogger("rigctl.capture.recorder").warning("r1c2: writer queue %d %% full", 90)
         warnings.warn("a library complains", RuntimeWarning, stacklevel=1)
 
     async def script(pilot: Any) -> None:
@@ -280,7 +280,7 @@ def test_log_records_from_threads_go_into_the_ui_and_everything_is_put_back() ->
         assert any("a library complains" in line for line in app.log_lines)
         assert terminal.getvalue() == ""  # nothing was written over the screen
         assert root.handlers == before_handlers and sys.getswitchinterval() == before_switch
-        logging.getLogger("rigctl.recorder").warning("after the UI")
+        logging.getLogger("rigctl.capture.recorder").warning("after the UI")
         assert "after the UI" in terminal.getvalue()  # the terminal handler is back
     finally:
         root.removeHandler(cli_handler)

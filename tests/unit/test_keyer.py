@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import skimage.data
 
-from rigctl.depth.key import Keyer
+from rigctl.keying import Keyer
 
 
 def _screen_behind_a_subject(h: int = 300, w: int = 400) -> tuple[np.ndarray, np.ndarray]:

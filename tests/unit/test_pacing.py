@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import threading
 
-from rigctl.pacing import Pacing, grid_phase
+from rigctl.capture.pacing import Pacing, grid_phase
 from rigctl.take.accounting import CameraStats
 from rigctl.take.plan import FramePool
 

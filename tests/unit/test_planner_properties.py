@@ -9,8 +9,8 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from rigctl import planner
 from rigctl.errors import ParameterError
+from rigctl.planning import planner
 
 focal = st.floats(1e-3, 1.0)  # 1 mm to 1000 mm
 pitch = st.floats(0.5e-6, 50e-6)  # 0.5 um to 50 um

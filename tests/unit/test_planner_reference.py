@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from rigctl import planner
+from rigctl.planning import planner
 
 SP_UHD = 13.056e-3 / 3840  # 3.4 um
 F = 25e-3

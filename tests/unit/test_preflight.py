@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from rigctl.preflight import (
+from rigctl.capture.preflight import (
     GO,
     REFUSE,
     WARN,

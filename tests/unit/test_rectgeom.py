@@ -8,7 +8,7 @@ import pytest
 
 from rigctl.calibration_model import ArrayCalibration, CameraModel
 from rigctl.errors import CalibrationError
-from rigctl.rectgeom import common_plane
+from rigctl.rectification.geometry import common_plane
 
 
 def grid(rot_deg: float = 0.0, swap: bool = False, seed: int = 0, w: int = 960, h: int = 540) -> ArrayCalibration:

@@ -6,7 +6,7 @@ or the UI: when no buffer is free the frame is still taken from the device (so t
 flowing) and counted as a writer drop with its sequence number. Sequence gaps are source drops; frames
 the device flags as corrupted are error frames. Recording starts at one instant T0 for all cameras and
 ends at T1; frame sets are assembled by capture time afterwards (see :mod:`rigctl.take.framesets`).
-A paced source (``--sim deterministic=true``) is waited for instead: :mod:`rigctl.pacing`."""
+A paced source (``--sim deterministic=true``) is waited for instead: :mod:`rigctl.capture.pacing`."""
 
 from __future__ import annotations
 
@@ -18,9 +18,9 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from rigctl.capture.pacing import Pacing
 from rigctl.errors import DeviceError, RigctlError, TakeError
 from rigctl.interfaces import Camera, CaptureFormat, Frame, FrameFlags
-from rigctl.pacing import Pacing
 from rigctl.registry import DeviceSet
 from rigctl.rig import Rig
 from rigctl.take.accounting import CameraStats

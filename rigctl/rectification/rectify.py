@@ -1,7 +1,7 @@
 """Common-plane grid rectification of takes: remap tables built once per calibration (and cached on disk by
 a hash of it), applied to every frame; the result is a take again, with its rectification recorded.
 
-The geometry is :func:`rigctl.rectgeom.common_plane`, the same definition the simulator's ground truth uses.
+The geometry is :func:`rigctl.rectification.geometry.common_plane`, the same definition the simulator's ground truth uses.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from rigctl.calibration_model import ArrayCalibration, load_calibration
 from rigctl.errors import CalibrationError
 from rigctl.publish import publishing_folder
-from rigctl.rectgeom import RectifiedGrid, calibration_hash, common_plane, rectification_record
+from rigctl.rectification.geometry import RectifiedGrid, calibration_hash, common_plane, rectification_record
 from rigctl.take.manifest import TAKE_SPEC, DamagedFrame, Rectification, write_manifest
 from rigctl.take.reader import TakeReader
 from rigctl.take.writer import TakeWriter

@@ -1,6 +1,6 @@
 """The planner applied to a rig: every camera pair against the parallax budget, as data, JSON and a table.
 
-The arithmetic lives in :mod:`rigctl.planner`; this module decides which distances to use (solve the
+The arithmetic lives in :mod:`rigctl.planning.planner`; this module decides which distances to use (solve the
 near distance from a subject depth, or check given near/far), evaluates every pair of the rig in one
 vectorised call, and formats the result.
 
@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from rigctl import planner
+import rigctl.planning.planner as planner
 from rigctl.errors import ParameterError
 from rigctl.rig import Rig
 

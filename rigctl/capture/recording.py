@@ -2,7 +2,7 @@
 UI's session and ``rigctl demo`` all go through :func:`preflight_take` (and the first and last through
 :func:`record_take`), so the three decide and report alike.
 
-It lives beside :mod:`rigctl.recorder`, not in :mod:`rigctl.take`: the take package is kept free of device
+It lives beside :mod:`rigctl.capture.recorder`, not in :mod:`rigctl.take`: the take package is kept free of device
 code (it reads and writes folders), and recording opens devices through the registry."""
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from rigctl.capture.preflight import PreflightReport, WriteSpeed, check_destinations
+from rigctl.capture.recorder import Recorder, TakePlan
 from rigctl.errors import ParameterError, PreflightError
-from rigctl.preflight import PreflightReport, WriteSpeed, check_destinations
-from rigctl.recorder import Recorder, TakePlan
 from rigctl.registry import DeviceSet, open_cameras
 from rigctl.rig import Rig
 from rigctl.take.manifest import Manifest

@@ -1,0 +1,8 @@
+"""Planning a shot: the paper's equations (1) and (2) as array functions (:mod:`.planner`) and their use on a
+rig, every camera pair against the parallax budget, with the disparity search range depth uses
+(:mod:`.report`: :func:`plan_rig`, :func:`format_plan`)."""
+
+from rigctl.planning import planner
+from rigctl.planning.report import PairPlan, Plan, format_plan, plan_rig
+
+__all__ = ["PairPlan", "Plan", "format_plan", "plan_rig", "planner"]
