@@ -34,9 +34,11 @@ def grid_phase(captures: list[int], period_ns: int) -> int:
 
 class Pacing:
     """The recorder's clock and waits. ``wall`` (seconds) bounds the waits for first frames and how long a
-    paced camera may stay silent (``stale_s``) before the take stops waiting for it."""
+    paced camera may stay silent (``stale_s``) before the take stops waiting for it. A paced camera is silent
+    only while its frame's scene state renders, which on a machine kept busy by others can take a minute, so
+    the bound is generous: it is there for a render that never comes, not for a slow one."""
 
-    def __init__(self, paced: bool, stale_s: float = 10.0, wall: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, paced: bool, stale_s: float = 300.0, wall: Callable[[], float] = time.monotonic) -> None:
         self.paced = paced
         self.placed = threading.Event()  # T0 is decided
         self.stale_s = stale_s
@@ -52,8 +54,8 @@ class Pacing:
     def grid_phase(self, stats: list[CameraStats], period_ns: int, first_frame_s: float = 15.0) -> int:
         """The rig's frame phase from the latest frames seen, once every camera delivers. A rig still starting
         up gets ``first_frame_s`` for its first frame, the other cameras a second after it (paced cameras,
-        which hold their first frames, all get ``first_frame_s``)."""
-        deadline = self._wall() + first_frame_s
+        which hold their first frames and are waited for however slow their renders, all get ``stale_s``)."""
+        deadline = self._wall() + (self.stale_s if self.paced else first_frame_s)
         while self._wall() < deadline:
             seen = [s.last_capture_ns for s in stats if s.last_capture_ns]
             if len(seen) == len(stats):

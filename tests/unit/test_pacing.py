@@ -47,3 +47,25 @@ def test_live_never_holds_or_waits_for_a_buffer() -> None:
     paced.hold(running)  # T0 decided: goes on at once
     running.clear()
     assert paced.slot(pool, running) is None  # capture ended: stops waiting
+
+
+def test_paced_cameras_are_waited_for_past_the_live_first_frame_bound() -> None:
+    """A paced camera's first frame may wait for a render a busy machine makes slow: its phase still counts,
+    where a live rig stops waiting a second after its first camera (wall seconds on an injected clock)."""
+    period = 1_000_000
+
+    def run(paced: bool) -> int:
+        stats = [CameraStats("r0c0", last_capture_ns=10), CameraStats("r0c1", last_capture_ns=12)]
+        late = CameraStats("r0c2")
+        calls = [0]
+
+        def wall() -> float:
+            calls[0] += 1
+            if calls[0] == 40:  # 40 s in: the slow render is done, the third camera delivers
+                late.last_capture_ns = 1_000 * period + 500
+            return float(calls[0])
+
+        return Pacing(paced, wall=wall).grid_phase([*stats, late], period)
+
+    assert run(paced=False) == 11  # the median of the two that came within the bound
+    assert run(paced=True) == 12  # all three: 10, 12 and 500
