@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import yaml
 
 FRAMES = 30
@@ -49,7 +50,13 @@ def without_wall_clock(folder: Path) -> dict:  # type: ignore[type-arg]
     return manifest  # type: ignore[no-any-return]
 
 
-def test_same_bytes_and_every_frame_set_beside_two_cpu_bound_processes(tmp_path: Path) -> None:
+@pytest.mark.slow
+def test_same_bytes_and_every_frame_set_beside_two_cpu_bound_processes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # a cache of its own: the loaded take renders every state (slowly, beside the busy processes), the quiet
+    # one reads them back from the disk cache
+    monkeypatch.setenv("RIGCTL_SIM_CACHE", str(tmp_path / "cache"))
     busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
     try:
         loaded = record(tmp_path, "loaded")
