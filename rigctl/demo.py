@@ -87,7 +87,7 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
         # a planned take of a few frame sets: preflight says go whenever memory holds it, on any disk
         bar = progress_factory(f"recording {take}")
         try:
-            result = record_take(rig, take, [takes], frames=frames, sim=list(sim), progress=bar)
+            result = record_take(rig, take, [takes], frames=frames, sim=["deterministic=true", *sim], progress=bar)
         finally:
             bar.close()
         say(f"preflight {result.preflight.outcome}: " + "; ".join(v.message for v in result.preflight.verdicts))
