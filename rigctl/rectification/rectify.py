@@ -1,7 +1,8 @@
 """Common-plane grid rectification of takes: remap tables built once per calibration (and cached on disk by
 a hash of it), applied to every frame; the result is a take again, with its rectification recorded.
 
-The geometry is :func:`rigctl.rectification.geometry.common_plane`, the same definition the simulator's ground truth uses.
+The geometry is :func:`rigctl.rectification.geometry.common_plane`, the same definition the simulator's
+ground truth uses.
 """
 
 from __future__ import annotations
