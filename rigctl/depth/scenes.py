@@ -188,3 +188,49 @@ def write_grid_folder(grid: Grid, folder: Path) -> Path:
         (folder / "truth").mkdir(exist_ok=True)
         write_pfm(folder / "truth" / f"{n}.pfm", t)
     return folder
+
+
+def shifted(grid: Grid, ref: str, s: float, room: float | None = None) -> Grid:
+    """The grid as parallel cameras would see it with every disparity grown by ``s`` px per horizontal
+    spacing: each view is cropped ``s`` times its offset from ``ref`` further along (what a sensor shift
+    undoes). ``room`` (>= s, default s) fixes the reference camera's crop, so grids shifted by different
+    amounts share the same reference picture. Crops must be whole pixels (s times every offset); the truth
+    and the disparity range are shifted with the views."""
+    room = s if room is None else room
+    if room < s or s < 0:
+        raise ValueError(f"shift {s} needs room >= shift >= 0, got room {room}")
+    h, w = grid.shape
+    ox = [o[0] for o in grid.offsets.values()]
+    oy = [o[1] for o in grid.offsets.values()]
+    rx, ry = grid.offsets[ref]
+    span_x, span_y = round(room * (max(ox) - min(ox))), round(room * (max(oy) - min(oy)))
+    if span_x >= w or span_y >= h:
+        raise ValueError(f"a shift of {room} px per spacing leaves nothing of a {w}x{h} grid")
+    images = {}
+    for n, (nx, ny) in grid.offsets.items():
+        cx = room * (rx - min(ox)) + s * (nx - rx)
+        cy = room * (ry - min(oy)) + s * (ny - ry)
+        if abs(cx - round(cx)) > 1e-6 or abs(cy - round(cy)) > 1e-6:
+            raise ValueError(f"shift {s} moves camera {n} by a fraction of a pixel ({cx}, {cy})")
+        x0, y0 = round(cx), round(cy)
+        images[n] = grid.images[n][y0 : y0 + h - span_y, x0 : x0 + w - span_x]
+    out = Grid(list(grid.names), images, dict(grid.offsets), grid.focal_px, grid.spacing, grid.doffs)
+    if grid.disparity_range is not None:
+        out.disparity_range = (grid.disparity_range[0] + s, grid.disparity_range[1] + s)
+    if grid.truth and ref in grid.truth:
+        x0, y0 = round(room * (rx - min(ox))), round(room * (ry - min(oy)))
+        out.truth = {ref: grid.truth[ref][y0 : y0 + h - span_y, x0 : x0 + w - span_x] + np.float32(s)}
+    return out
+
+
+def seen_by_all(grid: Grid, ref: str, disparity: F32, margin: int = 0) -> NDArray[np.bool_]:
+    """Pixels of ``ref`` whose point at ``disparity`` lies inside every view's frame (``margin`` px in)."""
+    h, w = disparity.shape
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    ok = np.isfinite(disparity)
+    d = np.where(ok, disparity, 0).astype(np.float32)
+    rx0, ry0 = grid.offsets[ref]
+    for nx, ny in grid.offsets.values():
+        x, y = xs - d * np.float32(nx - rx0), ys - d * np.float32(ny - ry0)
+        ok &= (x >= margin) & (x <= w - 1 - margin) & (y >= margin) & (y <= h - 1 - margin)
+    return np.asarray(ok)
