@@ -48,6 +48,7 @@ class MatchViews:
         rel: dict[str, tuple[float, float]],
         box: tuple[int, int, int, int],
         scale: float = 1.0,
+        centre: float = 0.0,
     ) -> None:
         self.scale = scale
         self.box = tuple(round(v * scale) for v in box)
@@ -65,12 +66,12 @@ class MatchViews:
         self.texture = std[y0:y1, x0:x1]
         self.bright = g_ref[y0:y1, x0:x1]
         self.guide = np.ascontiguousarray(g_ref[y0:y1, x0:x1])
-        m_ref, s_ref = float(g_ref.mean()), float(g_ref.std())
         for n, g in greys.items():
             # one gain and offset per camera (exposure differences), not a local normalisation: a window
             # statistic mixes a foreground edge with the background it moves over, and moves the edge
-            m, sd = float(g.mean()), float(g.std())
-            g = (g - m) * np.float32(s_ref / sd if sd > 1e-6 else 1.0) + np.float32(m_ref) if n != ref else g
+            if n != ref:
+                gain, offset = exposure(g_ref, g, (centre * scale * rel[n][0], centre * scale * rel[n][1]))
+                g = g * np.float32(gain) + np.float32(offset)
             gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
             gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
             self.feat[n] = np.ascontiguousarray(np.dstack([g, gx, gy]), dtype=np.float32)
@@ -118,6 +119,23 @@ class MatchViews:
             agg[outside] = INVALID_COST
             out[i] = agg
         return out
+
+
+def exposure(g_ref: F32, g: F32, shift: tuple[float, float]) -> tuple[float, float]:
+    """Gain and offset that match view ``g`` to the reference, from the part of the scene both show: the
+    view moved by ``shift`` (the disparity range's centre times its baseline). Whole-image statistics would
+    compare different content whenever the disparity is large (parallel cameras), and so depend on where
+    the range lies. Identity when the two share too little."""
+    h, w = g_ref.shape
+    dx, dy = round(shift[0]), round(shift[1])
+    if abs(dx) > w - 8 or abs(dy) > h - 8:
+        return 1.0, 0.0
+    # reference pixel (x, y) shows what the view shows at (x - dx, y - dy)
+    a = g_ref[max(0, dy) : h + min(0, dy), max(0, dx) : w + min(0, dx)]
+    b = g[max(0, -dy) : h + min(0, -dy), max(0, -dx) : w + min(0, -dx)]
+    m_a, s_a, m_b, s_b = float(a.mean()), float(a.std()), float(b.mean()), float(b.std())
+    gain = s_a / s_b if s_b > 1e-6 and s_a > 1e-6 else 1.0
+    return gain, m_a - gain * m_b
 
 
 @dataclass(frozen=True)
@@ -231,7 +249,8 @@ def volume_disparity(
     y0, y1, x0, x1 = box
     t0 = time.perf_counter()
     s = coarse_scale(hi - lo + 1, (y1 - y0, x1 - x0))
-    cv = MatchViews(images, ref, rel, box, s)
+    centre = 0.5 * (lo + hi)
+    cv = MatchViews(images, ref, rel, box, s, centre)
     first, last = math.floor(lo * s) - 1, math.ceil(hi * s) + 1
     levels = [float(v) for v in np.arange(first, last + 1, 1.0)]
     levels = levels[: max(1, 4 * max(cv.h, cv.w))]  # a range far beyond the image is capped
@@ -240,7 +259,7 @@ def volume_disparity(
     coarse = sweep(cv, list(levels), p, p.window, max(1, round(p.radius * s)))
     stats["integer_sweep_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    full = cv if s == 1.0 else MatchViews(images, ref, rel, box, 1.0)
+    full = cv if s == 1.0 else MatchViews(images, ref, rel, box, 1.0, centre)
     h, w = full.shape
     d0 = coarse.disparity / np.float32(s)
     if s != 1.0:
