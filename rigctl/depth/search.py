@@ -45,6 +45,7 @@ class EstimateStats(TypedDict, total=False):
     select_s: float
     pairs_chosen_share: float
     outliers_replaced: int
+    fewer_than_3_views_pixels: int  # estimated pixels whose point fewer than three other views have in frame
     cross_check_with: str
     cross_check_failed_pixels: int
     cross_check_s: float

@@ -1,8 +1,8 @@
 """The ``best`` preset's engine as seen by ``estimate``: the sub-pixel cost volume (``costvolume.py``), the
-continuous refinement along the baselines and the outlier clean-up (``refine.py``), on the keyed subject's box.
-Chosen per input: with fewer than three other views there is nothing to select occlusion-free views from,
-and with disparities beyond WIDE_PX the semi-global pairs hold wide occlusion bands together; both use the
-``pairs`` engine (today's results there, unchanged). ``rigctl bench depth`` shows both engines on every dataset."""
+continuous refinement along the baselines and the outlier clean-up (``refine.py``), on the keyed subject's box,
+for every disparity range. The semi-global pairs are a second candidate chosen per pixel from the data
+(``pick_pairs``). Only with fewer than three other views, where there is nothing to select occlusion-free
+views from, does the ``pairs`` engine run alone. ``rigctl bench depth`` shows both on every dataset."""
 
 from __future__ import annotations
 
@@ -13,8 +13,10 @@ from dataclasses import replace
 
 import cv2
 import numpy as np
+from numpy.typing import NDArray
 
-from rigctl.depth.costvolume import FRACTION, TRUNCATE, VolumeParams, choose, volume_disparity
+from rigctl.depth.cost import combine
+from rigctl.depth.costvolume import F32, FRACTION, TRUNCATE, MatchViews, VolumeParams, choose, volume_disparity
 from rigctl.depth.pair_fusion import pairs_engine
 from rigctl.depth.pairs import neighbour
 from rigctl.depth.presets import PRESETS
@@ -23,10 +25,7 @@ from rigctl.depth.search import BoxEstimate, SearchJob
 
 log = logging.getLogger(__name__)
 MIN_VIEWS = 3  # other views below which the pairs engine (semi-global) is the better start
-# disparity magnitude (px of one spacing) above which the pairs engine is used: wide disparities open wide
-# half-occluded bands and large weakly textured areas that semi-global smoothing holds together (the realistic
-# presenter, 85-128 px), while narrow ones (light fields, a few px) need the cost volume's sub-pixel accuracy
-WIDE_PX = 48.0
+CONFLICT_PX = 1.0  # the two candidates further apart than this disagree on the match, not on its sub-pixel part
 
 
 def volume_engine(job: SearchJob) -> BoxEstimate:
@@ -40,10 +39,8 @@ def volume_engine(job: SearchJob) -> BoxEstimate:
     }
     params = VolumeParams(job.keep, window=p.window, radius=p.guided_radius, eps=p.guided_eps)
     lo, hi = job.d_range
-    few = len(job.moving) < MIN_VIEWS
-    wide = max(abs(lo), abs(hi)) > WIDE_PX
-    if (few or wide) and min(job.grid.shape) >= 16 and neighbour_count(job):
-        stats["engine"] = "pairs: " + (f"only {len(job.moving)} other view(s)" if few else f"range beyond {WIDE_PX} px")
+    if len(job.moving) < MIN_VIEWS and min(job.grid.shape) >= 16 and neighbour_count(job):
+        stats["engine"] = f"pairs: only {len(job.moving)} other view(s)"
         pair_preset = PRESETS["pairs"]  # exactly the pairs preset's matching, window and views kept
         keep = max(1, math.ceil(pair_preset.keep * len(job.moving)))
         crop = pairs_engine(replace(job, preset=pair_preset, keep=keep))
@@ -61,8 +58,7 @@ def volume_engine(job: SearchJob) -> BoxEstimate:
         pairs = pairs_engine(job).disparity
         have = np.isfinite(pairs)
         cand = np.where(have, pairs, d).astype(np.float32)
-        k = choose(views, [d, cand], params)
-        picked = (k == 1) & have
+        picked = pick_pairs(views, d, cand, params) & have
         if p.lk_iterations and picked.any():
             d2, _ = refine(views, cand, job.keep, p.guided_radius, p.guided_eps, p.lk_iterations, reach=0.5)
             cand = d2
@@ -70,6 +66,8 @@ def volume_engine(job: SearchJob) -> BoxEstimate:
         stats["pairs_chosen_share"] = float(picked.mean())
     d, outliers = clean(np.clip(d, lo - 1.0, hi + 1.0).astype(np.float32))
     stats["outliers_replaced"] = int(outliers.sum())
+    # the bands only some views see (the frame's edges at a wide baseline): how many pixels rest on few views
+    stats["fewer_than_3_views_pixels"] = int((job.region & (views.seen_count(d) < 3)).sum())
     stats["refine_s"] = time.perf_counter() - t0
     with np.errstate(divide="ignore", invalid="ignore"):
         uniq = np.where(sw.cost > 1e-6, sw.mean_cost / np.maximum(sw.cost, 1e-6), 4.0)
@@ -77,6 +75,18 @@ def volume_engine(job: SearchJob) -> BoxEstimate:
     cost = np.minimum(sw.cost, TRUNCATE).astype(np.float32)
     cost[sw.no_view] = sw.cost[sw.no_view]
     return BoxEstimate(d, cost, distinct, views.texture, views.bright, sw.bound, sw.no_view)
+
+
+def pick_pairs(views: MatchViews, d: F32, pairs: F32, params: VolumeParams) -> NDArray[np.bool_]:
+    """Where the semi-global pairs' estimate replaces the cost volume's. Within CONFLICT_PX of each other the
+    aggregated cost decides (the sub-pixel part). Where they disagree on the match itself, that cost cannot
+    referee: the cost volume's estimate is its minimum by construction, and its window assumes a
+    fronto-parallel surface (a steep slant, a thin strip). There each view's difference at the pixel itself
+    decides, over the best ``keep`` views that see it: a cost that neither candidate was fitted to."""
+    conflict = np.abs(pairs - d) > CONFLICT_PX
+    k = choose(views, [d, pairs], params)
+    at_pixel = combine(views.view_costs(pairs, 1), params.keep) < combine(views.view_costs(d, 1), params.keep)
+    return np.asarray(np.where(conflict, at_pixel, k == 1))
 
 
 def neighbour_count(job: SearchJob) -> int:
