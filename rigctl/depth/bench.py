@@ -21,7 +21,7 @@ from rigctl.depth.grid import Grid, grid_from_arrays
 from rigctl.depth.metrics import score
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.presets import PRESETS
-from rigctl.depth.scenes import SCENES
+from rigctl.depth.scenes import SCENES, SPACING, seen_by_all, shifted
 
 # the Middlebury 2014 Motorcycle calibration (REFERENCE.md): quarter resolution of f, doffs as shipped
 MOTORCYCLE = {"focal_px": 994.978, "spacing": 0.193001, "doffs": 31.086}
@@ -64,6 +64,26 @@ def stratified(size: tuple[int, int] = (256, 256), seed: int = 0) -> list[Datase
         if b:
             truth[:b], truth[-b:], truth[:, :b], truth[:, -b:] = np.inf, np.inf, np.inf, np.inf
         out.append(Dataset(f"stratified {name} (3x3)", grid, "r1c1", truth, grid.disparity_range, key=False))
+    return out
+
+
+def stratified_shifted(offset: int = 60, size: tuple[int, int] = (256, 256), seed: int = 0) -> list[Dataset]:
+    """Each stratified scene twice from one rendering: as a light field sees it, and with every disparity grown
+    by ``offset`` px per horizontal spacing, as parallel cameras (the rig's) see it (``scenes.shifted``: the
+    same reference picture, the views cropped). Rendered large enough that the region every view sees at the
+    offset is about ``size``; both are scored there only, so a gap between the two rows is the estimator's
+    dependence on where the range lies."""
+    out = []
+    big = (size[0] + math.ceil(4 * offset * SPACING[1] / SPACING[0]), size[1] + 4 * offset)
+    for name, make in SCENES.items():
+        grid = make(big, seed)
+        far = shifted(grid, "r1c1", offset)
+        assert far.truth is not None
+        region = seen_by_all(far, "r1c1", far.truth["r1c1"], margin=15)
+        for s, g in ((0, shifted(grid, "r1c1", 0, offset)), (offset, far)):
+            assert g.truth is not None and g.disparity_range is not None
+            truth = np.where(region, g.truth["r1c1"], np.inf).astype(np.float32)
+            out.append(Dataset(f"stratified {name} (3x3) +{s} px", g, "r1c1", truth, g.disparity_range, key=False))
     return out
 
 

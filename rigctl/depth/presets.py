@@ -1,8 +1,8 @@
 """The depth presets (``rigctl depth --preset``): which engine runs, which views it matches with, how many it
-keeps per pixel, its window and its smoothing. ``best`` (the default) runs the cost-volume engine, which hands
-inputs it does not suit to the ``pairs`` engine (``volume_engine.py``); ``fast`` and ``balanced`` run the plane
-sweep (``sweep.py``); ``pairs`` runs OpenCV's semi-global matcher per pair, fused by every view
-(``pair_fusion.py``)."""
+keeps per pixel, its window and its smoothing. ``best`` (the default) runs the cost-volume engine at every
+disparity range, the semi-global pairs a second candidate per pixel; only a camera with fewer than three other
+views goes to the ``pairs`` engine (``volume_engine.py``); ``fast`` and ``balanced`` run the plane sweep
+(``sweep.py``); ``pairs`` runs OpenCV's semi-global matcher per pair, fused by every view (``pair_fusion.py``)."""
 
 from __future__ import annotations
 

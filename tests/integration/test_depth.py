@@ -255,6 +255,11 @@ def test_bench_depth_quick(tmp_path: Path) -> None:
     assert {"fast", "balanced", "best", "opencv-sgbm-3way", "opencv-sgbm-wls", "opencv-sgbm-fused"} <= methods
     for r in result["rows"]:
         assert r["seconds"] > 0 and 0 <= r["bad_1.0"] <= 100
+    # each stratified scene as a light field and as parallel cameras see it (issue 30): the same figures
+    best = {r["dataset"]: r["bad_0.2"] for r in result["rows"] if r["method"] == "best"}
+    for scene in ("surfaces", "thin"):
+        near, far = best[f"stratified {scene} (3x3) +0 px"], best[f"stratified {scene} (3x3) +60 px"]
+        assert abs(far - near) < 1.0, (scene, near, far)
     assert (tmp_path / "p.png").exists()
 
 

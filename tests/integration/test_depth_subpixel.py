@@ -72,7 +72,7 @@ def _slanted(h: int, w: int, a: float, b: float, rows: int = 3, cols: int = 3) -
 def test_mixed_sign_slanted_plane_and_ranges_from_one_to_hundreds_of_levels() -> None:
     images, t = _slanted(64, 96, -3.3, 0.07)  # -3.3 .. +3.3 px
     g = grid_from_arrays(images, 1000.0, 1.0, 0.65)
-    # a narrow range takes the cost volume (sub-pixel), a range of 420 levels the semi-global pairs
+    # one engine for both: a narrow range swept at full resolution, a range of 420 levels coarse to fine
     for rng, tol in (((-5.0, 5.0), 0.15), ((-20.0, 400.0), 0.5)):
         d = estimate(g, "r1c1", rng, PRESETS["best"], keyer=None).disparity
         assert np.all(np.isfinite(d[8:-8, 8:-8]))
