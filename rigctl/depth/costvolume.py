@@ -32,7 +32,8 @@ from rigctl.depth.search import EstimateStats
 F32 = NDArray[np.float32]
 log = logging.getLogger(__name__)
 
-MAX_LEVELS = 96  # integer levels swept at full resolution; a wider range is swept at a coarser scale first
+MAX_LEVELS = 32  # integer levels swept at full resolution; a wider range is swept at a coarser scale first
+# (the presenter's 48 levels at half scale: bad 1.0 1.86 % against 2.04 % at full, a quarter of the sweep's time)
 FRACTION = 0.25  # step of the fractional sweep, px
 # matching cost: truncated intensity and gradient differences, weights and truncations of Hosni et al. (2013)
 ALPHA, TAU_I, TAU_G = 0.9, 7 / 255, 2 / 255

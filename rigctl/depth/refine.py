@@ -26,10 +26,16 @@ DAMPING = 2e-5  # squared baseline gradient (grey 0..1 per px) at which a fit is
 
 
 def refine(
-    views: MatchViews, disp: F32, keep: int, radius: int, eps: float, iterations: int = 3, reach: float = 1.0
+    views: MatchViews,
+    disp: F32,
+    keep: int,
+    radius: int,
+    eps: float,
+    iterations: int = 3,
+    reach: float | F32 = 1.0,
 ) -> tuple[F32, F32]:
     """Gauss-Newton along the baselines, over the ``keep`` views with the smallest residual at each pixel.
-    Returns the refined map (within ``reach`` px of ``disp``) and the fit's strength (sum of g^2)."""
+    Returns the refined map (within ``reach`` px of ``disp``, a number or a map) and the fit's strength (sum of g^2)."""
     agg = Aggregator(views.guide, radius, eps)
     d = disp.astype(np.float32).copy()
     strength = np.zeros_like(d)

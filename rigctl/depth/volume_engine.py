@@ -50,20 +50,18 @@ def volume_engine(job: SearchJob) -> BoxEstimate:
     sw, views = volume_disparity(dict(job.grid.images), job.ref, rel, job.box, job.d_range, params, stats)
     t0 = time.perf_counter()
     d = sw.disparity
-    if p.lk_iterations:
-        d, _ = refine(views, d, job.keep, p.guided_radius, p.guided_eps, p.lk_iterations, reach=FRACTION)
+    reach: float | F32 = FRACTION  # the refinement stays within the quarter-pixel cell the sweep chose
     if p.with_pairs and neighbour_count(job) and min(job.grid.shape) >= 16:
-        # the semi-global pairs hold large weakly textured areas and occlusion edges together; where the views
-        # agree better with them, they win, and are refined in turn
+        # the semi-global pairs hold large weakly textured areas, steep slants and occlusion edges together;
+        # where the views agree better with them, they win, and are refined in turn (from their 1/16 px)
         pairs = pairs_engine(job).disparity
         have = np.isfinite(pairs)
-        cand = np.where(have, pairs, d).astype(np.float32)
-        picked = pick_pairs(views, d, cand, params) & have
-        if p.lk_iterations and picked.any():
-            d2, _ = refine(views, cand, job.keep, p.guided_radius, p.guided_eps, p.lk_iterations, reach=0.5)
-            cand = d2
-        d = np.where(picked, cand, d).astype(np.float32)
+        picked = pick_pairs(views, d, np.where(have, pairs, d).astype(np.float32), params) & have
+        d = np.where(picked, pairs, d).astype(np.float32)
+        reach = np.where(picked, np.float32(0.5), np.float32(FRACTION)).astype(np.float32)
         stats["pairs_chosen_share"] = float(picked.mean())
+    if p.lk_iterations:
+        d, _ = refine(views, d, job.keep, p.guided_radius, p.guided_eps, p.lk_iterations, reach=reach)
     d, outliers = clean(np.clip(d, lo - 1.0, hi + 1.0).astype(np.float32))
     stats["outliers_replaced"] = int(outliers.sum())
     # the bands only some views see (the frame's edges at a wide baseline): how many pixels rest on few views
