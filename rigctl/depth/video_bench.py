@@ -156,21 +156,24 @@ def _fmt(v: float | None, digits: int = 3) -> str:
 
 def format_video_table(result: VideoBenchResult) -> str:
     lines = [
-        "take                      temporal  bad1.0  flicker mean  p99    >0.5px %  change err mean  p99    "
-        "coverage chg %  s/frame"
+        "take       temporal  bad1.0  missed fg %  false fg %  flicker mean  p99    >0.5px %  change err mean  "
+        "p99    coverage chg %  s/frame"
     ]
     for r in result.runs:
         s = r.scores
         assert s is not None
+        missed = float(np.mean([f.missed_fg_pct for f in r.frames])) if r.frames else 0.0
+        false = float(np.mean([f.false_fg_pct for f in r.frames])) if r.frames else 0.0
         lines.append(
-            f"{r.take:<25} {'on ' if r.temporal else 'off'}       {r.bad_1:6.2f}  "
+            f"{r.take:<10} {'on ' if r.temporal else 'off'}       {r.bad_1:6.2f}  {missed:11.2f}  {false:10.2f}  "
             f"{_fmt(s.static_change_mean_px):>12}  {_fmt(s.static_change_p99_px):>5}  "
             f"{_fmt(s.static_change_over_0_5_pct, 2):>8}  {_fmt(s.change_error_mean_px):>15}  "
             f"{_fmt(s.change_error_p99_px):>5}  {_fmt(s.coverage_change_pct, 2):>14}  {r.seconds_per_frame:7.2f}"
         )
     lines.append(
-        "flicker: frame-to-frame change where the truth did not move; change err: error of the change against "
-        "the truth's change (px)"
+        "per frame, averaged: bad 1.0, missed foreground (truth without estimate), false foreground (estimate "
+        "without truth), %; over time: flicker = frame-to-frame change where the truth did not move, change err = "
+        "error of the change against the truth's change (px); --json has every frame"
     )
     return "\n".join(lines)
 
