@@ -165,7 +165,10 @@ def run(ns: argparse.Namespace) -> int:
         rng = summary.range
         if rng is not None:
             lo, hi = rng.disparity_range_px
-            print(f"take range {lo:.1f}..{hi:.1f} px ({rng.source}); widened {summary.widenings} times in chunks")
+            print(
+                f"take range {lo:.1f}..{hi:.1f} px ({rng.source}); widened {summary.widenings} times in chunks; "
+                f"bound hit on {summary.bound_hit_pixels} px in all"
+            )
         print(
             f"{summary.computed} frame sets computed in {summary.chunks} chunks, {summary.failed} failed, "
             f"{summary.skipped_done} already done; {summary.frames_per_second:.2f} frames/s; ledger {summary.ledger}"

@@ -183,6 +183,7 @@ class ProcessSummary(BaseModel):
     frames_by_worker: dict[str, int]
     range: RangeDecision | None
     widenings: int  # widenings of the range within chunks (each in the frame's report)
+    bound_hit_pixels: int  # summed over the frame sets computed by this run
     seconds: float
     compute_seconds: float  # from the first task submitted to the last result (no cluster start)
     frames_per_second: float
@@ -259,7 +260,7 @@ def process_take(
     status = Status(total=work.frames, skipped=len(work.skipped), clock=clock)
     workers: dict[str, int] = {}
     failed: dict[str, str] = {}
-    widenings = 0
+    widenings = bound_hits = 0
     t0 = clock()
     compute_seconds = 0.0
     if work.todo:
@@ -299,7 +300,9 @@ def process_take(
                     if entry.status == "done":
                         status.done += 1
                         workers[entry.worker] = workers.get(entry.worker, 0) + 1
-                        widenings += len(entry.report.widenings) if entry.report else 0
+                        if entry.report is not None:
+                            widenings += len(entry.report.widenings)
+                            bound_hits += entry.report.bound_hit_pixels
                     else:
                         status.failed += 1
                         failed[name] = entry.error or ""
@@ -323,6 +326,7 @@ def process_take(
         frames_by_worker=workers,
         range=ledger.data.range,
         widenings=widenings,
+        bound_hit_pixels=bound_hits,
         seconds=seconds,
         compute_seconds=compute_seconds,
         frames_per_second=status.done / compute_seconds if compute_seconds > 0 and status.done else 0.0,

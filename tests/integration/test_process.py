@@ -71,6 +71,7 @@ def test_local_cluster_of_processes_matches_rigctl_depth_byte_for_byte(
     ledger = json.loads((tmp_path / "process.json").read_text())
     report = json.loads((single_process / "report.json").read_text())
     assert ledger["range"] == report["range"] == summary["range"]  # decided once, the same way, for every chunk
+    assert summary["bound_hit_pixels"] == report["bound_hit_pixels"]  # summed over the take alike
     frames = ledger["frames"]
     assert sorted(frames) == [frame_name(n) for n in range(FRAMES)]
     for name, entry in frames.items():
