@@ -83,6 +83,7 @@ class TakeReport(BaseModel):
     temporal: bool
     frames: dict[str, FrameReport] = {}
     bound_hit_pixels: int = 0  # summed over the frame sets
+    widenings: list[Widening] = []  # every widening of the range, in order (each also in its frame's report)
     video: dict[str, VideoScores] = {}  # per camera, when the take has a truth
     damaged_skipped: list[DamagedFrame] = []
     seconds: float = 0.0

@@ -118,6 +118,7 @@ def run_depth(
             report.frames[str(done.number)] = done.report
             video.add(done)
     report.bound_hit_pixels = sum(f.bound_hit_pixels for f in report.frames.values())
+    report.widenings = list(processor.widenings)
     video.fill(report)
     if isinstance(src, TakeGrid):
         report.damaged_skipped = list(src.reader.damaged)

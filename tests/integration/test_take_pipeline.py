@@ -189,6 +189,7 @@ def test_rigctl_depth_reports_the_take_range_bound_hits_and_flicker_of_a_recorde
     frames = report["frames"]
     assert sorted(frames) == ["0", "1", "2"]
     assert report["bound_hit_pixels"] == sum(f["bound_hit_pixels"] for f in frames.values())
+    assert report["widenings"] == [w for n in ("0", "1", "2") for w in frames[n]["widenings"]]
     lo, hi = report["range"]["disparity_range_px"]
     for n in ("0", "1", "2"):  # each frame set searched at least the take's range, widened where it was hit
         f_lo, f_hi = frames[n]["disparity_range_px"]
