@@ -207,6 +207,12 @@ async function main() {
     return;
   }
   viewer.bindUi();
+  if (params.has("ipd")) {  // a link can open the page in stereo (?ipd=64) and at a place (?at=1.5,1)
+    $("stereo").checked = true;
+    $("ipd").value = params.get("ipd");
+    viewer.layout();
+  }
+  if (params.has("at")) viewer.move(...params.get("at").split(",").map(Number));
   const { offerXr } = await import("./xr.js");
   offerXr(viewer, $("xr"));
   await viewer.store.load(0);
