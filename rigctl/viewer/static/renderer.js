@@ -28,10 +28,13 @@ function compile(gl, type, source, name) {
   return s;
 }
 
-function program(gl, src, vert, frag) {
+// `defines` replace names in the fragment shader's text by constants (morph.frag's RADIUS and ERODE).
+function program(gl, src, vert, frag, defines = {}) {
   const p = gl.createProgram();
+  let text = src[frag];
+  for (const [name, value] of Object.entries(defines)) text = text.replaceAll(name, value);
   gl.attachShader(p, compile(gl, gl.VERTEX_SHADER, src[vert], vert));
-  gl.attachShader(p, compile(gl, gl.FRAGMENT_SHADER, src[frag], frag));
+  gl.attachShader(p, compile(gl, gl.FRAGMENT_SHADER, text, frag));
   gl.linkProgram(p);
   if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(`${vert} + ${frag}: ${gl.getProgramInfoLog(p)}`);
   const uniforms = {};
@@ -91,7 +94,9 @@ export class Renderer {
     const src = shaders;
     this.progs = {
       splat: program(gl, src, "splat.vert", "splat.frag"),
-      morph: program(gl, src, "fullscreen.vert", "morph.frag"),
+      dilate3: program(gl, src, "fullscreen.vert", "morph.frag", { RADIUS: "1", ERODE: "false" }),
+      erode3: program(gl, src, "fullscreen.vert", "morph.frag", { RADIUS: "1", ERODE: "true" }),
+      dilate5: program(gl, src, "fullscreen.vert", "morph.frag", { RADIUS: "2", ERODE: "false" }),
       cracks: program(gl, src, "fullscreen.vert", "cracks.frag"),
       scan: program(gl, src, "fullscreen.vert", "scan.frag"),
       fill: program(gl, src, "fullscreen.vert", "fill.frag"),
@@ -214,8 +219,8 @@ export class Renderer {
     gl.disable(gl.BLEND);
     this.mark("splat", a);
     // 1b, 1c: close one-pixel cracks
-    this.pass(this.progs.morph, b, { radius: ["uniform1i", 1], erode: ["uniform1i", 0] }, { source: a });
-    this.pass(this.progs.morph, c, { radius: ["uniform1i", 1], erode: ["uniform1i", 1] }, { source: b });
+    this.pass(this.progs.dilate3, b, {}, { source: a });
+    this.pass(this.progs.erode3, c, {}, { source: b });
     this.pass(this.progs.cracks, b, {}, { splatted: a, closed: c });
     this.mark("close", b);
     // 1d: fill disocclusions from the background side, rows then columns
@@ -234,7 +239,7 @@ export class Renderer {
     }
     this.mark("fill", cur);
     // 1e: the ring of the key's soft edge
-    this.pass(this.progs.morph, d, { radius: ["uniform1i", 2], erode: ["uniform1i", 0] }, { source: cur });
+    this.pass(this.progs.dilate5, d, {}, { source: cur });
     // 2-3: shade
     const textures = { target: cur, ring: d };
     for (let k = 0; k < TAPS; k++) {
@@ -249,7 +254,7 @@ export class Renderer {
       w.set([cl, f32(cl * agree), f32(cl * f32(1e-3))], 3 * k);
     });
     this.pass(this.progs.shade, view, {
-      n: ["uniform1i", srcs.length], offset: ["uniform2fv", off], weight: ["uniform3fv", w],
+      n: ["uniform1i", srcs.length], offset: ["uniform2fv", off], weight: ["uniform3fv", w], size: ["uniform2i", this.w, this.h],
     }, textures);
     this.mark("shade", view);
     return srcs.map((s) => s.name);

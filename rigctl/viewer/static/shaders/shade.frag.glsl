@@ -26,16 +26,22 @@ uniform highp sampler2D disparity0, disparity1, disparity2, disparity3;
 uniform int n;                      // sources used, 1..4
 uniform vec2 offset[4];             // (du, dv) per source
 uniform vec3 weight[4];             // (c, c / 1.5, c / 1000) per source, c the scaled closeness
+uniform ivec2 size;                 // the sources' size (W, H)
 out uvec4 outColour;
 
+// Fetches outside the image read the clamped texel and discard it (no branch around the fetch).
+bool inside(ivec2 q) {
+    return all(greaterThanEqual(q, ivec2(0))) && all(lessThan(q, size));
+}
+
 uvec4 texel(usampler2D t, ivec2 q) {
-    ivec2 s = textureSize(t, 0);
-    return all(greaterThanEqual(q, ivec2(0))) && all(lessThan(q, s)) ? texelFetch(t, q, 0) : uvec4(0u);
+    uvec4 v = texelFetch(t, clamp(q, ivec2(0), size - 1), 0);
+    return inside(q) ? v : uvec4(0u);
 }
 
 float seenAt(sampler2D t, ivec2 q) {
-    ivec2 s = textureSize(t, 0);
-    return all(greaterThanEqual(q, ivec2(0))) && all(lessThan(q, s)) ? texelFetch(t, q, 0).r : NONE;
+    float v = texelFetch(t, clamp(q, ivec2(0), size - 1), 0).r;
+    return inside(q) ? v : NONE;
 }
 
 uvec4 lerp7(uvec4 a, uvec4 b, uint q) {
