@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import queue
 import shutil
 import signal
 import subprocess
@@ -58,7 +59,7 @@ class Probe:
         while "done" not in got:
             try:
                 tag, body = self.server.results.get(timeout=0.5)
-            except Exception:  # queue.Empty
+            except queue.Empty:
                 if self.proc.poll() is not None or time.monotonic() > end:
                     why = "exited" if self.proc.poll() is not None else f"gave nothing in {timeout:g} s"
                     raise RuntimeError(f"the browser {why}; its log:\n{self._tail()}") from None
