@@ -192,7 +192,6 @@ def simulated_view(take: Path, col: float, row: float) -> tuple[NDArray[np.float
     """What a camera at grid position (col, row) of a simulated, motion-free take would have seen: (RGB in
     [0, 1], subject mask) from the simulator, or None when the take is not simulated. Only processing's
     callers reach the simulator, through here."""
-    import yaml
 
     from rigctl.errors import TakeError
     from rigctl.rig import rig_from_dict
@@ -203,9 +202,17 @@ def simulated_view(take: Path, col: float, row: float) -> tuple[NDArray[np.float
     path = take / "truth" / "settings.yaml"
     if not path.exists():
         return None
-    raw = yaml.safe_load((take / "take.yaml").read_text())
-    rig = rig_from_dict(raw["rig"], str(take / "take.yaml"))
-    array = SimArray(rig, SimSettings.model_validate(yaml.safe_load(path.read_text())))
+    from pydantic import ValidationError
+
+    from rigctl.take.manifest import read_manifest
+    from rigctl.yamlfile import load_yaml
+
+    rig = rig_from_dict(read_manifest(take).rig, str(take / "take.yaml"))
+    try:  # read with the loader's limits: a take received from someone else may carry anything here
+        settings = SimSettings.model_validate(load_yaml(path))
+    except ValidationError as exc:
+        raise TakeError(f"{path}: not the simulator's settings ({exc.error_count()} problem(s))") from None
+    array = SimArray(rig, settings)
     if not array.settings.ideal:
         return None  # a realistic take is rectified with an estimated calibration: no exact truth view
     if array.distinct_states != 1:

@@ -18,6 +18,7 @@ from rigctl.depth.sources import FrameSource, open_source
 from rigctl.errors import ParameterError, TakeError
 from rigctl.keying import Keyer
 from rigctl.pfm import read_pfm
+from rigctl.regular import read_regular
 from rigctl.rig import CAMERA_NAME
 from rigctl.timecode import Timecode
 
@@ -242,10 +243,8 @@ def _made_from(disparity_dir: Path) -> Path | None:
         return d.parent.parent
     report = disparity_dir / "report.json"
     try:
-        if not report.is_file() or report.stat().st_size > 1 << 24:
-            return None
-        source = json.loads(report.read_text()).get("source")
-    except (OSError, ValueError, AttributeError):
+        source = json.loads(read_regular(report, 1 << 24, TakeError, "report")).get("source")
+    except (TakeError, ValueError, AttributeError):
         return None
     return Path(source) if isinstance(source, str) and source else None
 

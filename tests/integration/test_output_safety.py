@@ -219,6 +219,8 @@ def test_read_only_and_full_destinations_are_one_line(tiny, tmp_path: Path) -> N
         ("ro", ("take", "export", str(tiny[0]), "--out", str(mnt / "x")), "read-only"),
         ("ro", ("depth", str(tiny[1]), "--out", str(mnt), "--preset", "fast"), "read-only"),
         ("ro", ("rectify", str(tiny[0]), "--calibration", cal, "--out", str(mnt / "r")), "read-only"),
+        ("ro", ("process", str(tiny[1]), "--out", str(mnt / "p"), "--workers", "1"), "read-only"),
+        ("ro", ("demo", "--out", str(mnt / "d")), "read-only"),
         ("size=48k", ("take", "export", str(tiny[0]), "--out", str(mnt / "x")), "no space left"),
         ("size=48k", ("depth", str(tiny[1]), "--out", str(mnt), "--preset", "fast"), "no space left"),
         ("size=48k", ("rectify", str(tiny[0]), "--calibration", cal, "--out", str(mnt / "r")), "no space left"),
@@ -438,3 +440,23 @@ def test_a_calibration_whose_cameras_are_kilometres_apart_is_refused(tiny, tmp_p
     res = rigctl("rectify", str(tiny[0]), "--calibration", str(path), "--out", str(tmp_path / "r"))
     one_line(res, EXIT_BAD_INPUT, "cameras.r2c2 lies", "within 1000 m")
     assert not (tmp_path / "r").exists()
+
+
+def test_a_comparison_with_the_truth_never_stops_a_render(tmp_path: Path) -> None:
+    """A simulated take with motion has no single truth view: render once wrote a view, then failed."""
+    from hostile_support import SIM_RIG, write_yaml  # type: ignore[import-not-found]
+
+    rig = dict(SIM_RIG, format={**SIM_RIG["format"], "width_px": 96, "height_px": 54})
+    write_yaml(tmp_path / "rig.yaml", rig)
+    res = rigctl(
+        "record", str(tmp_path / "rig.yaml"), "--take", "m", "--frames", "2", "--out", str(tmp_path),
+        "--sim", "ideal=true", "--force",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    take = tmp_path / "m"
+    res = rigctl(
+        "render", str(take), "--disparity", str(take / "truth/disparity"), "--at", "1,1", "--out", str(tmp_path / "v")
+    )
+    assert res.returncode == 0, res.stderr
+    assert "no comparison with the truth" in res.stderr
+    assert len(list((tmp_path / "v").rglob("c1r1.png"))) == 2
