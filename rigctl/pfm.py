@@ -14,7 +14,7 @@ from rigctl.errors import ParameterError, TakeError
 from rigctl.publish import publish_bytes
 
 
-def write_pfm(path: Path, image: NDArray[np.floating]) -> None:
+def write_pfm(path: Path, image: NDArray[np.floating], durable: bool = True) -> None:
     """Write a single-channel (Pf) or RGB (PF) float image, little-endian, atomically."""
     img = np.asarray(image, dtype="<f4")
     if img.ndim == 2:
@@ -24,7 +24,8 @@ def write_pfm(path: Path, image: NDArray[np.floating]) -> None:
     else:
         raise ParameterError(f"{path}: PFM holds 1 or 3 channels, got shape {img.shape}")
     h, w = img.shape[:2]
-    publish_bytes(path, header + b"\n" + f"{w} {h}\n".encode() + b"-1.0\n" + np.ascontiguousarray(img[::-1]).tobytes())
+    data = header + b"\n" + f"{w} {h}\n".encode() + b"-1.0\n" + np.ascontiguousarray(img[::-1]).tobytes()
+    publish_bytes(path, data, durable)
 
 
 HEADER_MAX = 256  # bytes: three short lines

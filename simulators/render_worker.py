@@ -42,6 +42,7 @@ def _sweep_stale_folders() -> None:
         except PermissionError:
             pass
 
+
 _array: Any = None  # the child's own simulated array
 
 

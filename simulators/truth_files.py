@@ -50,9 +50,9 @@ def write_truth(array: SimArray, folder: Path, frame_sets: list[tuple[int, dict[
                 disp, mattes = array.truth(state)
                 i = array.index[name]
                 if kind == "disparity":
-                    write_pfm(target, disp[i])
+                    write_pfm(target, disp[i], durable=False)  # truth is made again from settings
                 else:
-                    publish_png(target, mattes[i].astype(np.uint8) * 255)
+                    publish_png(target, mattes[i].astype(np.uint8) * 255, durable=False)
                 first_file[key] = target
     if poses:
         doc = {"board": array.board.as_dict(), "poses": poses}
