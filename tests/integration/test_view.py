@@ -64,7 +64,7 @@ def shots(server: ViewerServer) -> dict[str, np.ndarray]:
     pictures = ("at:", "loo:", "eye:", "keys:")
     views = {t: np.frombuffer(b, np.uint8).reshape(h, w, 4) for t, b in got.items() if t.startswith(pictures)}
     sources = {t[8:]: json.loads(b) for t, b in got.items() if t.startswith("sources:")}
-    return views | {"keys": json.loads(got["keys"]), "sources": sources}  # type: ignore[dict-item]
+    return views | {"keys": json.loads(got["keys"]), "limit": json.loads(got["limit"]), "sources": sources}  # type: ignore[dict-item]
 
 
 def psnr_keyed(cpu: np.ndarray, gpu: np.ndarray) -> float:
@@ -167,6 +167,9 @@ def test_the_arrow_keys_move_the_eye(shots: dict[str, np.ndarray]) -> None:
     place = shots["keys"]
     assert place["col"] == pytest.approx(1.5) and place["row"] == pytest.approx(1.0), place
     assert psnr_keyed(shots["at:1.5,1"], shots["keys:view"]) >= 35.0
+    # forty more: the eye stops where rigctl render --at stops, one spacing beyond the cameras, and says so
+    limit = shots["limit"]
+    assert limit["col"] == 3.0 and "columns -1..3" in limit["shown"], limit
 
 
 def best_shift(ref: np.ndarray, moved: np.ndarray, mask: np.ndarray) -> int:

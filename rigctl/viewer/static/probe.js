@@ -44,6 +44,8 @@ async function shots(params, v) {
     v.tick(performance.now());
     await post("keys", JSON.stringify({ col: v.col, row: v.row }));
     await post("keys:view", v.r.read(v.views[0]));
+    for (let i = 0; i < 40; i++) document.dispatchEvent(new KeyboardEvent("keydown", { key: "ArrowRight" }));
+    await post("limit", JSON.stringify({ col: v.col, row: v.row, shown: document.getElementById("position").textContent }));
   }
   for (const cam of (params.get("loo") || "").split(",").filter(Boolean)) {
     const offset = v.take.cameras.find((c) => c.name === cam).offset;
