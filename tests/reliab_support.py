@@ -32,7 +32,7 @@ def make_tiny(root: Path, frames: int = 3, width: int = 96, height: int = 54) ->
     write_yaml(root / "tiny.yaml", rig)
     res = rigctl(
         "record", str(root / "tiny.yaml"), "--take", "t", "--frames", str(frames), "--out", str(root),
-        "--sim", "motion=false", "--force",
+        "--sim", "motion=false", "--sim", "deterministic=true", "--force",
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
     res = rigctl(

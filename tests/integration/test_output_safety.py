@@ -450,7 +450,7 @@ def test_a_comparison_with_the_truth_never_stops_a_render(tmp_path: Path) -> Non
     write_yaml(tmp_path / "rig.yaml", rig)
     res = rigctl(
         "record", str(tmp_path / "rig.yaml"), "--take", "m", "--frames", "2", "--out", str(tmp_path),
-        "--sim", "ideal=true", "--force",
+        "--sim", "ideal=true", "--sim", "deterministic=true", "--force",
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
     take = tmp_path / "m"
