@@ -111,7 +111,7 @@ class Bundles:
 
     def _make(self, number: int) -> bytes:
         frame = self.input.frame(number)
-        names, chunks, spread = [], [], []
+        names, chunks, spread, boxes = [], [], [], []
         for v in frame.views.values():
             if v.disparity is None:
                 continue
@@ -123,11 +123,15 @@ class Bundles:
             valid = half[half > NONE]
             if valid.size:
                 spread.append(float(valid.max() - valid.min()))
+            rows, cols = np.nonzero(half > NONE)
+            # the half-resolution samples that hold a disparity lie in this box: the splat draws no others
+            box = [cols.min(), rows.min(), cols.max() + 1, rows.max() + 1] if rows.size else [0, 0, 0, 0]
+            boxes.append([int(b) for b in box])
             names.append(v.name)
             chunks += [rgba.tobytes(), disp.tobytes()]
         # the renderer's bound on a disocclusion (warp.Renderer.max_gap): from every source of the frame
         max_gap = int(max(spread, default=0.0) * 1.5 / 2) + 4
         header = json.dumps({"number": number, "cameras": names, "width": self.width, "height": self.height,
-                             "max_gap": max_gap}).encode()  # fmt: skip
+                             "max_gap": max_gap, "boxes": boxes}).encode()  # fmt: skip
         header += b" " * (-len(header) % 4)
         return b"".join([MAGIC, struct.pack("<I", len(header)), header, *chunks])

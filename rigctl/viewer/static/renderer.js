@@ -141,7 +141,9 @@ export class Renderer {
       t.disparityFrame = header.number;
     }
     const offsets = new Map(this.take.cameras.map((c) => [c.name, c.offset]));
-    this.sources = cameras.map((c) => ({ name: c.name, offset: offsets.get(c.name), tex: this.cameras.get(c.name) }));
+    this.sources = cameras.map((c, k) => ({
+      name: c.name, offset: offsets.get(c.name), tex: this.cameras.get(c.name), box: header.boxes[k],
+    }));
     this.maxGap = header.max_gap;
     this.frame = header.number;
   }
@@ -212,9 +214,11 @@ export class Renderer {
     gl.activeTexture(gl.TEXTURE0);
     gl.uniform1i(sp.u.disparity, 0);
     srcs.forEach((s, k) => {
+      const [x0, y0, x1, y1] = s.box;
       gl.bindTexture(gl.TEXTURE_2D, s.tex.disparity.t);
       gl.uniform2f(sp.u.offset, du[k], dv[k]);
-      gl.drawArrays(gl.POINTS, 0, this.wl * this.hl);
+      gl.uniform4i(sp.u.box, x0, y0, x1, y1);
+      if (x1 > x0 && y1 > y0) gl.drawArrays(gl.POINTS, 0, (x1 - x0) * (y1 - y0));
     });
     gl.disable(gl.BLEND);
     this.mark("splat", a);
