@@ -1,13 +1,14 @@
 """Which pixels of a view changed between two consecutive frame sets by more than the sensor noise.
 
 The colour of a still surface changes between frames only by noise, so the test needs the noise level, and it
-is measured from the data, not assumed: per camera, the frame difference of every pixel (after a global gain
-and offset fitted per channel, so a change of exposure or light is not taken for motion) is squared and
-averaged over a small window; over the whole picture, where most pixels are still (the screen, the set, a
-presenter between gestures), the median of that statistic is the noise's own level and its median absolute
-deviation its spread. A pixel changed when its statistic lies ``sigmas`` spreads above that level. Each
-frame pair gives one level and spread per camera; the threshold uses the median of the pairs seen so far, so a
-frame in which most of the picture moves does not raise it.
+is measured from the data, not assumed: per camera, the frame difference of every pixel (after a gain and
+offset per channel, so a change of exposure or light is not taken for motion) is squared and averaged over a
+small window. On the flat pixels of the picture (a small spatial gradient in both frames, nothing clipped) a
+moving subject changes the colour only at its edges, so there the statistic is the noise even when most of
+the picture moves (a presenter filling the frame): its median is the noise's level and its median absolute
+deviation its spread, and the gain and offset are fitted there too. A pixel changed when its statistic lies
+``sigmas`` spreads above that level. Each frame pair gives one level and spread per camera; the threshold
+uses the median of the pairs seen so far.
 """
 
 from __future__ import annotations
@@ -23,6 +24,9 @@ from rigctl.depth.grid import Grid
 F32 = NDArray[np.float32]
 MAD_TO_SIGMA = 1.4826  # the median absolute deviation of a normal distribution is 0.6745 sigma
 SUBSAMPLE = 2  # every other row and column (of the half-size picture) for the fits and the noise figures
+FLAT_SHARE = 0.1  # the noise is measured on this share of the pixels, the flattest ...
+MIN_FLAT = 500  # ... unless fewer than this many (a small picture): then on every pixel
+MIN_SPREAD = 0.05  # brightness spread (0..1) below which only an offset is fitted between frames, not a gain
 
 
 @dataclass
@@ -46,12 +50,15 @@ class NoiseHistory:
         return float(np.sqrt(max(0.0, float(np.median(self.levels))) / 2.0))
 
 
-def gain_matched(prev: F32, cur: F32) -> F32:
-    """``prev`` with one gain and offset per channel fitted to ``cur`` (least squares, then again on the pixels
-    the first fit explains: moving ones do not pull the fit)."""
-    s = (slice(None, None, SUBSAMPLE), slice(None, None, SUBSAMPLE))
-    xs = prev[s].reshape(-1, prev.shape[2])
-    ys = cur[s].reshape(-1, cur.shape[2])
+def gain_matched(prev: F32, cur: F32, flat: NDArray[np.bool_]) -> F32:
+    """``prev`` with one gain and offset per channel fitted to ``cur`` on the ``flat`` pixels (where a moving
+    subject hardly changes the colour, so a change of exposure is all there is to fit; every pixel when there
+    are too few), least squares, then again on the pixels the first fit explains."""
+    if flat.sum() >= MIN_FLAT:
+        xs, ys = prev[flat], cur[flat]
+    else:
+        s = (slice(None, None, SUBSAMPLE), slice(None, None, SUBSAMPLE))
+        xs, ys = prev[s].reshape(-1, prev.shape[2]), cur[s].reshape(-1, cur.shape[2])
     gain = np.ones(prev.shape[2], np.float32)
     offset = np.zeros(prev.shape[2], np.float32)
     for c in range(prev.shape[2]):
@@ -66,27 +73,49 @@ def gain_matched(prev: F32, cur: F32) -> F32:
 
 
 def line_fit(x: F32, y: F32) -> tuple[float, float]:
-    """Least-squares y = a x + b; a pure offset when x does not vary (a flat or empty picture)."""
+    """Least-squares y = a x + b; a pure offset when x spans too little to tell a gain from noise (a flat
+    screen of one colour) or there is next to nothing to fit."""
     if x.size < 16:
         return 1.0, 0.0
     mx, my = float(x.mean()), float(y.mean())
     vx = float(np.dot(x - mx, x - mx))
-    if vx < 1e-6 * x.size:
+    if vx < MIN_SPREAD**2 * x.size:
         return 1.0, my - mx
     a = float(np.dot(x - mx, y - my)) / vx
     return a, my - a * mx
 
 
-def change_statistic(prev: F32, cur: F32, window: int) -> F32:
+def change_statistic(prev: F32, cur: F32, window: int, flat: NDArray[np.bool_]) -> F32:
     """Mean over the window and the channels of the squared frame difference, in 8-bit levels squared."""
-    diff = (cur - gain_matched(prev, cur)) * np.float32(255.0)
+    diff = (cur - gain_matched(prev, cur, flat)) * np.float32(255.0)
     sq = np.asarray((diff * diff).mean(axis=2), np.float32)
     return np.asarray(cv2.boxFilter(sq, -1, (window, window), borderType=cv2.BORDER_REFLECT), np.float32)
 
 
-def noise_figures(stat: F32) -> tuple[float, float]:
-    """Level (median) and spread (median absolute deviation) of a change statistic over the picture."""
-    v = stat[::SUBSAMPLE, ::SUBSAMPLE].ravel()
+def flat_pixels(prev: F32, cur: F32, window: int) -> NDArray[np.bool_]:
+    """The flattest pixels of the picture (a spatial gradient over a window, in either frame, within 1.5 times
+    the FLAT_SHARE quantile's), leaving out the clipped ones (no noise there). There a moving subject changes
+    the colour only at its edges, so the frame difference is noise even when most of the picture moves."""
+    grad = np.zeros(cur.shape[:2], np.float32)
+    unclipped = np.ones(cur.shape[:2], bool)
+    for img in (prev, cur):
+        g = np.asarray(img.mean(axis=2), np.float32)
+        mag = np.abs(cv2.Sobel(g, cv2.CV_32F, 1, 0)) + np.abs(cv2.Sobel(g, cv2.CV_32F, 0, 1))
+        np.maximum(grad, mag, out=grad)
+        unclipped &= (img.min(axis=2) > 2 / 255) & (img.max(axis=2) < 253 / 255)  # any channel clipped: no noise
+    # averaged over a wider window than the statistic's, so a pixel's own noise hardly decides its flatness
+    wide = 2 * window + 1
+    grad = np.asarray(cv2.boxFilter(grad, -1, (wide, wide), borderType=cv2.BORDER_REFLECT), np.float32)
+    if unclipped.sum() < MIN_FLAT:
+        unclipped[:] = True
+    # up to half as much again as the flattest share's gradient: in a flat area the gradient is the noise's, and
+    # ranking the pixels within it would pick those where the noise happens to be low
+    return np.asarray(unclipped & (grad <= 1.5 * np.quantile(grad[unclipped], FLAT_SHARE)), bool)
+
+
+def noise_figures(stat: F32, flat: NDArray[np.bool_]) -> tuple[float, float]:
+    """Level (median) and spread (median absolute deviation) of a change statistic over the flat pixels."""
+    v = stat[flat] if flat.sum() >= MIN_FLAT else stat[::SUBSAMPLE, ::SUBSAMPLE].ravel()
     level = float(np.median(v))
     return level, float(np.median(np.abs(v - level)))
 
@@ -117,9 +146,11 @@ def frame_change(prev: Grid, cur: Grid, history: dict[str, NoiseHistory], window
     for name in cur.names:
         if name not in prev.names:
             continue
-        stat = change_statistic(half(prev.images[name]), half(cur.images[name]), win)
+        a, b = half(prev.images[name]), half(cur.images[name])
+        flat = flat_pixels(a, b, win)
+        stat = change_statistic(a, b, win, flat)
         hist = history.setdefault(name, NoiseHistory())
-        hist.add(*noise_figures(stat))
+        hist.add(*noise_figures(stat, flat))
         moved = (stat > hist.threshold(sigmas)).astype(np.uint8)
         # the window's statistic reaches half a window around a change: the pixels it reached changed too
         grown = cv2.dilate(moved, kernel)

@@ -142,8 +142,6 @@ def test_a_moving_scene_follows_its_truth_and_moving_edges_are_not_dragged(movin
     assert stable.change_error_mean_px < single.change_error_mean_px, (single, stable)
     assert moved_pairs_error(take.stable, take.truth) < moved_pairs_error(take.single, take.truth)
     assert bad1(take.stable, take.truth) <= bad1(take.single, take.truth)
-    moved = [st for st in take.stats[1:] if st["temporal_changed_share"] > 0.1]  # type: ignore[operator]
-    assert moved and all(st["temporal_new_share"] > 0.9 for st in moved), take.stats  # type: ignore[operator]
     checked = 0
     for i in range(1, len(take.truth)):
         t0, t1 = take.truth[i - 1], take.truth[i]
@@ -155,6 +153,10 @@ def test_a_moving_scene_follows_its_truth_and_moving_edges_are_not_dragged(movin
             jump = (np.isfinite(t0) != np.isfinite(t1)) | (both & (np.abs(t1 - t0) > 1.0))
         band = cv2.dilate(jump.astype(np.uint8), np.ones((11, 11), np.uint8)).astype(bool) & np.isfinite(t1)
         edge_single, edge_stable = (score(d[i], t1, band)["bad_1.0"] for d in (take.single, take.stable))
+        # where the truth moved by 0.3 px or more, the new estimate as it is: the colour test saw the motion
+        with np.errstate(invalid="ignore"):
+            moved = both & (np.abs(t1 - t0) >= 0.3) & np.isfinite(take.single[i])
+        assert np.mean(take.stable[i][moved] == take.single[i][moved]) > 0.98
         assert edge_stable <= edge_single + 0.1, (i, edge_single, edge_stable)
         checked += 1
     assert checked >= 2

@@ -78,7 +78,8 @@ def test_the_noise_is_measured_from_the_frames_and_a_moved_square_is_seen_above_
     assert max(still.share.values()) < 0.03, still.share  # a false alarm is a 6 px block: 0.3 % of this picture
     moved = frame_change(b, scene(46, noise, 3), history, 5, 6.0)
     assert moved.changed["r1c1"][30:66, 42:84].all()  # the square's old and new place
-    assert moved.changed["r1c1"][:, :30].sum() == 0 and moved.changed["r1c1"][:, 100:].sum() == 0
+    # far from the square: at most a false alarm (a 6 px block, 1.3 % of this strip) or two
+    assert moved.changed["r1c1"][:, :30].mean() < 0.03 and moved.changed["r1c1"][:, 100:].mean() < 0.03
 
 
 def test_a_change_of_exposure_is_not_motion() -> None:
@@ -146,3 +147,22 @@ def test_the_same_frames_give_the_same_bytes_and_reset_or_disabled_pass_through(
     temporal.reset()
     res = temporal.stabilise(grids[1], "r1c1", copy.copy(result(estimates[1])), (0.0, 10.0))
     assert np.array_equal(res.disparity, estimates[1])
+
+
+def test_the_noise_is_measured_where_the_picture_is_flat_so_a_large_moving_subject_does_not_raise_it() -> None:
+    """A textured card over 60 % of the picture moves 4 px in front of a flat screen: most pixels change, so the
+    median of the change statistic is the card's motion, not the noise; the flat screen still shows the noise."""
+    card = texture(5, 240, 320)
+
+    def picture(x: int, seed: int) -> Grid:
+        img = np.full((240, 320), 0.45, np.float32)
+        img[24:216, 8:248] = card[24:216, x : x + 240]
+        noisy = np.clip(np.rint(img * 255 + np.random.default_rng(seed).normal(0, 2.0, img.shape)), 0, 255)
+        u8 = np.repeat(noisy.astype(np.uint8)[..., None], 3, axis=2)
+        return grid_from_arrays({"r0c0": u8, "r0c1": u8.copy()}, 1000.0, 0.1, 0.1)
+
+    history: dict[str, NoiseHistory] = {}
+    change = frame_change(picture(10, 1), picture(14, 2), history, 5, 6.0)
+    assert history["r0c0"].sigma() == pytest.approx(1.0, rel=0.3)  # 2 levels at full size, half at half size
+    assert change.changed["r0c0"][28:212, 12:244].mean() > 0.95
+    assert change.changed["r0c0"][:, 260:].mean() < 0.01
