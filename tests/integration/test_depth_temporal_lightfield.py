@@ -115,6 +115,8 @@ def test_a_card_moving_in_front_of_a_real_scene_is_followed_not_dragged(clean: d
         for d in (run.single[i], run.stable[i]):
             assert np.median(np.abs(d[on_card] - D_CARD)) < 0.2
         if left.any():
-            assert np.abs(run.stable[i][left] - run.single[i][left]).max() < 1e-6  # the new estimate, as it is
+            # the new estimate, or (held) the previous depth within the agreement of it: never the card's depth
+            tol = float(run.stats[i]["temporal_agree_px"])  # type: ignore[arg-type]
+            assert np.abs(run.stable[i][left] - run.single[i][left]).max() <= tol + 1e-6
             assert np.median(run.stable[i][left]) < D_CARD - 1.5  # the scene behind, not the card
     assert mean_change(run.stable) < mean_change(run.single)
