@@ -1,37 +1,39 @@
 """The temporal stabiliser on real pictures: a 3x3 sub-grid of the HCI light field ``dino`` (stride 3, a crop),
 made into frame sets with fresh sensor noise each, a change of exposure, and a textured card moving in front.
 There is no truth: the reference is the estimate from the noise-free pictures, and the card's own disparity.
-Skipped where the shared data is not mounted."""
+The light field is read in place from the shared data (never copied); a missing folder fails, naming it."""
 
 from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
-from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
+from conftest import SHARED
 
 from rigctl.depth.estimate import estimate
 from rigctl.depth.grid import Grid, grid_from_arrays
 from rigctl.depth.presets import PRESETS
 from rigctl.depth.temporal import Temporal
 
-DATA = Path("/work/shared/data/hci-training")
+DATA = SHARED / "data" / "hci-training"
 VIEWS = {"r0c0": 10, "r0c1": 13, "r0c2": 16, "r1c0": 37, "r1c1": 40, "r1c2": 43, "r2c0": 64, "r2c1": 67, "r2c2": 70}
 CROP = (slice(176, 336), slice(176, 336))  # 160 x 160 around the centre
 D_RANGE = (-2.5, 4.0)
 D_CARD = 3.0  # the card's disparity per view step: in front of everything in dino (-1.7 to 1.8)
 CARD = (50, 40)  # height, width
 
-pytestmark = pytest.mark.skipif(not (DATA / "dino").is_dir(), reason="the shared HCI light fields are not mounted")
 
 
 def views(scene: str) -> dict[str, np.ndarray]:
-    return {
-        n: cv2.imread(str(DATA / scene / f"input_Cam{i:03d}.png"))[CROP].astype(np.float32) for n, i in VIEWS.items()
-    }
+    out = {}
+    for n, i in VIEWS.items():
+        img = cv2.imread(str(DATA / scene / f"input_Cam{i:03d}.png"))
+        assert img is not None, f"{DATA / scene}: view {i} missing (the shared data, read in place)"
+        out[n] = img[CROP].astype(np.float32)
+    return out
 
 
 def frame(
