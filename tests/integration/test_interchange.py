@@ -46,9 +46,14 @@ def write_take(folder: Path, fps: float, frames: dict[str, list[Timecode | None]
     cams = {}
     for ci, (name, tcs) in enumerate(frames.items()):
         writer = CameraWriter(name, folder, fps, sync_interval_s=0)
+        wrap, last = 0, None  # capture time is monotonic: a timecode past midnight counts on from the day before
         for i, tc in enumerate(tcs):
             flags = FrameFlags.TIMESTAMP_MONOTONIC
-            t = 10**12 + (tc.frames if tc else i) * period_ns + ci * 1000
+            n = tc.frames if tc else i
+            if last is not None and n + wrap < last:
+                wrap += last - n + 1
+            last = n + wrap
+            t = 10**12 + last * period_ns + ci * 1000
             writer.write(Frame(name, i, t, t + 10**6, flags, memoryview(data.reshape(-1)), tc))
         writer.close()
         cams[name] = {"essence": f"{name}.essence", "index": f"{name}.index", "frames": len(tcs)}
