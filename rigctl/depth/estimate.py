@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.depth.cost import F32, TRUNCATE
+from rigctl.depth.edge import DEPTH_COVERAGE, coverage, sensor_fixed
 from rigctl.depth.grid import Grid
 from rigctl.depth.pair_fusion import pairs_engine
 from rigctl.depth.presets import Preset
@@ -78,7 +79,8 @@ def estimate(
     t0 = time.perf_counter()
     if matte is None:
         matte = keyer.matte(grid.images[ref]) if keyer is not None else np.ones((h, w), np.float32)
-    fg = matte > 0.0  # the soft edge too: compositing needs depth under a partly transparent edge
+    # depth where the subject covers at least half the pixel (``edge.py``): not on the screen beside it
+    fg = coverage(grid.images[ref], matte) >= DEPTH_COVERAGE
     stats["key_s"] = time.perf_counter() - t0
     stats["keyed_background_share"] = float(1.0 - fg.mean())
     empty = DepthResult(
@@ -120,6 +122,9 @@ def estimate(
     region = fg[y0:y1, x0:x1]
     valid = region & ~crop.no_view & np.isfinite(disp)
     out[y0:y1, x0:x1] = np.where(valid, disp, np.inf)
+    fixed = _drop_sensor_fixed(grid, ref, moving, out, (lo, hi), keyer.min_area if keyer else DEFAULT_KEYER.min_area)
+    valid &= ~fixed[y0:y1, x0:x1]
+    stats["sensor_fixed_pixels"] = int(fixed.sum())
     conf = np.zeros((h, w), np.float32)
     c_local = np.clip(1.0 - crop.cost / TRUNCATE, 0, 1) * crop.distinct
     unreliable_local = (crop.texture < 0.01) | (crop.bright > 0.98)
@@ -139,6 +144,25 @@ def estimate(
         filled[y0:y1, x0:x1] = valid & crop.filled
         stats["filled_from_background_pixels"] = int(filled.sum())
     return DepthResult(out, conf, unreliable, bound_hit, matte, filled, stats)
+
+
+def _drop_sensor_fixed(
+    grid: Grid, ref: str, views: list[str], out: F32, d_range: tuple[float, float], min_area: float
+) -> NDArray[np.bool_]:
+    """Pixels fixed to the sensor (:func:`edge.sensor_fixed`) and the specks they leave (estimated blobs
+    smaller than the keyer's ``min_area`` share of the image that touch them), set to no estimate in ``out``
+    and returned."""
+    fixed = sensor_fixed(grid, ref, views, out, d_range)
+    if fixed.any():
+        rest = np.isfinite(out) & ~fixed
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(rest.astype(np.uint8), connectivity=8)
+        touching = np.unique(labels[cv2.dilate(fixed.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0])
+        small = np.zeros(n, bool)
+        small[touching] = stats[touching, cv2.CC_STAT_AREA] < min_area * out.size
+        small[0] = False
+        fixed |= small[labels]
+        out[fixed] = np.inf
+    return fixed
 
 
 def cross_check(a: DepthResult, b: DepthResult, rel: tuple[float, float], tol: float = 1.0) -> NDArray[np.bool_]:

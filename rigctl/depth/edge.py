@@ -1,0 +1,129 @@
+"""Where the subject ends: which pixels get a depth.
+
+**Coverage at the edge.** The keyer's matte is a soft ramp of the green excess, which is not the share of the
+pixel the subject covers, and the green excess comes from the chroma, which a 4:2:2 camera (every SDI
+camera, and the simulator) shares between two neighbouring pixels: at a silhouette both pixels of a pair
+look half green. Only the luma is per pixel. :func:`coverage` therefore estimates each edge pixel's
+coverage as a two-colour mix along the luma, between the nearest pure subject and pure screen colours (the
+mean of the matte's 1 and 0 pixels in a 5x5 window, as local foreground and background colours are taken
+in Bayesian and closed-form matting), and falls back to the same mix along the green excess where the two
+lumas are too close to tell apart. Depth is estimated where the coverage is at least
+:data:`DEPTH_COVERAGE` (half the pixel: the pixel's centre is more likely on the subject than off it).
+
+**Fixed to the sensor.** A pattern that sits at the same place in every camera (the simulator's burnt-in id,
+a timecode overlay, dust on a sensor window) matches at zero disparity, outside the range of a subject in
+front of the rig: :func:`sensor_fixed` marks the pixels whose views agree better unshifted than at the
+estimated disparity, and better than one pixel of disparity either way (a match, not a flat patch that
+agrees at any shift), with the flat parts of the same pattern joined to such pixels (hysteresis). They are
+not part of the scene and get no depth; neither do the specks they leave.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from rigctl.depth.cost import F32
+from rigctl.depth.grid import Grid
+
+DEPTH_COVERAGE = 0.5  # depth where the subject covers at least this share of the pixel
+WINDOW = 2  # radius of the window the local subject and screen colours are taken from
+MIN_LUMA_STEP = 0.03  # below this luma difference between subject and screen, the green excess decides
+LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)  # BT.709
+AGREE_MARGIN = 0.02  # how much better (mean absolute difference, 0..1) the views must agree unshifted
+
+
+def _near_mean(values: F32, weight: F32) -> tuple[F32, F32]:
+    """Mean of ``values`` over the window's pixels of weight 1, and how many there were."""
+    k = (2 * WINDOW + 1, 2 * WINDOW + 1)
+    num = cv2.boxFilter(values * weight, -1, k, normalize=False, borderType=cv2.BORDER_REPLICATE)
+    den = cv2.boxFilter(weight, -1, k, normalize=False, borderType=cv2.BORDER_REPLICATE)
+    return (num / np.maximum(den, 1e-6)).astype(np.float32), den
+
+
+def _mix(value: F32, fg: F32, bg: F32) -> F32:
+    step = fg - bg
+    safe = np.where(np.abs(step) > 1e-6, step, np.float32(1.0))
+    return np.asarray(np.clip((value - bg) / safe, 0.0, 1.0), np.float32)
+
+
+def coverage(rgb: F32, matte: F32) -> F32:
+    """The share of each pixel the subject covers: the matte where it is 0 or 1, the two-colour mix (luma,
+    else green excess) on the soft edge between. An edge pixel with no pure subject or screen pixel in its
+    window keeps the matte."""
+    soft = (matte > 0) & (matte < 1)
+    if not soft.any():
+        return matte.copy()
+    luma = np.asarray(rgb @ LUMA, np.float32)
+    excess = np.asarray(rgb[..., 1] - np.maximum(rgb[..., 0], rgb[..., 2]), np.float32)
+    solid, screen = (matte >= 1).astype(np.float32), (matte <= 0).astype(np.float32)
+    y_f, n_f = _near_mean(luma, solid)
+    y_b, n_b = _near_mean(luma, screen)
+    s_f, _ = _near_mean(excess, solid)
+    s_b, _ = _near_mean(excess, screen)
+    both = soft & (n_f > 0) & (n_b > 0)
+    by_luma = np.abs(y_f - y_b) >= MIN_LUMA_STEP
+    mixed = np.where(by_luma, _mix(luma, y_f, y_b), _mix(excess, s_f, s_b))
+    return np.asarray(np.where(both, mixed, matte), np.float32)
+
+
+def _disagreement(
+    grid: Grid, ref: str, views: list[str], shift: F32, box: tuple[int, int, int, int], seen_by: F32 | None = None
+) -> tuple[F32, F32]:
+    """Per pixel of ``box``: the mean over the better half of the views that see it (sampled ``shift``
+    disparity along their baseline, inside the image) of the 3x3 mean absolute luma difference between the
+    reference and the view (inf where no view sees it), and how many views see it. ``seen_by``: use each
+    pixel's better half of that many views, so two shifts are compared over the same number of views."""
+    y0, y1, x0, x1 = box
+    ox, oy = grid.offsets[ref]
+    ref_y = np.asarray(grid.images[ref][y0:y1, x0:x1] @ LUMA, np.float32)
+    gy, gx = np.mgrid[y0:y1, x0:x1].astype(np.float32)
+    diffs = []
+    for n in views:
+        dx, dy = grid.offsets[n][0] - ox, grid.offsets[n][1] - oy
+        img = np.asarray(grid.images[n] @ LUMA, np.float32)
+        seen = cv2.remap(img, gx - shift * np.float32(dx), gy - shift * np.float32(dy), cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)  # fmt: skip
+        diff = np.abs(seen - ref_y)
+        outside = cv2.blur((seen < 0).astype(np.float32), (3, 3)) > 0
+        diffs.append(np.where(outside, np.inf, cv2.blur(diff, (3, 3))).astype(np.float32))
+    stack = np.sort(np.stack(diffs), axis=0)
+    count = np.isfinite(stack).sum(axis=0).astype(np.float32)
+    n_views = count if seen_by is None else np.minimum(count, seen_by)
+    keep = np.maximum(1, np.floor((n_views + 1) / 2)).astype(np.int64)
+    csum = np.cumsum(np.where(np.isfinite(stack), stack, 0.0), axis=0)
+    mean = np.take_along_axis(csum, (keep - 1)[None], axis=0)[0] / keep
+    return np.asarray(np.where(n_views > 0, mean, np.inf), np.float32), count
+
+
+def sensor_fixed(
+    grid: Grid, ref: str, views: list[str], disparity: F32, d_range: tuple[float, float]
+) -> NDArray[np.bool_]:
+    """Estimated pixels of ``ref`` that the views show better unshifted than at their estimated disparity,
+    when zero disparity lies outside the range (a subject in front of the rig): fixed to the sensor."""
+    h, w = disparity.shape
+    out = np.zeros((h, w), bool)
+    have = np.isfinite(disparity)
+    if d_range[0] <= 0.0 <= d_range[1] or not have.any() or not views:
+        return out
+    ys, xs = np.nonzero(have)
+    box = (int(ys.min()), int(ys.max()) + 1, int(xs.min()), int(xs.max()) + 1)
+    y0, y1, x0, x1 = box
+    d = np.where(have[y0:y1, x0:x1], disparity[y0:y1, x0:x1], 0.0).astype(np.float32)
+    at_estimate, count = _disagreement(grid, ref, views, d, box)
+    unshifted, _ = _disagreement(grid, ref, views, np.zeros_like(d), box, seen_by=count)
+    # a match, not a flat patch that agrees at any shift: one pixel of disparity either way agrees worse
+    nearby = np.minimum(
+        *(_disagreement(grid, ref, views, np.full_like(d, step), box, seen_by=count)[0] for step in (-1.0, 1.0))
+    )
+    seen = np.isfinite(at_estimate) & np.isfinite(unshifted) & have[y0:y1, x0:x1]
+    weak = seen & (unshifted < AGREE_MARGIN) & (unshifted <= at_estimate)
+    sure = weak & (unshifted + AGREE_MARGIN < nearby)
+    # hysteresis: the sure pixels (a pattern's edges) and the flat parts of the same pattern joined to them
+    n, labels = cv2.connectedComponents(weak.astype(np.uint8), connectivity=8)
+    seeded = np.zeros(n, bool)
+    seeded[np.unique(labels[sure])] = True
+    seeded[0] = False
+    out[y0:y1, x0:x1] = seeded[labels]
+    return out

@@ -1,0 +1,114 @@
+"""Where the subject ends (``rigctl.depth.edge``): the coverage of edge pixels of a 4:2:2 picture, and
+patterns fixed to the sensor, which match at zero disparity outside the range, getting no depth."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from rigctl.depth.edge import DEPTH_COVERAGE, coverage
+from rigctl.depth.estimate import estimate
+from rigctl.depth.grid import grid_from_arrays
+from rigctl.depth.key import Keyer
+from rigctl.depth.presets import PRESETS
+
+SCREEN = np.array([0.14, 0.54, 0.21], np.float32)
+
+
+def textured(h: int, w: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    tex = cv2.GaussianBlur(rng.random((h, w)).astype(np.float32), (0, 0), 3.0)
+    tex = (tex - tex.min()) / (tex.max() - tex.min())
+    skin = np.array([0.25, 0.12, 0.08], np.float32) + tex[..., None] * np.array([0.55, 0.45, 0.35], np.float32)
+    return np.asarray(skin, np.float32)
+
+
+def four_two_two(rgb: np.ndarray) -> np.ndarray:
+    """The picture as a 4:2:2 camera delivers it: BT.709 luma per pixel, chroma shared by pixel pairs."""
+    m = np.array([[0.2126, 0.7152, 0.0722], [-0.1146, -0.3854, 0.5], [0.5, -0.4542, -0.0458]], np.float32)
+    ycc = rgb @ m.T
+    h, w = rgb.shape[:2]
+    pairs = ycc[..., 1:].reshape(h, w // 2, 2, 2).mean(axis=2)
+    ycc[..., 1:] = np.repeat(pairs, 2, axis=1)
+    return np.asarray(np.clip(ycc @ np.linalg.inv(m).T, 0, 1), np.float32)
+
+
+def subject_on_screen(h: int = 96, w: int = 128, ss: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """A textured subject (a disc and a slanted arm) on a green screen, rendered at ss x ss samples a pixel
+    and delivered as 4:2:2; and its coverage (the share of each pixel's samples on the subject)."""
+    yy, xx = (np.mgrid[0 : h * ss, 0 : w * ss] + 0.5) / ss
+    inside = ((yy - 40.3) ** 2 + (xx - 60.7) ** 2 < 26.2**2) | ((np.abs((xx - 95) - 0.3 * (yy - 50)) < 4.6) & (yy > 30))
+    fine = np.where(inside[..., None], cv2.resize(textured(h, w, 1), (w * ss, h * ss)), SCREEN)
+    rgb = fine.reshape(h, ss, w, ss, 3).mean(axis=(1, 3)).astype(np.float32)
+    cover = inside.reshape(h, ss, w, ss).mean(axis=(1, 3)).astype(np.float32)
+    return four_two_two(rgb), cover
+
+
+def test_coverage_decides_the_edge_pixels_where_the_soft_matte_spills_past_the_silhouette() -> None:
+    """A sharp picture (one sample a pixel, as the simulator renders): the soft matte comes from the chroma
+    the pixel pairs share, and the luma tells which pixel of the pair is the subject's."""
+    rgb, cover = subject_on_screen()
+    matte = Keyer().matte(rgb)
+    truth = cover >= 0.5
+    soft = (matte > 0) & (matte < 1)
+    old = matte > 0  # what depth used before: every pixel the soft matte does not call pure screen
+    new = coverage(rgb, matte) >= DEPTH_COVERAGE
+    wrong_old, wrong_new = int((old != truth).sum()), int((new != truth).sum())
+    false_old, false_new = int((old & ~truth).sum()), int((new & ~truth).sum())
+    print(f"soft pixels {soft.sum()}: wrong {wrong_old} -> {wrong_new}, false foreground {false_old} -> {false_new}")
+    assert soft.sum() > 100  # the test has an edge to decide
+    assert wrong_new <= 0.5 * wrong_old, (wrong_old, wrong_new)
+    assert false_new <= 0.25 * false_old, (false_old, false_new)
+    assert np.array_equal(new[~soft], matte[~soft] > 0)  # pure subject and pure screen stay as the matte says
+
+
+def test_coverage_of_an_antialiased_picture_is_no_worse_than_the_soft_matte() -> None:
+    """Anti-aliased (8 x 8 samples a pixel): the matte is hard on most partly covered pixels (their pair's
+    chroma looks pure), which the coverage leaves as they are; where it is soft, it is no worse."""
+    rgb, cover = subject_on_screen(ss=8)
+    matte = Keyer().matte(rgb)
+    truth, edge = cover >= 0.5, (cover > 0) & (cover < 1)
+    wrong_old = int(((matte > 0) != truth)[edge].sum())
+    wrong_new = int(((coverage(rgb, matte) >= DEPTH_COVERAGE) != truth)[edge].sum())
+    assert wrong_new <= wrong_old, (wrong_old, wrong_new)
+
+
+def test_coverage_of_a_picture_without_soft_pixels_is_the_matte() -> None:
+    matte = np.zeros((20, 30), np.float32)
+    matte[5:15, 10:20] = 1.0
+    rgb = np.where(matte[..., None] > 0, np.float32(0.5), SCREEN).astype(np.float32)
+    assert np.array_equal(coverage(rgb, matte), matte)
+
+
+def plane_with_overlay(d: float, h: int = 120, w: int = 160) -> dict[str, np.ndarray]:
+    """A textured plane at disparity ``d`` in a 3x3 grid, with a block pattern burnt into the same corner of
+    every camera's picture (fixed to the sensor, as the simulator's frame id)."""
+    rng = np.random.default_rng(4)
+    noise = cv2.GaussianBlur(rng.random((h + 40, w + 400)).astype(np.float32), (0, 0), 1.2)
+    blocks = np.repeat(np.repeat(rng.random((2, 16)) > 0.5, 3, axis=0), 3, axis=1).astype(np.float32)
+    images = {}
+    for r in range(3):
+        for c in range(3):
+            M = np.array([[1, 0, 200 + d * (c - 1)], [0, 1, 20 + d * (r - 1) * 0.65]], np.float32)
+            img = cv2.warpAffine(noise, M, (w, h), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP)
+            img[:6, :48] = 0.06 + 0.86 * blocks
+            images[f"r{r}c{c}"] = np.repeat(np.clip(img, 0, 1)[..., None], 3, axis=2)
+    return images
+
+
+@pytest.mark.parametrize("preset", ["best", "pairs"])
+def test_a_pattern_fixed_to_the_sensor_gets_no_depth_when_zero_is_outside_the_range(preset: str) -> None:
+    images = plane_with_overlay(10.0)
+    g = grid_from_arrays(images, 1000.0, 0.12, 0.12 * 0.65)
+    r = estimate(g, "r1c1", (5.0, 20.0), PRESETS[preset], keyer=None)
+    # the pattern's pixels lose their depth; those on its edge with the scene (their 3x3 window reaches
+    # into the scene, which does not agree unshifted) may keep the scene's
+    assert not np.isfinite(r.disparity[:5, :47]).any(), int(np.isfinite(r.disparity[:5, :47]).sum())
+    assert r.stats["sensor_fixed_pixels"] >= 5 * 47
+    inner = r.disparity[12:-12, 12:-12]
+    assert np.isfinite(inner).mean() > 0.995  # the scene keeps its depth
+    # with zero inside the range the pattern is a legitimate match (a background at infinity): kept
+    wide = estimate(g, "r1c1", (-2.0, 20.0), PRESETS[preset], keyer=None)
+    assert np.isfinite(wide.disparity[:6, :48]).mean() > 0.9
+    assert wide.stats["sensor_fixed_pixels"] == 0
