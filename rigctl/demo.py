@@ -188,11 +188,15 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
             f"placement ({pooled.raw.rms:.3f} px raw)."
         )
     fr_truth = [t for cam in frame.cameras if (t := frame.truth(cam)) is not None]
+    subject = max(1, sum(t.pixels for t in fr_truth))
+    missed = sum(t.missed_fg_pct * t.pixels for t in fr_truth) / subject
     if fr_truth:
         lines.append(
             "- Depth on the demo's own rectified take (its truth is in the true calibration's geometry): mean bad "
             f"1.0 {np.mean([t.bad_1_0 for t in fr_truth]):.2f} %, "
-            f"bad 2.0 {np.mean([t.bad_2_0 for t in fr_truth]):.2f} %."
+            f"bad 2.0 {np.mean([t.bad_2_0 for t in fr_truth]):.2f} %; over all cameras, depth where the truth "
+            f"has none on {100 * sum(t.false_fg_pixels for t in fr_truth) / subject:.3f} % as many pixels "
+            f"as the subject has, none on {missed:.3f} % of the subject."
         )
     lines.append(
         f"- Keyed background left out: {frame.keyed_background_share:.0%} of pixels; disparity levels left out "

@@ -105,7 +105,10 @@ def run(ns: argparse.Namespace) -> int:
         for cam in fr.cameras:
             truth = fr.truth(cam)
             if truth is not None:
-                print(f"  {cam}: bad 1.0 {truth.bad_1_0:.2f} %, bad 2.0 {truth.bad_2_0:.2f} % against the truth")
+                print(
+                    f"  {cam}: bad 1.0 {truth.bad_1_0:.2f} %, bad 2.0 {truth.bad_2_0:.2f} %, false foreground "
+                    f"{truth.false_fg_pct:.3f} %, missed {truth.missed_fg_pct:.3f} % against the truth"
+                )
     for cam, v in report.video.items():
         if v.static_change_mean_px is not None:
             print(

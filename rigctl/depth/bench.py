@@ -221,7 +221,8 @@ def format_table(result: DepthBenchResult) -> str:
     for ds in result.datasets:
         lines.append(f"{ds}")
         lines.append(
-            "  method            bad0.1 bad0.2 bad0.5 bad1.0 bad2.0  MAE px  RMS px  MSEx100 lock %  no est %  seconds"
+            "  method            bad0.1 bad0.2 bad0.5 bad1.0 bad2.0  MAE px  RMS px  MSEx100 lock %  no est %"
+            "  false fg %  missed %  seconds"
         )
         rows = result.of(ds)
         front = pareto(rows)
@@ -235,7 +236,8 @@ def format_table(result: DepthBenchResult) -> str:
                 f" {star}{r.method:<17} "
                 + " ".join(f"{r.metric(f'bad_{x}'):6.2f}" for x in (0.1, 0.2, 0.5, 1.0, 2.0))
                 + f" {num['mae_px']:>7} {num['rms_px']:>7} {mse:>8} {lock:>6}"
-                f"  {r.metric('no_estimate_pct'):8.2f}  {r.seconds:7.3f}"
+                f"  {r.metric('no_estimate_pct'):8.2f}  {r.metric('false_fg_pct'):10.3f}"
+                f"  {r.metric('missed_fg_pct'):8.3f}  {r.seconds:7.3f}"
             )
     lines.append("* on the Pareto front of bad 0.2 against seconds (nothing is both faster and more accurate)")
     for c in comparisons(result):

@@ -29,10 +29,15 @@ def locking(estimate: NDArray[np.floating], truth: NDArray[np.floating]) -> floa
     return float(50.0 * np.abs(h_e - h_t).sum())
 
 
-def score(disparity: F32, truth: F32, mask: NDArray[np.bool_]) -> dict[str, float | None]:
+def score(
+    disparity: F32, truth: F32, mask: NDArray[np.bool_], scene: NDArray[np.bool_] | None = None
+) -> dict[str, float | None]:
     """Metrics on ``mask`` (pixels with ground truth): bad 0.1 / 0.2 / 0.5 / 1 / 2 px (a missing estimate
     counts as bad); MAE, RMS and MSE x 100 (px^2) over the estimated pixels; the pixel-locking figure; the
-    share with no estimate."""
+    share with no estimate. And both sides of the silhouette, as a share of ``mask``'s pixel count: **false
+    foreground** (an estimate where the truth has none: on a green screen, depth painted beside the subject),
+    counted over ``scene`` (default every pixel), and **missed foreground** (the truth has depth, the
+    estimate none)."""
     t = truth[mask]
     d = disparity[mask]
     have = np.isfinite(d)
@@ -47,5 +52,25 @@ def score(disparity: F32, truth: F32, mask: NDArray[np.bool_]) -> dict[str, floa
         "mse_x100": float(np.mean(e**2) * 100) if e.size else None,
         "locking_pct": locking(d[have], t[have]) if e.size else None,
         "no_estimate_pct": float(np.mean(~have) * 100) if t.size else 0.0,
+        **silhouette(disparity, truth, mask, scene),
         "pixels": int(t.size),
+    }
+
+
+def silhouette(
+    disparity: F32, truth: F32, mask: NDArray[np.bool_], scene: NDArray[np.bool_] | None = None
+) -> dict[str, float]:
+    """False and missed foreground (see :func:`score`) in percent of ``mask``'s pixels, and the pixel count
+    of the false foreground (0 % of an empty mask is not a figure: then the percentages are 0 and the count
+    says what there is)."""
+    est = np.isfinite(disparity)
+    false = est & ~np.isfinite(truth)
+    if scene is not None:
+        false &= scene
+    n = int(mask.sum())
+    n_false, n_missed = int(false.sum()), int((mask & ~est).sum())
+    return {
+        "false_fg_pct": 100.0 * n_false / n if n else 0.0,
+        "missed_fg_pct": 100.0 * n_missed / n if n else 0.0,
+        "false_fg_pixels": n_false,
     }

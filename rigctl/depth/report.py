@@ -31,6 +31,9 @@ class TruthScores(BaseModel):
     mse_x100: float | None
     locking_pct: float | None
     no_estimate_pct: float
+    false_fg_pct: float = 0.0  # depth where the truth has none, % of the truth's pixels (0 in older reports)
+    missed_fg_pct: float = 0.0  # the truth's pixels with no depth, %
+    false_fg_pixels: int = 0
     pixels: int
 
 
