@@ -77,3 +77,20 @@ def score(
         "ivpsnr_db": round(ivpsnr_rgb(rendered, reference, mask), 3),
         "pixels": int(mask.sum()),
     }
+
+
+def full_frame_psnr_db(
+    rendered_rgba: F32, reference: F32, reference_alpha: F32, ignore: tuple[int, int, int, int] | None = None
+) -> float:
+    """PSNR (dB) over the whole frame of the rendered subject against the reference's keyed subject, both
+    premultiplied by their alpha (straight RGBA in, as a renderer writes it): where the reference shows
+    screen, anything the render puts there (a fringe of depth painted beside the silhouette) costs as much
+    as an error on the subject, and so does a part of the subject the render leaves out. ``ignore`` as in
+    :func:`score`."""
+    mask = np.ones(reference_alpha.shape, bool)
+    if ignore is not None:
+        y0, y1, x0, x1 = ignore
+        mask[y0:y1, x0:x1] = False
+    ours = rendered_rgba[..., :3] * rendered_rgba[..., 3:4]
+    theirs = reference * reference_alpha[..., None]
+    return round(psnr_db(ours.astype(np.float32), theirs.astype(np.float32), mask), 3)

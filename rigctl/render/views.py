@@ -18,7 +18,7 @@ from rigctl.errors import ParameterError, RigctlError
 from rigctl.exr import picture, picture_attributes, write_exr
 from rigctl.publish import publish_png
 from rigctl.render.inputs import F32, FrameViews, RenderInput
-from rigctl.render.score import Score, score
+from rigctl.render.score import Score, full_frame_psnr_db, score
 from rigctl.render.warp import Rendered, Renderer, prepare
 
 log = logging.getLogger(__name__)
@@ -50,6 +50,7 @@ class LeaveOneOutRow(TypedDict):
     ssim: float
     ivpsnr_db: float
     pixels: int
+    full_frame_psnr_db: float  # premultiplied render against the keyed image, every pixel (score.py)
     sources: list[str]
     ms: float
 
@@ -237,19 +238,24 @@ def leave_one_out(
             t0 = time.perf_counter()
             res = ren.render(*view.offset, exclude=(cam,))
             ms = (time.perf_counter() - t0) * 1e3
-            sc = score(res.rgba[..., :3], view.rgb, view.alpha if view.keyed else np.ones_like(view.alpha), ignore)
+            alpha = view.alpha if view.keyed else np.ones_like(view.alpha)
+            sc = score(res.rgba[..., :3], view.rgb, alpha, ignore)
+            full = full_frame_psnr_db(res.rgba, view.rgb, alpha, ignore)
             rows.append(
                 {"frame": f"{n:06d}", "camera": cam, "psnr_db": sc["psnr_db"], "ssim": sc["ssim"],
-                 "ivpsnr_db": sc["ivpsnr_db"], "pixels": sc["pixels"], "sources": res.sources, "ms": round(ms, 2)}
+                 "ivpsnr_db": sc["ivpsnr_db"], "pixels": sc["pixels"], "full_frame_psnr_db": full,
+                 "sources": res.sources, "ms": round(ms, 2)}
             )  # fmt: skip
     return rows
 
 
 def format_table(rows: list[LeaveOneOutRow]) -> str:
-    lines = [f"{'frame':<8} {'camera':<7} {'PSNR dB':>8} {'SSIM':>7} {'IV-PSNR':>8} {'pixels':>8}  sources"]
+    lines = [
+        f"{'frame':<8} {'camera':<7} {'PSNR dB':>8} {'SSIM':>7} {'IV-PSNR':>8} {'pixels':>8} {'full dB':>8}  sources"
+    ]
     for r in rows:
         lines.append(
             f"{r['frame']:<8} {r['camera']:<7} {r['psnr_db']:>8.2f} {r['ssim']:>7.4f} {r['ivpsnr_db']:>8.2f} "
-            f"{r['pixels']:>8}  " + " ".join(r["sources"])
+            f"{r['pixels']:>8} {r['full_frame_psnr_db']:>8.2f}  " + " ".join(r["sources"])
         )
     return "\n".join(lines)

@@ -82,6 +82,24 @@ def test_a_wrong_disparity_scores_far_worse(take: Path, tmp_path: Path) -> None:
     assert worse < good - 6.0, (good, worse)
 
 
+def test_full_frame_score_sees_depth_painted_over_the_screen(take: Path, tmp_path: Path) -> None:
+    """The screen painted at the subject's distance (every pixel with no truth given the subject's median
+    disparity): the full-frame PSNR (premultiplied, every pixel) falls with the subject's."""
+    from rigctl.pfm import read_pfm, write_pfm
+
+    painted = tmp_path / "painted" / "000000"
+    painted.mkdir(parents=True)
+    for p in (take / "truth" / "disparity" / "000000").glob("*.pfm"):
+        d = read_pfm(p)
+        write_pfm(painted / p.name, np.where(np.isfinite(d), d, np.median(d[np.isfinite(d)])).astype(np.float32))
+    good = loo(take, take / "truth" / "disparity", "r1c1")["r1c1"]
+    bad = loo(take, tmp_path / "painted", "r1c1")["r1c1"]
+    print(f"truth: {good['psnr_db']} / {good['full_frame_psnr_db']} dB; painted: {bad['psnr_db']} / "
+          f"{bad['full_frame_psnr_db']} dB (subject / full frame)")  # fmt: skip
+    assert good["full_frame_psnr_db"] > good["psnr_db"]  # the screen, keyed out in both, agrees
+    assert bad["full_frame_psnr_db"] < good["full_frame_psnr_db"] - 3.0
+
+
 def test_view_between_cameras_is_within_2_db_of_leave_one_out(take: Path, tmp_path: Path) -> None:
     truth = take / "truth" / "disparity"
     out = tmp_path / "views"
