@@ -64,7 +64,10 @@ def coverage(rgb: F32, matte: F32) -> F32:
     s_b, _ = _near_mean(excess, screen)
     both = soft & (n_f > 0) & (n_b > 0)
     by_luma = np.abs(y_f - y_b) >= MIN_LUMA_STEP
-    mixed = np.where(by_luma, _mix(luma, y_f, y_b), _mix(excess, s_f, s_b))
+    # the screen is the uniform side: a luma away from the screen's is the subject's, on whichever side of
+    # the screen's luma the nearby subject is (a two-colour mix |Y - Y_B| = c |Y_F - Y_B|)
+    by_deviation = np.clip(np.abs(luma - y_b) / np.maximum(np.abs(y_f - y_b), 1e-6), 0.0, 1.0)
+    mixed = np.where(by_luma, by_deviation, _mix(excess, s_f, s_b))
     return np.asarray(np.where(both, mixed, matte), np.float32)
 
 

@@ -7,6 +7,10 @@ other camera; each match that obeys the grid geometry (a point at (x, y) appears
 votes for a disparity d. A feature counts when at least three cameras agree on its d (a chance match on
 the epipolar line does not survive that), and the range spans every such feature, widened by a margin: thin
 structures in front are few features, so no percentile may cut them off.
+
+In front of a green screen nothing is at infinity: a feature at zero disparity in every camera is fixed to
+the sensor (a burnt-in id or timecode, dust on a window), not in the scene, and does not count
+(``screen=True``; a light field's background at infinity is a legitimate zero).
 """
 
 from __future__ import annotations
@@ -82,12 +86,18 @@ def disparity_votes(grid: Grid, max_features: int = 4000) -> np.ndarray:
     return np.asarray(agreed, np.float64)
 
 
-def measured_range(grids: Grid | Sequence[Grid]) -> tuple[float, float] | None:
+def measured_range(grids: Grid | Sequence[Grid], screen: bool = False) -> tuple[float, float] | None:
     """The range the images show (the features of every grid given, pooled: a take's sample of frame sets),
-    or None when too few matches agree to say."""
+    or None when too few matches agree to say. ``screen``: the views show a green screen, so features at
+    zero disparity are fixed to the sensor and left out (see the module)."""
     sample = [grids] if isinstance(grids, Grid) else list(grids)
     votes = np.concatenate([disparity_votes(g) for g in sample]) if sample else np.zeros(0)
     votes = votes[np.isfinite(votes)]
+    if screen:
+        fixed = np.abs(votes) <= AGREE_PX
+        if fixed.any():
+            log.info("%d features at zero disparity in front of a green screen: fixed to the sensor", fixed.sum())
+        votes = votes[~fixed]
     if votes.size < MIN_FEATURES:
         log.info("no plan and only %d features the cameras agree on: searching the whole plausible range", votes.size)
         return None

@@ -17,6 +17,7 @@ from pydantic import BaseModel, ConfigDict
 
 from rigctl.depth.estimate import DepthResult
 from rigctl.depth.grid import Grid, SkippedFrameSet
+from rigctl.depth.key import Keyer
 from rigctl.depth.measured_range import measured_range
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.sources import FrameSource
@@ -100,7 +101,9 @@ def decide_range(source: FrameSource, opt: DepthOptions) -> RangeDecision:
                 break
             except SkippedFrameSet:
                 continue
-    measured = measured_range(grids) if grids else None
+    # in front of a green screen nothing is at infinity (zero-disparity features are fixed to the sensor)
+    screen = opt.key and bool(grids) and Keyer().screen_excess(grids[0].images[grids[0].names[0]]) > 0
+    measured = measured_range(grids, screen) if grids else None
     if measured is not None:
         return RangeDecision(
             disparity_range_px=measured,
