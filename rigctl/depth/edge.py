@@ -39,7 +39,7 @@ def _near_mean(values: F32, weight: F32) -> tuple[F32, F32]:
     k = (2 * WINDOW + 1, 2 * WINDOW + 1)
     num = cv2.boxFilter(values * weight, -1, k, normalize=False, borderType=cv2.BORDER_REPLICATE)
     den = cv2.boxFilter(weight, -1, k, normalize=False, borderType=cv2.BORDER_REPLICATE)
-    return (num / np.maximum(den, 1e-6)).astype(np.float32), den
+    return (num / np.maximum(den, 1e-6)).astype(np.float32), np.asarray(den, np.float32)
 
 
 def _mix(value: F32, fg: F32, bg: F32) -> F32:

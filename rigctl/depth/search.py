@@ -30,6 +30,7 @@ class EstimateStats(TypedDict, total=False):
     estimated_share_of_subject: float
     bound_hit_pixels: int
     unreliable_pixels: int
+    sensor_fixed_pixels: int  # matched unshifted, outside the range: fixed to the sensor (edge.py)
     filled_from_background_pixels: int
     levels: int  # disparity levels searched
     sgm: bool
