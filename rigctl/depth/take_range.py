@@ -17,10 +17,10 @@ from pydantic import BaseModel, ConfigDict
 
 from rigctl.depth.estimate import DepthResult
 from rigctl.depth.grid import Grid, SkippedFrameSet
-from rigctl.depth.key import Keyer
 from rigctl.depth.measured_range import measured_range
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.sources import FrameSource
+from rigctl.keying import Keyer
 from rigctl.planning.planner import search_range_px
 
 log = logging.getLogger(__name__)

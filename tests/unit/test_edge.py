@@ -6,12 +6,12 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from rigctl.depth.key import Keyer
 
 from rigctl.depth.edge import DEPTH_COVERAGE, coverage
 from rigctl.depth.estimate import estimate
 from rigctl.depth.grid import grid_from_arrays
 from rigctl.depth.presets import PRESETS
+from rigctl.keying import Keyer
 
 SCREEN = np.array([0.14, 0.54, 0.21], np.float32)
 
