@@ -41,7 +41,8 @@ def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def our_depth(take: Path) -> Path:
     out = take.parent / "depth"
-    res = run_rigctl("depth", str(take), "--out", str(out), "--json")
+    # nine cameras with the default preset: about two minutes on two idle cores, several on busy ones
+    res = run_rigctl("depth", str(take), "--out", str(out), "--json", timeout=1800)
     assert res.returncode == 0, res.stderr
     return out
 

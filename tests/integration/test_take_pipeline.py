@@ -45,9 +45,9 @@ def test_a_moving_take_without_a_plan_is_matched_once_and_never_searches_a_narro
     votes: list[int] = []
     real_measured, real_votes = take_range.measured_range, measured_module.disparity_votes
 
-    def counting_measured(grids: Any) -> Any:
+    def counting_measured(grids: Any, *a: Any) -> Any:
         passes.append(len(grids))
-        return real_measured(grids)
+        return real_measured(grids, *a)
 
     def counting_votes(grid: Grid, *a: Any) -> Any:
         votes.append(int(grid.meta["frame"]))
