@@ -32,7 +32,8 @@ def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("edge")
     res = run_rigctl(
         "record", "--take", "ideal", "--frames", "1", "--out", str(out),
-        "--sim", "ideal=true", "--sim", "seed=3", "--sim", "motion=false", "--force",
+        "--sim", "ideal=true", "--sim", "seed=3", "--sim", "motion=false", "--sim", "deterministic=true",
+        "--force",
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
     return out / "ideal"
