@@ -77,6 +77,17 @@ def positive_int(text: str) -> int:
     return value
 
 
+def non_negative_int(text: str) -> int:
+    """A whole number of at least 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be at least 0, got {text!r}")
+    return value
+
+
 def add_layout(p: argparse.ArgumentParser) -> None:
     """``--layout`` of every command that writes per-frame, per-camera files (rigctl.layout), and ``--colour``
     of their EXR pictures (rigctl.exr)."""
@@ -97,7 +108,7 @@ def add_layout(p: argparse.ArgumentParser) -> None:
 
 def add_pipeline_options(p: argparse.ArgumentParser) -> None:
     """The take-level pipeline's options, the same for rigctl depth and rigctl process."""
-    from rigctl.depth.options import DEFAULT_CHUNK
+    from rigctl.depth.options import DEFAULT_CHUNK, DEFAULT_WARMUP
 
     p.add_argument("--no-temporal", action="store_true", help="each frame set on its own (no temporal stabilisation)")
     p.add_argument(
@@ -106,4 +117,11 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
         default=DEFAULT_CHUNK,
         metavar="N",
         help=f"frame sets per chunk: state carried between frame sets starts afresh at each (default {DEFAULT_CHUNK})",
+    )
+    p.add_argument(
+        "--warmup",
+        type=non_negative_int,
+        default=DEFAULT_WARMUP,
+        metavar="W",
+        help=f"frame sets before a chunk processed, not written, to settle the stabiliser (default {DEFAULT_WARMUP})",
     )

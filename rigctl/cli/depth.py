@@ -60,6 +60,7 @@ def run(ns: argparse.Namespace) -> int:
         cameras=tuple(ns.cameras) if ns.cameras else None,
         temporal=not ns.no_temporal,
         chunk=ns.chunk,
+        warmup=ns.warmup,
     )
     if ns.check and ns.cameras is not None and len(set(ns.cameras)) < 2:
         raise ParameterError(

@@ -141,6 +141,7 @@ def run(ns: argparse.Namespace) -> int:
             cameras=tuple(ns.cameras) if ns.cameras else None,
             temporal=not ns.no_temporal,
             chunk=ns.chunk,
+            warmup=ns.warmup,
         ),
         calibration=ns.calibration,
         frames=list(parse_range(ns.frames, 1_000_000)) if ns.frames else None,
@@ -165,10 +166,11 @@ def run(ns: argparse.Namespace) -> int:
         rng = summary.range
         if rng is not None:
             lo, hi = rng.disparity_range_px
-            print(
-                f"take range {lo:.1f}..{hi:.1f} px ({rng.source}); widened {summary.widenings} times in chunks; "
-                f"bound hit on {summary.bound_hit_pixels} px in all"
-            )
+            print(f"take range {lo:.1f}..{hi:.1f} px ({rng.source}); bound hit on {summary.bound_hit_pixels} px in all")
+            if summary.search is not None and summary.search.rounds > 1:
+                lo, hi = summary.search.state.disparity_range_px
+                rounds = summary.search.rounds
+                print(f"widened to {lo:.1f}..{hi:.1f} px: every chunk computed again from it ({rounds} rounds)")
         print(
             f"{summary.computed} frame sets computed in {summary.chunks} chunks, {summary.failed} failed, "
             f"{summary.skipped_done} already done; {summary.frames_per_second:.2f} frames/s; ledger {summary.ledger}"

@@ -8,9 +8,12 @@ the frame set again; stabilise each camera over time (:class:`rigctl.depth.tempo
 cross-check the cameras; export (:class:`rigctl.depth.export.Exporter`); report (:class:`FrameReport`).
 
 State carried from one frame set to the next: the range (widened, never narrowed) and the temporal
-stabiliser's previous frame set. Both start afresh at :meth:`TakeProcessor.start_chunk`: a take is
-processed as contiguous chunks of ``DepthOptions.chunk`` frame sets (:func:`chunks`), so the farm hands
-chunks out independently and a run in one process over the same chunks writes the same bytes.
+stabiliser's previous frame set. A take is processed as contiguous chunks of ``DepthOptions.chunk`` frame
+sets (:func:`chunks`) that a farm hands out independently, so each chunk's outputs depend only on its frame
+sets, the ``DepthOptions.warmup`` frame sets of the take before its first (processed to settle the
+stabiliser, not written or reported: no temporal pop at the chunk's first frame) and the
+:class:`~rigctl.depth.take_range.SearchState` it starts from. The take's rounds (:func:`settle`) make that
+state the same for every chunk and wide enough for all of them.
 """
 
 from __future__ import annotations
@@ -32,11 +35,15 @@ from rigctl.depth.presets import PRESETS, Preset
 from rigctl.depth.report import CameraDepth, FrameReport, Timings, TruthScores
 from rigctl.depth.sources import FrameSource
 from rigctl.depth.take_range import (
+    MAX_ROUNDS,
     MAX_WIDEN,
     RangeDecision,
+    SearchRounds,
+    SearchState,
     Widening,
     bound_side_hits,
     decide_range,
+    hull,
     unplanned_range,
     widened,
 )
@@ -52,6 +59,32 @@ def chunks(numbers: list[int], size: int) -> list[list[int]]:
     if size < 1:
         raise ParameterError(f"--chunk must be at least 1 frame set, got {size}")
     return [numbers[i : i + size] for i in range(0, len(numbers), size)]
+
+
+@dataclass
+class ChunkEnd:
+    """Where a chunk's search ended (the widest state it reached) and the widenings on its way."""
+
+    state: SearchState
+    widenings: list[Widening]
+
+
+def settle(run_round: Callable[[SearchState, int], list[ChunkEnd]], start: SearchState, planned: bool) -> SearchRounds:
+    """Run the take's chunks (``run_round(state, round)``) from ``start``; while any chunk widened, run them all
+    again from the hull of every chunk's end state (at most :data:`MAX_ROUNDS` rounds). Returns how it
+    settled: then every published frame set searched that one range."""
+    state = start
+    moved: list[Widening] = []
+    for n in range(1, MAX_ROUNDS + 1):
+        ends = run_round(state, n)
+        new = hull([state, *(e.state for e in ends)])
+        if planned or new == state:
+            return SearchRounds(state=state, rounds=n, settled=True, widenings=moved)
+        moved += [w for e in ends for w in e.widenings]
+        if n == MAX_ROUNDS:
+            return SearchRounds(state=state, rounds=n, settled=False, widenings=moved)
+        state = new
+    raise AssertionError("unreachable")
 
 
 def _plain(value: Any) -> Any:
@@ -127,17 +160,41 @@ class TakeProcessor:
         self.exporter = exporter
         self.temporal = Temporal(TemporalParams(enabled=opt.temporal))
         self.d_range = self.decision.disparity_range_px
-        self.widenings: list[Widening] = []  # every widening of the run, in order
+        self.widenings: list[Widening] = []  # every widening of the chunk, warm-up included, in order
         self._last_widenings: list[Widening] = []
         # per side, the bound hits a widening did not remove (spurious matches at whatever bound there is):
-        # within the chunk, only more than twice as many count as the scene being clipped
+        # only more than twice as many count as the scene being clipped
         self.spurious = [0, 0]
+        self._start = self._reached = self.decision.start()
+        self._take_numbers: list[int] | None = None
 
-    def start_chunk(self) -> None:
-        """A new chunk: the range as the take decided it, no previous frame set."""
-        self.d_range = self.decision.disparity_range_px
-        self.spurious = [0, 0]
+    def state(self) -> SearchState:
+        return SearchState(disparity_range_px=self.d_range, spurious_hits=(self.spurious[0], self.spurious[1]))
+
+    def start_chunk(self, state: SearchState | None = None) -> None:
+        """A new chunk: from ``state`` (the take's range as decided by default), no previous frame set."""
+        self._start = self._reached = state if state is not None else self.decision.start()
+        self.widenings = []
+        self._restart()
+
+    def _restart(self) -> None:
+        self._reached = hull([self._reached, self.state()]) if self.widenings else self._reached
+        self.d_range = self._start.disparity_range_px
+        self.spurious = list(self._start.spurious_hits)
         self.temporal.reset()
+
+    def chunk_end(self) -> ChunkEnd:
+        """The widest state the chunk reached (a failed frame set's restart does not forget a widening)."""
+        return ChunkEnd(hull([self._reached, self.state()]), list(self.widenings))
+
+    def warmup_frames(self, first: int) -> list[int]:
+        """The ``DepthOptions.warmup`` frame sets of the take just before ``first`` (none for the first chunk)."""
+        if self.opt.warmup < 1:
+            return []
+        if self._take_numbers is None:
+            self._take_numbers = self.source.frame_numbers()
+        before = [n for n in self._take_numbers if n < first]
+        return before[-self.opt.warmup :]
 
     def _estimate(self, grid: Grid, d_range: tuple[float, float], progress: Progress | None) -> dict[str, DepthResult]:
         out = {}
@@ -182,11 +239,21 @@ class TakeProcessor:
         numbers: list[int],
         progress: Callable[[int, str], None] | None = None,
         catch: tuple[type[BaseException], ...] = (),
+        state: SearchState | None = None,
     ) -> Iterator[FrameDone | FrameFailed]:
-        """One chunk's frame sets in order, from a fresh state. A frame set with a damaged frame (skipped by
-        the source) is left out; an error of a type in ``catch`` is yielded as :class:`FrameFailed` and the
-        chunk goes on from a fresh state, anything else ends the run."""
-        self.start_chunk()
+        """One chunk's frame sets in order, from ``state`` (see :meth:`start_chunk`) after warming the temporal
+        state up on the frame sets before it (:meth:`warmup_frames`: processed, neither written nor yielded).
+        A frame set with a damaged frame (skipped by the source) is left out; an error of a type in ``catch``
+        is yielded as :class:`FrameFailed` (a warm-up frame's is not) and the chunk goes on from a fresh
+        state, anything else ends the run. :meth:`chunk_end` then tells where its search ended."""
+        self.start_chunk(state)
+        for n in self.warmup_frames(numbers[0]) if numbers else []:
+            try:
+                self.depth(self.source.grid(n), n)
+            except SkippedFrameSet:
+                continue
+            except catch:
+                self._restart()
         for n in numbers:
             step = None if progress is None else (lambda cam, n=n: progress(n, cam))
             try:
@@ -194,7 +261,7 @@ class TakeProcessor:
             except SkippedFrameSet:
                 continue
             except catch as exc:
-                self.start_chunk()
+                self._restart()
                 yield FrameFailed(n, exc)
 
     def process(self, number: int, progress: Progress | None = None) -> FrameDone:

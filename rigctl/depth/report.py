@@ -10,7 +10,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from rigctl.depth.search import EstimateStats
-from rigctl.depth.take_range import RangeDecision, Widening
+from rigctl.depth.take_range import RangeDecision, SearchRounds, Widening
 from rigctl.depth.video_metrics import VideoScores
 from rigctl.publish import publish_json
 from rigctl.take.manifest import DamagedFrame
@@ -82,11 +82,13 @@ class TakeReport(BaseModel):
     source: str
     preset: str
     range: RangeDecision
+    search: SearchRounds | None = None  # how the take's range settled: what every frame set searched
     chunk: int
+    warmup: int = 0
     temporal: bool
     frames: dict[str, FrameReport] = {}
     bound_hit_pixels: int = 0  # summed over the frame sets
-    widenings: list[Widening] = []  # every widening of the range, in order (each also in its frame's report)
+    widenings: list[Widening] = []  # widenings within the published frame sets, in order (none once settled)
     video: dict[str, VideoScores] = {}  # per camera, when the take has a truth
     damaged_skipped: list[DamagedFrame] = []
     seconds: float = 0.0

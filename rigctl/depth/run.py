@@ -16,10 +16,10 @@ from rigctl.depth.estimate import DepthResult
 from rigctl.depth.export import Exporter, Target, colour_preview, write_outputs
 from rigctl.depth.grid import Grid, TakeGrid
 from rigctl.depth.options import DEFAULT_CHUNK, DepthOptions
-from rigctl.depth.pipeline import FrameDone, TakeProcessor, chunks
+from rigctl.depth.pipeline import ChunkEnd, FrameDone, TakeProcessor, chunks, settle
 from rigctl.depth.report import TakeReport
 from rigctl.depth.sources import FrameSource, OneGrid, open_source
-from rigctl.depth.take_range import unplanned_range
+from rigctl.depth.take_range import SearchState, unplanned_range
 from rigctl.depth.video_metrics import VideoMetrics
 from rigctl.errors import ParameterError
 from rigctl.exr import to_colour
@@ -102,23 +102,35 @@ def run_depth(
     exporter = Exporter(out, layout, colour, formats, flat=src.flat and layout == "frames")
     processor = TakeProcessor(src, opt, exporter=exporter)
     report = TakeReport(
-        source=str(source), preset=opt.preset, range=processor.decision, chunk=opt.chunk, temporal=opt.temporal
-    )
+        source=str(source), preset=opt.preset, range=processor.decision, chunk=opt.chunk, warmup=opt.warmup,
+        temporal=opt.temporal,
+    )  # fmt: skip
     video = VideoScoring()
     position = {n: i for i, n in enumerate(numbers)}
     cams = processor.cameras
+    this_round = 1
 
     def step(n: int, cam: str) -> None:
         if progress:
-            progress((position[n] + cams.index(cam) / len(cams)) / len(numbers), f"frame {n} camera {cam}")
+            again = f" (round {this_round}: the take's range was widened)" if this_round > 1 else ""
+            progress((position[n] + cams.index(cam) / len(cams)) / len(numbers), f"frame {n} camera {cam}{again}")
 
-    for chunk in chunks(numbers, opt.chunk):
-        for done in processor.run_chunk(chunk, step):
-            assert isinstance(done, FrameDone)  # nothing is caught: an error ends the run
-            report.frames[str(done.number)] = done.report
-            video.add(done)
+    def run_round(state: SearchState, n: int) -> list[ChunkEnd]:
+        """Every chunk from ``state``: a later round replaces every output and report of the one before."""
+        nonlocal video, this_round
+        this_round, video, ends = n, VideoScoring(), []
+        report.frames = {}
+        for chunk in chunks(numbers, opt.chunk):
+            for done in processor.run_chunk(chunk, step, state=state):
+                assert isinstance(done, FrameDone)  # nothing is caught: an error ends the run
+                report.frames[str(done.number)] = done.report
+                video.add(done)
+            ends.append(processor.chunk_end())
+        return ends
+
+    report.search = settle(run_round, processor.decision.start(), processor.decision.planned)
     report.bound_hit_pixels = sum(f.bound_hit_pixels for f in report.frames.values())
-    report.widenings = list(processor.widenings)
+    report.widenings = [w for f in report.frames.values() for w in f.widenings]
     video.fill(report)
     if isinstance(src, TakeGrid):
         report.damaged_skipped = list(src.reader.damaged)

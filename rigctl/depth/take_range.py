@@ -4,8 +4,13 @@ over a few frame sets spread across the take (:func:`rigctl.depth.measured_range
 failing that the whole plausible range. A measured range is only ever widened, never narrowed: when a frame
 set's estimates pile up at one of its bounds (:func:`bound_side_hits`), the pipeline widens that side and
 runs the frame set again, so no frame keeps a clipped result. Hits a widening did not halve are spurious matches at
-whatever bound there is, not a clipped scene: for the rest of the chunk that side is widened again only
-when more than twice as many hit it. A planned range is the user's word and is kept; its bound hits are reported."""
+whatever bound there is, not a clipped scene: from then on that side is widened again only when more than
+twice as many hit it. A planned range is the user's word and is kept; its bound hits are reported.
+
+Every chunk of a take starts from the same :class:`SearchState` (the range and those spurious-hit thresholds).
+When a chunk widened, the take's state becomes the hull of every chunk's end state (:func:`hull`, whatever the
+order the chunks finished in) and every chunk is run again from it, round after round, until no chunk widens:
+every published frame set then searched the same range, the widest any frame set needed."""
 
 from __future__ import annotations
 
@@ -31,6 +36,7 @@ HIT_SHARE = 0.002  # ... and more than this share of that camera's estimated pix
 WIDEN_MIN_PX = 4.0  # a widening adds at least this much to the side hit ...
 WIDEN_SHARE = 0.25  # ... or this share of the range's span, whichever is more
 MAX_WIDEN = 3  # widenings of one frame set at most (each runs it again)
+MAX_ROUNDS = 4  # runs of a take's chunks at most: the first, and each after the take's range was widened
 
 
 class Widening(BaseModel):
@@ -53,6 +59,41 @@ class RangeDecision(BaseModel):
     source: str
     planned: bool  # from a plan: kept as it is, never widened
     sampled_frames: list[int] = []
+
+    def start(self) -> SearchState:
+        return SearchState(disparity_range_px=self.disparity_range_px)
+
+
+class SearchState(BaseModel):
+    """What every chunk of a take starts from: the range, and per side (low, high) the bound hits a widening did
+    not remove (spurious matches: only more than twice as many widen that side again)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    disparity_range_px: tuple[float, float]
+    spurious_hits: tuple[int, int] = (0, 0)
+
+
+def hull(states: list[SearchState]) -> SearchState:
+    """The state wide enough for every one of ``states``: the widest range, the largest spurious thresholds
+    (independent of their order, so of the order in which a farm's chunks finish)."""
+    return SearchState(
+        disparity_range_px=(min(s.disparity_range_px[0] for s in states), max(s.disparity_range_px[1] for s in states)),
+        spurious_hits=(max(s.spurious_hits[0] for s in states), max(s.spurious_hits[1] for s in states)),
+    )
+
+
+class SearchRounds(BaseModel):
+    """How the take's range settled (``report.json`` and ``process.json``): the state the published frame sets
+    were computed from, the rounds run (1: no chunk widened the take's range), whether the last round widened
+    nothing (only false when :data:`MAX_ROUNDS` ran out), and the widenings that moved the take's range."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    state: SearchState
+    rounds: int = 1
+    settled: bool = True
+    widenings: list[Widening] = []
 
 
 def unplanned_range(width: int) -> tuple[float, float]:

@@ -20,9 +20,9 @@ import numpy as np
 from rigctl.depth.export import Exporter, frame_name
 from rigctl.depth.grid import TakeGrid
 from rigctl.depth.options import DepthOptions
-from rigctl.depth.pipeline import FrameDone, TakeProcessor
+from rigctl.depth.pipeline import ChunkEnd, FrameDone, TakeProcessor
 from rigctl.depth.sources import FrameSource, open_source
-from rigctl.depth.take_range import RangeDecision, decide_range
+from rigctl.depth.take_range import RangeDecision, SearchState, decide_range
 from rigctl.errors import RigctlError, TakeError
 from rigctl.farm.ledger import FrameEntry
 
@@ -43,6 +43,7 @@ class ChunkJob:
     frames: tuple[int, ...]
     options: DepthOptions
     decision: RangeDecision
+    state: SearchState
     calibration: str | None = None
 
 
@@ -79,25 +80,27 @@ def take_range(take: str, calibration: str | None, options: DepthOptions) -> Ran
     return decide_range(cached_source(take, calibration), options)
 
 
-def run_chunk(job: ChunkJob) -> list[tuple[int, FrameEntry]]:
-    """The Dask task: the chunk's frame sets in order; never raises for a bad frame set (it is reported
-    failed, the others go on)."""
+def run_chunk(job: ChunkJob) -> tuple[list[tuple[int, FrameEntry]], ChunkEnd]:
+    """The Dask task: the chunk's frame sets in order from the job's search state (after its warm-up), and
+    where its search ended; never raises for a bad frame set (it is reported failed, the others go on)."""
     pin_threads()
     worker = worker_address()
     out: list[tuple[int, FrameEntry]] = []
     source = cached_source(job.take, job.calibration)
     processor = TakeProcessor(source, job.options, job.decision, Exporter(Path(job.out), atomic=True))
     t0 = time.perf_counter()
-    for item in processor.run_chunk(list(job.frames), catch=FAILURES):
+    for item in processor.run_chunk(list(job.frames), catch=FAILURES, state=job.state):
         seconds = time.perf_counter() - t0
         if isinstance(item, FrameDone):
-            entry = FrameEntry(status="done", worker=worker, seconds=seconds, report=item.report, files=item.files)
+            entry = FrameEntry(
+                status="done", worker=worker, seconds=seconds, report=item.report, files=item.files, start=job.state
+            )
         else:
             log.warning("frame %s failed: %s", item.number, item.error)
             entry = FrameEntry(status="failed", worker=worker, seconds=seconds, error=one_line(item.error))
         out.append((item.number, entry))
         t0 = time.perf_counter()
-    return out
+    return out, processor.chunk_end()
 
 
 def one_line(exc: BaseException) -> str:

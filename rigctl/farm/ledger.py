@@ -1,4 +1,5 @@
-"""``DIR/process.json``: the take's range and what happened to every frame set, rewritten atomically after
+"""``DIR/process.json``: the take's range, how it settled (the state every chunk started from, the rounds), the
+chunking, and what happened to every frame set (with the state its chunk started from), rewritten atomically after
 each chunk, so a run that is stopped at any moment leaves a ledger a re-run can trust. Typed: a file that is
 not a ledger (or one whose entries are not entries) is refused in one line naming it."""
 
@@ -15,7 +16,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 
 from rigctl.depth.export import FileRecord, is_whole
 from rigctl.depth.report import FrameReport
-from rigctl.depth.take_range import RangeDecision
+from rigctl.depth.take_range import RangeDecision, SearchRounds, SearchState
 from rigctl.errors import TakeError
 
 log = logging.getLogger(__name__)
@@ -34,12 +35,17 @@ class FrameEntry(BaseModel):
     error: str | None = None
     report: FrameReport | None = None
     files: dict[str, FileRecord] = {}
+    start: SearchState | None = None  # the search state its chunk started from (done from another: redone)
 
 
 class LedgerFile(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     range: RangeDecision | None = None
+    search: SearchRounds | None = None  # the state chunks start from now, and how it got there
+    reached: SearchState | None = None  # the hull of every chunk's end state under ``search`` (wider: a round)
+    chunk: int | None = None  # frame sets per chunk, and warm-up frame sets before each: a run with others
+    warmup: int | None = None  # is refused (the outputs depend on them)
     frames: dict[str, FrameEntry] = {}
 
 

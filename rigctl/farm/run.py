@@ -29,8 +29,8 @@ from pydantic import BaseModel, ConfigDict
 
 from rigctl.depth.export import FORMATS, PARTIAL_PREFIX, frame_name
 from rigctl.depth.options import DepthOptions
-from rigctl.depth.pipeline import chunks
-from rigctl.depth.take_range import RangeDecision
+from rigctl.depth.pipeline import ChunkEnd, chunks, settle
+from rigctl.depth.take_range import RangeDecision, SearchRounds, SearchState, hull
 from rigctl.errors import ParameterError
 from rigctl.farm.frame import ChunkJob, is_rectified, one_line, run_chunk, take_range
 from rigctl.farm.ledger import FrameEntry, Ledger
@@ -106,16 +106,27 @@ class Status:
 
 @dataclass
 class Work:
-    """What a run is to do: the chunks with a frame set not done (each computed whole, as its state runs
-    through it), the frame sets done whose files are whole (skipped), the ledger."""
+    """What a run is to do: every chunk of the frame sets asked for, the frame sets done whose files are whole,
+    the ledger. A chunk is computed whole (its state runs through it) unless every frame set of it is whole and
+    was computed from the search state the take's chunks start from now (:meth:`todo`)."""
 
-    todo: list[list[int]]
-    skipped: list[int]
+    chunks: list[list[int]]
+    whole: set[int]
     ledger: Ledger
+    redo: bool = False
 
-    @property
-    def frames(self) -> int:
-        return sum(len(c) for c in self.todo)
+    def todo(self, state: SearchState) -> tuple[list[list[int]], list[int]]:
+        """The chunks to compute from ``state`` and the frame sets skipped."""
+        todo: list[list[int]] = []
+        skipped: list[int] = []
+        for chunk in self.chunks:
+            entries = [self.ledger.frames.get(frame_name(n)) for n in chunk]
+            done = all(n in self.whole for n in chunk) and all(e is not None and e.start == state for e in entries)
+            if done and not self.redo:
+                skipped += chunk
+            else:
+                todo.append(chunk)
+        return todo, skipped
 
 
 def frames_to_do(options: FarmOptions) -> Work:
@@ -148,22 +159,22 @@ def frames_to_do(options: FarmOptions) -> Work:
     if not numbers:
         raise ParameterError(f"{take}: the take has no complete frame set")
     ledger = Ledger(options.out)
+    chunk, warmup = options.depth.chunk, options.depth.warmup
+    if ledger.frames and not options.redo and (ledger.data.chunk, ledger.data.warmup) != (chunk, warmup):
+        raise ParameterError(
+            f"{ledger.path}: computed with --chunk {ledger.data.chunk} and --warmup {ledger.data.warmup}, asked "
+            f"--chunk {chunk} --warmup {warmup}: run with those, or --redo to compute every frame set again"
+        )
+    ledger.data.chunk, ledger.data.warmup = chunk, warmup
     depth_dir = options.out / "depth"
     names = list(cams or reader.names)
-    todo: list[list[int]] = []
-    skipped: list[int] = []
-    for chunk in chunks(numbers, options.depth.chunk):
-        whole = [
-            n
-            for n in chunk
-            if ledger.whole(frame_name(n), depth_dir / frame_name(n))
-            and all((depth_dir / frame_name(n) / f"{c}.{ext}").exists() for c in names for ext in FORMATS)
-        ]
-        if len(whole) == len(chunk) and not options.redo:
-            skipped += chunk
-        else:
-            todo.append(chunk)
-    return Work(todo, skipped, ledger)
+    whole = {
+        n
+        for n in numbers
+        if ledger.whole(frame_name(n), depth_dir / frame_name(n))
+        and all((depth_dir / frame_name(n) / f"{c}.{ext}").exists() for c in names for ext in FORMATS)
+    }
+    return Work(chunks(numbers, chunk), whole, ledger, options.redo)
 
 
 class ProcessSummary(BaseModel):
@@ -182,7 +193,8 @@ class ProcessSummary(BaseModel):
     failed_frames: dict[str, str]
     frames_by_worker: dict[str, int]
     range: RangeDecision | None
-    widenings: int  # widenings of the range within chunks (each in the frame's report)
+    search: SearchRounds | None  # how the take's range settled: the state every chunk started from, the rounds
+    widenings: int  # widenings of the range within the chunks of the last round (each in the frame's report)
     bound_hit_pixels: int  # summed over the frame sets computed by this run
     seconds: float
     compute_seconds: float  # from the first task submitted to the last result (no cluster start)
@@ -257,13 +269,18 @@ def process_take(
     depth_dir.mkdir(parents=True, exist_ok=True)
     for stale in depth_dir.glob(PARTIAL_PREFIX + "*"):  # left by a run that was stopped mid-write
         shutil.rmtree(stale, ignore_errors=True)
-    status = Status(total=work.frames, skipped=len(work.skipped), clock=clock)
+    status = Status(total=0, clock=clock)
     workers: dict[str, int] = {}
     failed: dict[str, str] = {}
-    widenings = bound_hits = 0
+    computed: dict[str, FrameEntry] = {}  # this run's last result of every frame set
     t0 = clock()
     compute_seconds = 0.0
-    if work.todo:
+    known = ledger.data.search.state if ledger.data.search is not None and ledger.data.range is not None else None
+    if known is not None and ledger.data.reached is not None:
+        known = hull([known, ledger.data.reached])  # a round was cut short: its chunks widened the range
+    todo, skipped = work.todo(known) if known is not None else (work.chunks, [])
+    chunks_run = 0
+    if todo:
         from distributed import as_completed
 
         take = str(options.take.resolve())
@@ -277,56 +294,88 @@ def process_take(
             # turn into a range again, and may have been given since
             if decision is None or options.redo or plan or decision.planned:
                 fut = client.submit(take_range, take, calibration, options.depth, key=f"rigctl-range-{run_id}")
-                decision = fut.result()
-                ledger.data.range = decision
+                new = fut.result()
+                if new != decision or options.redo:  # the chunks start from the new range
+                    ledger.data.search = ledger.data.reached = None
+                decision = ledger.data.range = new
+            if ledger.data.search is None:
+                ledger.data.search = SearchRounds(state=decision.start(), rounds=0, settled=False)
+            start = ledger.data.search.state
+            if ledger.data.reached is not None:
+                start = hull([start, ledger.data.reached])
+            ledger.save()
+
+            def run_round(state: SearchState, round_: int) -> list[ChunkEnd]:
+                """The chunks not yet computed from ``state``; the ledger notes where each one's search ended."""
+                nonlocal skipped, chunks_run
+                assert ledger.data.search is not None
+                if ledger.data.search.state != state:
+                    ledger.data.reached = None
+                ledger.data.search = ledger.data.search.model_copy(
+                    update={"state": state, "rounds": round_, "settled": False}
+                )
                 ledger.save()
-            futures = {}
-            for chunk in work.todo:
-                job = ChunkJob(take, str(depth_dir.resolve()), tuple(chunk), options.depth, decision, calibration)
-                key = f"rigctl-chunk-{frame_name(chunk[0])}-{run_id}"
-                futures[client.submit(run_chunk, job, key=key, pure=False)] = chunk
-            if progress:
-                progress(status)
-            for fut in as_completed(futures):
-                chunk = futures[fut]
-                try:
-                    entries = fut.result()
-                except Exception as exc:  # the task itself could not run (KilledWorker, lost cluster, ...)
-                    entries = [(n, FrameEntry(status="failed", error=one_line(exc))) for n in chunk]
-                fut.release()
-                for n, entry in entries:
-                    name = frame_name(n)
-                    ledger.record(name, entry)
-                    if entry.status == "done":
-                        status.done += 1
-                        workers[entry.worker] = workers.get(entry.worker, 0) + 1
-                        if entry.report is not None:
-                            widenings += len(entry.report.widenings)
-                            bound_hits += entry.report.bound_hit_pixels
-                    else:
-                        status.failed += 1
-                        failed[name] = entry.error or ""
-                ledger.save()
+                todo, now_skipped = work.todo(state)
+                if round_ == 1:
+                    skipped = now_skipped
+                status.total += sum(len(c) for c in todo)
+                chunks_run += len(todo)
+                futures = {}
+                for chunk in todo:
+                    job = ChunkJob(
+                        take, str(depth_dir.resolve()), tuple(chunk), options.depth, decision, state, calibration
+                    )
+                    key = f"rigctl-chunk-{frame_name(chunk[0])}-r{round_}-{run_id}"
+                    futures[client.submit(run_chunk, job, key=key, pure=False)] = chunk
                 if progress:
                     progress(status)
+                for fut in as_completed(futures):
+                    chunk = futures[fut]
+                    try:
+                        entries, end = fut.result()
+                        ledger.data.reached = hull([ledger.data.reached or state, end.state])
+                    except Exception as exc:  # the task itself could not run (KilledWorker, lost cluster, ...)
+                        entries = [(n, FrameEntry(status="failed", error=one_line(exc))) for n in chunk]
+                    fut.release()
+                    for n, entry in entries:
+                        name = frame_name(n)
+                        ledger.record(name, entry)
+                        computed[name] = entry
+                        if entry.status == "done":
+                            status.done += 1
+                            workers[entry.worker] = workers.get(entry.worker, 0) + 1
+                            failed.pop(name, None)
+                        else:
+                            status.failed += 1
+                            failed[name] = entry.error or ""
+                    ledger.save()
+                    if progress:
+                        progress(status)
+                return [ChunkEnd(ledger.data.reached or state, [])]
+
+            ledger.data.search = settle(run_round, start, decision.planned)
+            ledger.save()
             compute_seconds = clock() - t_compute
     elif not ledger.path.exists():
         ledger.save()
+    final = [e for e in computed.values() if e.report is not None and ledger.data.search is not None
+             and e.start == ledger.data.search.state]  # fmt: skip
     seconds = clock() - t0
     return ProcessSummary(
         take=str(options.take),
         out=str(options.out),
         ledger=str(ledger.path),
-        frames=work.frames + len(work.skipped),
-        chunks=len(work.todo),
+        frames=sum(len(c) for c in work.chunks),
+        chunks=chunks_run,
         computed=status.done,
-        failed=status.failed,
-        skipped_done=len(work.skipped),
+        failed=len(failed),
+        skipped_done=len(skipped),
         failed_frames=failed,
         frames_by_worker=workers,
         range=ledger.data.range,
-        widenings=widenings,
-        bound_hit_pixels=bound_hits,
+        search=ledger.data.search,
+        widenings=sum(len(e.report.widenings) for e in final if e.report is not None),
+        bound_hit_pixels=sum(e.report.bound_hit_pixels for e in final if e.report is not None),
         seconds=seconds,
         compute_seconds=compute_seconds,
         frames_per_second=status.done / compute_seconds if compute_seconds > 0 and status.done else 0.0,
