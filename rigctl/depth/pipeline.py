@@ -80,7 +80,8 @@ def settle(run_round: Callable[[SearchState, int], list[ChunkEnd]], start: Searc
         new = hull([state, *(e.state for e in ends)])
         if planned or new == state:
             return SearchRounds(state=state, rounds=n, settled=True, widenings=moved)
-        moved += [w for e in ends for w in e.widenings]
+        # in frame order whatever order the chunks finished in (a warm-up frame's widening may appear twice)
+        moved += sorted((w for e in ends for w in e.widenings), key=lambda w: (w.frame, w.before, w.after))
         if n == MAX_ROUNDS:
             return SearchRounds(state=state, rounds=n, settled=False, widenings=moved)
         state = new

@@ -329,11 +329,13 @@ def process_take(
                     futures[client.submit(run_chunk, job, key=key, pure=False)] = chunk
                 if progress:
                     progress(status)
+                ends: list[ChunkEnd] = []
                 for fut in as_completed(futures):
                     chunk = futures[fut]
                     try:
                         entries, end = fut.result()
                         ledger.data.reached = hull([ledger.data.reached or state, end.state])
+                        ends.append(end)
                     except Exception as exc:  # the task itself could not run (KilledWorker, lost cluster, ...)
                         entries = [(n, FrameEntry(status="failed", error=one_line(exc))) for n in chunk]
                     fut.release()
@@ -351,7 +353,7 @@ def process_take(
                     ledger.save()
                     if progress:
                         progress(status)
-                return [ChunkEnd(ledger.data.reached or state, [])]
+                return [*ends, ChunkEnd(ledger.data.reached or state, [])]  # and what earlier runs reached
 
             ledger.data.search = settle(run_round, start, decision.planned)
             ledger.save()

@@ -24,7 +24,8 @@ from rigctl.farm.run import FarmOptions, Status, process_take
 REPO = Path(__file__).resolve().parents[2]
 CAMS = ("r1c1", "r1c0")
 CHUNK = 2  # three chunks of the six frame sets: both workers get some
-FAST = ["--preset", "fast", "--cameras", *CAMS, "--chunk", str(CHUNK)]
+WARMUP = 2  # the last chunk warms up on two frame sets of the one before (not on the take's start)
+FAST = ["--preset", "fast", "--cameras", *CAMS, "--chunk", str(CHUNK), "--warmup", str(WARMUP)]
 FRAMES = 6
 
 
@@ -83,7 +84,7 @@ def test_local_cluster_of_processes_matches_rigctl_depth_byte_for_byte(
 
 
 def test_a_rerun_after_an_interruption_computes_only_the_missing_frames(take: Path, tmp_path: Path) -> None:
-    opt = FarmOptions(take, tmp_path, DepthOptions(preset="fast", cameras=CAMS, chunk=CHUNK), workers=1)
+    opt = FarmOptions(take, tmp_path, DepthOptions(preset="fast", cameras=CAMS, chunk=CHUNK, warmup=WARMUP), workers=1)
 
     def stop_after_two(st: Status) -> None:
         if st.done == 2:
@@ -255,3 +256,56 @@ def test_a_take_not_yet_rectified_is_rectified_on_the_workers_as_rigctl_rectify_
     assert run_rigctl("depth", str(tmp_path / "rect"), "--out", str(tmp_path / "d"), *FAST).returncode == 0
     for name in ("000000", "000001"):
         assert same_bytes(tmp_path / "d" / name, tmp_path / "p" / "depth" / name) == []
+
+
+def test_a_range_too_narrow_for_the_take_is_widened_for_every_chunk_alike_in_depth_and_process(
+    take: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A measured range that clips the nearest part of the presenter: each chunk of the first round widens it
+    on its own, so every chunk is run again from the hull of their widenings. Then every frame set searched that
+    one range (none narrower than an earlier one), in ``rigctl depth`` and in ``rigctl process`` byte for byte."""
+    import numpy as np
+
+    import rigctl.depth.pipeline as pipeline
+    from rigctl.depth.run import run_depth
+    from rigctl.depth.sources import open_source
+    from rigctl.depth.take_range import RangeDecision, decide_range
+    from rigctl.farm.ledger import Ledger
+
+    opt = DepthOptions(preset="fast", cameras=CAMS, chunk=CHUNK, warmup=WARMUP)
+    src = open_source(take)
+    truths = [src.grid(n).truth for n in src.frame_numbers()]
+    top = max(float(np.nanmax(np.where(np.isfinite(t[c]), t[c], np.nan))) for t in truths if t for c in CAMS)
+    measured = decide_range(src, opt)
+    narrow = RangeDecision(
+        disparity_range_px=(measured.disparity_range_px[0], top - 3.0), source="measured (test)", planned=False
+    )
+    monkeypatch.setattr(pipeline, "decide_range", lambda _src, _opt: narrow)
+    report = run_depth(take, tmp_path / "d", opt, formats=("pfm", "png", "exr"))
+    search = report.search
+    assert search is not None and search.rounds >= 2 and search.settled and search.widenings, search
+    lo, hi = search.state.disparity_range_px
+    assert lo <= narrow.disparity_range_px[0] and hi > top  # the hull covers the scene
+    ranges = [f.disparity_range_px for f in report.frames.values()]
+    assert ranges == [(lo, hi)] * FRAMES  # every frame set searched the final range: none narrower than before
+    assert report.widenings == [] and all("(widened)" in f.range_source for f in report.frames.values())
+
+    ledger = Ledger(tmp_path / "p")  # the farm from the same measured range (a measured range is kept)
+    ledger.data.range = narrow
+    ledger.save()
+    res = run_rigctl("process", str(take), "--out", str(tmp_path / "p"), "--workers", "2", *FAST, "--json")
+    assert res.returncode == 0, res.stderr
+    summary = json.loads(res.stdout)
+    assert summary["search"] == search.model_dump(mode="json")  # the same rounds, whatever order chunks finished in
+    assert summary["computed"] == search.rounds * FRAMES and summary["failed"] == 0
+    written = json.loads((tmp_path / "p" / "process.json").read_text())
+    assert written["search"] == summary["search"] and written["chunk"] == CHUNK and written["warmup"] == WARMUP
+    for name, entry in written["frames"].items():
+        assert entry["start"] == summary["search"]["state"]
+        assert entry["report"]["disparity_range_px"] == [lo, hi]
+        assert same_bytes(tmp_path / "d" / name, tmp_path / "p" / "depth" / name) == []
+    # a resume with another chunking is refused in one line (its outputs would not be these)
+    other = run_rigctl("process", str(take), "--out", str(tmp_path / "p"), *FAST, "--chunk", "3")
+    assert other.returncode == 2 and other.stderr.count("\n") == 1 and "--chunk 2" in other.stderr, other.stderr
+    again = run_rigctl("process", str(take), "--out", str(tmp_path / "p"), *FAST, "--json")
+    assert again.returncode == 0 and json.loads(again.stdout)["skipped_done"] == FRAMES, again.stderr
