@@ -100,3 +100,46 @@ def test_resume_trusts_a_done_frame_only_while_its_files_are_whole(tmp_path: Pat
 def test_worker_memory_grows_with_pixels_and_cameras() -> None:
     small, big = worker_memory_bytes(480, 270, 9), worker_memory_bytes(3840, 2160, 9)
     assert small < worker_memory_bytes(480, 270, 18) and small < big
+
+
+def test_the_take_search_settles_on_the_hull_of_every_chunk_whatever_their_order() -> None:
+    from rigctl.depth.pipeline import ChunkEnd, settle
+    from rigctl.depth.take_range import MAX_ROUNDS, SearchState, Widening, hull
+
+    a = SearchState(disparity_range_px=(10.0, 20.0))
+    b = SearchState(disparity_range_px=(10.0, 26.0), spurious_hits=(0, 70))
+    c = SearchState(disparity_range_px=(6.0, 20.0))
+    assert hull([a, b, c]) == hull([c, b, a]) == SearchState(disparity_range_px=(6.0, 26.0), spurious_hits=(0, 70))
+    wide = Widening(frame=7, before=(10.0, 20.0), after=(10.0, 26.0), low_hits=0, high_hits=900)
+    starts: list[SearchState] = []
+
+    def run_round(state: SearchState, n: int) -> list[ChunkEnd]:  # chunk 2 widens in the first round only
+        starts.append(state)
+        return [ChunkEnd(state, []), ChunkEnd(hull([state, b]), [wide] if n == 1 else [])]
+
+    done = settle(run_round, a, planned=False)
+    assert starts == [a, hull([a, b])] and done.state == hull([a, b]) and done.rounds == 2 and done.settled
+    assert done.widenings == [wide]
+    starts.clear()
+    assert settle(run_round, a, planned=True).rounds == 1 and starts == [a]  # a plan is never widened
+
+    def ever_wider(state: SearchState, n: int) -> list[ChunkEnd]:
+        lo, hi = state.disparity_range_px
+        return [ChunkEnd(SearchState(disparity_range_px=(lo, hi + 1)), [])]
+
+    endless = settle(ever_wider, a, planned=False)
+    assert endless.rounds == MAX_ROUNDS and not endless.settled
+
+
+def test_resume_skips_a_whole_chunk_only_when_it_started_from_the_take_state(tmp_path: Path) -> None:
+    from rigctl.depth.take_range import SearchState
+    from rigctl.farm.run import Work
+
+    s1, s2 = SearchState(disparity_range_px=(0.0, 8.0)), SearchState(disparity_range_px=(0.0, 12.0))
+    led = Ledger(tmp_path)
+    for n, start in ((0, s1), (1, s1), (2, s1), (3, s2)):
+        led.record(f"{n:06d}", FrameEntry(status="done", start=start))
+    work = Work([[0, 1], [2, 3]], {0, 1, 2, 3}, led)
+    assert work.todo(s1) == ([[2, 3]], [0, 1])
+    assert work.todo(s2) == ([[0, 1], [2, 3]], [])
+    assert Work([[0, 1], [2, 3]], {0, 1, 2, 3}, led, redo=True).todo(s1) == ([[0, 1], [2, 3]], [])
