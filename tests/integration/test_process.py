@@ -68,10 +68,13 @@ def test_local_cluster_of_processes_matches_rigctl_depth_byte_for_byte(
     res = run_rigctl("process", str(take), "--out", str(tmp_path), "--workers", "2", *FAST, "--json")
     assert res.returncode == 0, res.stderr
     summary = json.loads(res.stdout)
-    assert summary["computed"] == FRAMES and summary["failed"] == 0 and summary["chunks"] == FRAMES // CHUNK
+    rounds = summary["search"]["rounds"]  # 2 when a chunk widened the take's range: every chunk again from it
+    assert summary["computed"] == rounds * FRAMES and summary["chunks"] == rounds * FRAMES // CHUNK
+    assert summary["failed"] == 0 and summary["search"]["settled"]
     ledger = json.loads((tmp_path / "process.json").read_text())
     report = json.loads((single_process / "report.json").read_text())
     assert ledger["range"] == report["range"] == summary["range"]  # decided once, the same way, for every chunk
+    assert ledger["search"] == report["search"] == summary["search"]  # and settled the same way
     assert summary["bound_hit_pixels"] == report["bound_hit_pixels"]  # summed over the take alike
     frames = ledger["frames"]
     assert sorted(frames) == [frame_name(n) for n in range(FRAMES)]
@@ -84,7 +87,9 @@ def test_local_cluster_of_processes_matches_rigctl_depth_byte_for_byte(
 
 
 def test_a_rerun_after_an_interruption_computes_only_the_missing_frames(take: Path, tmp_path: Path) -> None:
-    opt = FarmOptions(take, tmp_path, DepthOptions(preset="fast", cameras=CAMS, chunk=CHUNK, warmup=WARMUP), workers=1)
+    # a planned range: one round (a chunk that widened a measured range would have every chunk computed again)
+    depth = DepthOptions(preset="fast", cameras=CAMS, chunk=CHUNK, warmup=WARMUP, disparity_range=(30.0, 60.0))
+    opt = FarmOptions(take, tmp_path, depth, workers=1)
 
     def stop_after_two(st: Status) -> None:
         if st.done == 2:
@@ -210,7 +215,7 @@ def test_subprocess_cluster_survives_a_killed_worker_and_keeps_images_off_the_sc
                 os.killpg(p.pid, signal.SIGKILL)
 
     summary = json.loads(stdout)
-    assert summary["computed"] == FRAMES and summary["failed"] == 0
+    assert summary["computed"] == summary["search"]["rounds"] * FRAMES and summary["failed"] == 0
     frames = json.loads(ledger.read_text())["frames"]
     assert all(e["status"] == "done" for e in frames.values()) and len(frames) == FRAMES
     for name in frames:
