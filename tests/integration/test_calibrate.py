@@ -23,8 +23,11 @@ STEREO = SHARED / "data" / "opencv-stereo-chessboard"
 
 
 def record(out: Path, name: str, frames: int, *sim: str) -> Path:
+    """A board take on the simulated clock: every pose is recorded however busy the machine is (a live take
+    on a loaded machine loses frames at the source, and with them the views these tests count)."""
     args = ["record", "--take", name, "--scene", "charuco", "--frames", str(frames), "--out", str(out)]
-    res = run_rigctl(*args, "--sim", f"board_poses={frames}", *[a for s in sim for a in ("--sim", s)])
+    sim = ("deterministic=true", f"board_poses={frames}", *sim)
+    res = run_rigctl(*args, *[a for s in sim for a in ("--sim", s)])
     assert res.returncode == 0, res.stderr
     return out / name
 
