@@ -24,6 +24,8 @@ from rigctl.take.reader import TakeReader
 from rigctl.take.writer import CameraWriter, DiskFullError
 
 FAST = ["--sim", "motion=false"]
+# on the simulated clock: every frame is recorded, however busy the machine
+STEADY = [*FAST, "--sim", "deterministic=true"]
 RIG = load_rig("sim-3x3")
 
 
@@ -162,7 +164,7 @@ def test_stalled_writer_still_stops_in_bounded_time(tmp_path: Path) -> None:
 
 def test_corruption_is_located_by_file_and_byte(tmp_path: Path) -> None:
     res = subprocess.run(
-        [*rigctl_exe(), "record", "--take", "c", "--frames", "6", "--out", str(tmp_path), *FAST],
+        [*rigctl_exe(), "record", "--take", "c", "--frames", "6", "--out", str(tmp_path), *STEADY],
         capture_output=True,
         text=True,
         timeout=120,
