@@ -25,9 +25,9 @@ REPO = Path(__file__).resolve().parents[2]
 FRAMES = 40
 CHUNK = 12  # chunks start at 12, 24 and 36: the last two warm up on part of the take, not from its start
 # The change at a chunk's first frame set against the mean change within the chunks, measured here (2 cores):
-# without warm-up 0.199 px against 0.046 px (4.3x), with 8 frame sets 3.5x, with 16 (the default) 0.066 px
-# against 0.036 px (1.9x). What is left is the stabiliser's longer memory (a pixel whose new estimates disagree
-# keeps an older depth), which no finite warm-up replays.
+# without warm-up 0.176 px against 0.041 px (4.3x), with 16 (the default) 0.063 px against 0.031 px (2.0x);
+# with 8 frame sets 3.5x (before the subject's-edge changes). What is left is the stabiliser's longer memory
+# (a pixel whose new estimates disagree keeps an older depth), which no finite warm-up replays.
 SEAM_RATIO = 2.5
 
 
