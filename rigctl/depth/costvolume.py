@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.depth.cost import INVALID_COST, TRUNCATE, combine, grey, normalise
+from rigctl.depth.cost_kernels import combined_costs
 from rigctl.depth.search import EstimateStats
 
 F32 = NDArray[np.float32]
@@ -37,6 +38,7 @@ MAX_LEVELS = 32  # integer levels swept at full resolution; a wider range is swe
 FRACTION = 0.25  # step of the fractional sweep, px
 # matching cost: truncated intensity and gradient differences, weights and truncations of Hosni et al. (2013)
 ALPHA, TAU_I, TAU_G = 0.9, 7 / 255, 2 / 255
+COMPILED = True  # the matching cost by the compiled kernel; False: the OpenCV and numpy reference
 
 
 class MatchViews:
@@ -79,6 +81,12 @@ class MatchViews:
         self.ref = np.ascontiguousarray(self.feat[ref][y0:y1, x0:x1])
         self.rel = rel
         self.names = list(rel)
+        # the views side by side for the compiled cost (the dict's entries become views of it, no copy kept)
+        self.stack = np.empty((len(self.names), self.h, self.w, 3), np.float32)
+        for i, n in enumerate(self.names):
+            self.stack[i] = self.feat[n]
+            self.feat[n] = self.stack[i]
+        self.rel_array = np.array([rel[n] for n in self.names], np.float32).reshape(-1, 2)
         self.gy, self.gx = np.mgrid[y0:y1, x0:x1].astype(np.float32)
 
     @property
@@ -114,6 +122,17 @@ class MatchViews:
             mx, my = self.gx - d * np.float32(rx), self.gy - d * np.float32(ry)
             n += (mx >= 0) & (mx <= self.w - 1) & (my >= 0) & (my <= self.h - 1)
         return n
+
+    def costs(self, d: float | F32, win: int, keep: int) -> F32:
+        """The combined cost at ``d`` (a number or a map): the mean of the ``keep`` best views'
+        ``view_costs``, computed in one compiled pass (``cost_kernels.py``); with ``COMPILED`` off, by the
+        OpenCV and numpy reference."""
+        if not COMPILED or not self.names:
+            return combine(self.view_costs(d, win), keep)
+        dm = np.full(self.shape, d, np.float32) if isinstance(d, float) else d
+        y0, _, x0, _ = self.box
+        weights = ((1 - ALPHA) * TRUNCATE / TAU_I, ALPHA * TRUNCATE / TAU_G, TAU_I, TAU_G)
+        return combined_costs(self.stack, self.ref, self.rel_array, dm, (y0, x0), win, keep, weights, INVALID_COST)
 
     def view_costs(self, d: float | F32, win: int) -> F32:
         """(views, h, w): truncated absolute differences of intensity and gradient (Hosni et al.'s cost, scaled
@@ -198,7 +217,7 @@ def sweep(views: MatchViews, candidates: list[float | F32], p: VolumeParams, win
     prev = np.full(shape, np.inf, np.float32)
     seen_any = np.zeros(shape, bool)
     for k, d in enumerate(candidates):
-        raw = combine(views.view_costs(d, win), p.keep)
+        raw = views.costs(d, win, p.keep)
         seen = raw < INVALID_COST * 0.5
         c = np.where(seen, agg(raw), np.float32(INVALID_COST))
         c_plus = np.where(k_best == k - 1, c, c_plus)  # the level right after the current best
@@ -296,5 +315,5 @@ def choose(views: MatchViews, candidates: list[F32], p: VolumeParams) -> NDArray
     """Per pixel, the index of the candidate disparity map that the kept views agree with best (the same
     aggregated cost as the sweep)."""
     agg = Aggregator(views.guide, p.radius, p.eps)
-    costs = np.stack([agg(combine(views.view_costs(c, p.window), p.keep)) for c in candidates])
+    costs = np.stack([agg(views.costs(c, p.window, p.keep)) for c in candidates])
     return np.asarray(np.argmin(costs, axis=0))

@@ -15,7 +15,6 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.depth.cost import combine
 from rigctl.depth.costvolume import F32, FRACTION, TRUNCATE, MatchViews, VolumeParams, choose, volume_disparity
 from rigctl.depth.pair_fusion import pairs_engine
 from rigctl.depth.pairs import neighbour
@@ -83,7 +82,7 @@ def pick_pairs(views: MatchViews, d: F32, pairs: F32, params: VolumeParams) -> N
     decides, over the best ``keep`` views that see it: a cost that neither candidate was fitted to."""
     conflict = np.abs(pairs - d) > CONFLICT_PX
     k = choose(views, [d, pairs], params)
-    at_pixel = combine(views.view_costs(pairs, 1), params.keep) < combine(views.view_costs(d, 1), params.keep)
+    at_pixel = views.costs(pairs, 1, params.keep) < views.costs(d, 1, params.keep)
     return np.asarray(np.where(conflict, at_pixel, k == 1))
 
 
