@@ -38,9 +38,10 @@ def _differences(
     tau_i: float,
     tau_g: float,
     ad: F32,
+    outside: NDArray[np.bool_],
 ) -> None:
     """``ad`` (views, h, w): the truncated differences of each view sampled at disparity ``d`` (h, w), summed
-    over ``2 r + 1`` columns."""
+    over ``2 r + 1`` columns; ``outside``: where the sample falls outside the view."""
     nv, hh, ww = feats.shape[0], feats.shape[1], feats.shape[2]
     h, w = d.shape
     ci, cg = np.float32(c_int), np.float32(c_grad)
@@ -53,6 +54,7 @@ def _differences(
             for x in range(w):
                 mx = np.float32(x0 + x) - d[y, x] * rx
                 my = gy - d[y, x] * ry
+                outside[v, y, x] = mx < 0 or mx > ww - 1 or my < 0 or my > hh - 1
                 ix, iy = int(mx), int(my)  # floor: truncation, one less below zero
                 ix -= np.float32(ix) > mx
                 iy -= np.float32(iy) > my
@@ -75,12 +77,65 @@ def _differences(
                 a = min(abs(s0 - ref[y, x, 0]), ti) * ci
                 a += min(abs(s1 - ref[y, x, 1]) + abs(s2 - ref[y, x, 2]), tg) * cg
                 row[x] = a
-            # the box's horizontal sums (the vertical ones are taken in ``_aggregate``)
+            _row_sums(row, r, ad[v, y])
+
+
+@njit(parallel=True, cache=True, fastmath=False)
+def _differences_at(
+    feats: F32,
+    ref: F32,
+    shift: F32,
+    r: int,
+    c_int: float,
+    c_grad: float,
+    tau_i: float,
+    tau_g: float,
+    ad: F32,
+) -> None:
+    """``_differences`` at one disparity for every pixel: view v's sample for crop pixel (x, y) lies at
+    (x + shift[v, 0], y + shift[v, 1]) (``warpAffine``'s translation), so the weights are one per view."""
+    nv, hh, ww = feats.shape[0], feats.shape[1], feats.shape[2]
+    h, w = ref.shape[0], ref.shape[1]
+    ci, cg = np.float32(c_int), np.float32(c_grad)
+    ti, tg = np.float32(tau_i), np.float32(tau_g)
+    for y in prange(h):
+        row = np.empty(w, np.float32)
+        for v in range(nv):
+            sx, sy = shift[v, 0], shift[v, 1]
+            bx, by = np.floor(sx), np.floor(sy)
+            fx, fy = np.float32(sx - bx), np.float32(sy - by)
+            ox, iy = int(bx), y + int(by)
+            ya, yb = min(max(iy, 0), hh - 1), min(max(iy + 1, 0), hh - 1)
+            w00 = (np.float32(1.0) - fy) * (np.float32(1.0) - fx)
+            w01 = (np.float32(1.0) - fy) * fx
+            w10 = fy * (np.float32(1.0) - fx)
+            w11 = fy * fx
             for x in range(w):
-                acc = np.float32(0.0)
-                for dx in range(-r, r + 1):
-                    acc += row[_reflect(x + dx, w)]
-                ad[v, y, x] = acc
+                xa, xb = min(max(x + ox, 0), ww - 1), min(max(x + ox + 1, 0), ww - 1)
+                s0 = feats[v, ya, xa, 0] * w00 + feats[v, ya, xb, 0] * w01
+                s0 += feats[v, yb, xa, 0] * w10
+                s0 += feats[v, yb, xb, 0] * w11
+                s1 = feats[v, ya, xa, 1] * w00 + feats[v, ya, xb, 1] * w01
+                s1 += feats[v, yb, xa, 1] * w10
+                s1 += feats[v, yb, xb, 1] * w11
+                s2 = feats[v, ya, xa, 2] * w00 + feats[v, ya, xb, 2] * w01
+                s2 += feats[v, yb, xa, 2] * w10
+                s2 += feats[v, yb, xb, 2] * w11
+                a = min(abs(s0 - ref[y, x, 0]), ti) * ci
+                a += min(abs(s1 - ref[y, x, 1]) + abs(s2 - ref[y, x, 2]), tg) * cg
+                row[x] = a
+            _row_sums(row, r, ad[v, y])
+
+
+@njit(inline="always")
+def _row_sums(row: F32, r: int, out: F32) -> None:
+    # the box's horizontal sums (the vertical ones are taken in ``_aggregate``)
+    w = row.shape[0]
+    for x in range(w):
+        acc = np.float32(0.0)
+        for dx in range(-r, r + 1):
+            acc += row[_reflect(x + dx, w)]
+        out[x] = acc
 
 
 @njit(inline="always")
@@ -94,9 +149,7 @@ def _reflect(i: int, n: int) -> int:
 
 
 @njit(parallel=True, cache=True, fastmath=False)
-def _aggregate(
-    ad: F32, rel: F32, d: F32, y0: int, x0: int, hh: int, ww: int, win: int, keep: int, invalid: float, out: F32
-) -> None:
+def _aggregate(ad: F32, outside: NDArray[np.bool_], win: int, keep: int, invalid: float, out: F32) -> None:
     """``out`` (h, w): per pixel the mean of the ``keep`` smallest box-aggregated view costs, among the views
     that see the point (INVALID where none does)."""
     nv, h, w = ad.shape
@@ -104,55 +157,76 @@ def _aggregate(
     inv = np.float32(invalid)
     half = np.float32(invalid * 0.5)
     norm = np.float32(1.0 / (win * win))
+    k = min(keep, nv)
     for y in prange(h):
-        costs = np.empty(nv, np.float32)
+        costs = np.empty((nv, w), np.float32)
+        rank = np.empty(w, np.int32)
+        total = np.zeros(w, np.float32)
+        n = np.zeros(w, np.int32)
+        for v in range(nv):
+            cv = costs[v]
+            cv[:] = 0.0
+            for dy in range(-r, r + 1):
+                src = ad[v, _reflect(y + dy, h)]
+                for x in range(w):
+                    cv[x] += src[x]
+            for x in range(w):
+                cv[x] = inv if outside[v, y, x] else cv[x] * norm
+        # the keep smallest, branch-free: a view is kept where fewer than keep views rank before it (ties by
+        # view order); the seen ones among them are averaged
+        for i in range(nv):
+            ci = costs[i]
+            rank[:] = 0
+            for j in range(nv):
+                cj = costs[j]
+                if j < i:
+                    for x in range(w):
+                        rank[x] += cj[x] <= ci[x]
+                elif j > i:
+                    for x in range(w):
+                        rank[x] += cj[x] < ci[x]
+            for x in range(w):
+                use = (rank[x] < k) & (ci[x] < half)
+                total[x] += ci[x] if use else np.float32(0.0)
+                n[x] += use
         for x in range(w):
-            for v in range(nv):
-                mx = np.float32(x0 + x) - d[y, x] * rel[v, 0]
-                my = np.float32(y0 + y) - d[y, x] * rel[v, 1]
-                if mx < 0 or mx > ww - 1 or my < 0 or my > hh - 1:
-                    costs[v] = inv
-                    continue
-                acc = np.float32(0.0)
-                for dy in range(-r, r + 1):
-                    acc += ad[v, _reflect(y + dy, h), x]
-                costs[v] = acc * norm
-            # the keep smallest (insertion sort of a handful of values), the seen ones among them averaged
-            for i in range(1, nv):
-                c = costs[i]
-                j = i - 1
-                while j >= 0 and costs[j] > c:
-                    costs[j + 1] = costs[j]
-                    j -= 1
-                costs[j + 1] = c
-            total = np.float32(0.0)
-            n = 0
-            for i in range(min(keep, nv)):
-                if costs[i] < half:
-                    total += costs[i]
-                    n += 1
-            out[y, x] = total / np.float32(n) if n > 0 else inv
+            out[y, x] = total[x] / np.float32(n[x]) if n[x] > 0 else inv
 
 
 def combined_costs(
     feats: F32,
     ref: F32,
-    rel: F32,
-    d: F32,
+    rel: NDArray[np.float64],
+    d: float | F32,
     origin: tuple[int, int],
     win: int,
     keep: int,
     weights: tuple[float, float, float, float],
     invalid: float,
 ) -> F32:
-    """(h, w) combined cost at the disparity map ``d`` (h, w): ``feats`` (views, H, W, 3) the views'
-    intensity and gradients, ``ref`` (h, w, 3) the reference crop whose top-left pixel is ``origin`` (y, x) in
-    the views, ``rel`` (views, 2) the baselines, ``weights`` the intensity and gradient scale and truncation."""
+    """(h, w) combined cost at the disparity ``d`` (a number or an (h, w) map): ``feats`` (views, H, W, 3) the
+    views' intensity and gradients, ``ref`` (h, w, 3) the reference crop whose top-left pixel is ``origin``
+    (y, x) in the views, ``rel`` (views, 2) the baselines, ``weights`` the intensity and gradient scale and
+    truncation. At a number, samples and the outside test are placed as ``MatchViews.warp`` places them
+    (``warpAffine``'s float32 translation; the test in double precision)."""
     nv, hh, ww = feats.shape[0], feats.shape[1], feats.shape[2]
-    h, w = d.shape
+    h, w = ref.shape[0], ref.shape[1]
+    y0, x0 = origin
     ad = np.empty((nv, h, w), np.float32)
-    d = np.ascontiguousarray(d, np.float32)
-    _differences(feats, ref, rel, d, origin[0], origin[1], win // 2, *weights, ad)
+    if isinstance(d, float):
+        shift = np.empty((nv, 2), np.float32)
+        outside = np.empty((nv, h, w), bool)
+        for v in range(nv):
+            rx, ry = float(rel[v, 0]), float(rel[v, 1])
+            shift[v] = (x0 - d * rx, y0 - d * ry)
+            xs = np.arange(x0, x0 + w, dtype=np.float32) - d * rx
+            ys = np.arange(y0, y0 + h, dtype=np.float32) - d * ry
+            outside[v] = ((ys < 0) | (ys > hh - 1))[:, None] | ((xs < 0) | (xs > ww - 1))[None, :]
+        _differences_at(feats, ref, shift.astype(np.float64), win // 2, *weights, ad)
+    else:
+        outside = np.empty((nv, h, w), bool)
+        dm = np.ascontiguousarray(d, np.float32)
+        _differences(feats, ref, rel.astype(np.float32), dm, y0, x0, win // 2, *weights, ad, outside)
     out = np.empty((h, w), np.float32)
-    _aggregate(ad, rel, d, origin[0], origin[1], hh, ww, win, keep, invalid, out)
+    _aggregate(ad, outside, win, keep, invalid, out)
     return out

@@ -86,7 +86,7 @@ class MatchViews:
         for i, n in enumerate(self.names):
             self.stack[i] = self.feat[n]
             self.feat[n] = self.stack[i]
-        self.rel_array = np.array([rel[n] for n in self.names], np.float32).reshape(-1, 2)
+        self.rel_array = np.array([rel[n] for n in self.names], np.float64).reshape(-1, 2)
         self.gy, self.gx = np.mgrid[y0:y1, x0:x1].astype(np.float32)
 
     @property
@@ -129,10 +129,9 @@ class MatchViews:
         OpenCV and numpy reference."""
         if not COMPILED or not self.names:
             return combine(self.view_costs(d, win), keep)
-        dm = np.full(self.shape, d, np.float32) if isinstance(d, float) else d
         y0, _, x0, _ = self.box
         weights = ((1 - ALPHA) * TRUNCATE / TAU_I, ALPHA * TRUNCATE / TAU_G, TAU_I, TAU_G)
-        return combined_costs(self.stack, self.ref, self.rel_array, dm, (y0, x0), win, keep, weights, INVALID_COST)
+        return combined_costs(self.stack, self.ref, self.rel_array, d, (y0, x0), win, keep, weights, INVALID_COST)
 
     def view_costs(self, d: float | F32, win: int) -> F32:
         """(views, h, w): truncated absolute differences of intensity and gradient (Hosni et al.'s cost, scaled
