@@ -48,32 +48,43 @@ def _differences(
     ti, tg = np.float32(tau_i), np.float32(tau_g)
     for y in prange(h):
         row = np.empty(w, np.float32)
+        xa, xb = np.empty(w, np.int64), np.empty(w, np.int64)
+        ya, yb = np.empty(w, np.int64), np.empty(w, np.int64)
+        fx, fy = np.empty(w, np.float32), np.empty(w, np.float32)
         gy = np.float32(y0 + y)
         for v in range(nv):
             rx, ry = rel[v, 0], rel[v, 1]
+            # positions, weights and the outside test first (a loop the compiler vectorises), then the samples
             for x in range(w):
                 mx = np.float32(x0 + x) - d[y, x] * rx
                 my = gy - d[y, x] * ry
-                outside[v, y, x] = mx < 0 or mx > ww - 1 or my < 0 or my > hh - 1
-                ix, iy = int(mx), int(my)  # floor: truncation, one less below zero
-                ix -= np.float32(ix) > mx
-                iy -= np.float32(iy) > my
-                fx, fy = mx - np.float32(ix), my - np.float32(iy)
-                xa, xb = min(max(ix, 0), ww - 1), min(max(ix + 1, 0), ww - 1)
-                ya, yb = min(max(iy, 0), hh - 1), min(max(iy + 1, 0), hh - 1)
-                w00 = (np.float32(1.0) - fy) * (np.float32(1.0) - fx)
-                w01 = (np.float32(1.0) - fy) * fx
-                w10 = fy * (np.float32(1.0) - fx)
-                w11 = fy * fx
-                s0 = feats[v, ya, xa, 0] * w00 + feats[v, ya, xb, 0] * w01
-                s0 += feats[v, yb, xa, 0] * w10
-                s0 += feats[v, yb, xb, 0] * w11
-                s1 = feats[v, ya, xa, 1] * w00 + feats[v, ya, xb, 1] * w01
-                s1 += feats[v, yb, xa, 1] * w10
-                s1 += feats[v, yb, xb, 1] * w11
-                s2 = feats[v, ya, xa, 2] * w00 + feats[v, ya, xb, 2] * w01
-                s2 += feats[v, yb, xa, 2] * w10
-                s2 += feats[v, yb, xb, 2] * w11
+                outside[v, y, x] = (mx < 0) | (mx > ww - 1) | (my < 0) | (my > hh - 1)
+                bx, by = np.floor(mx), np.floor(my)
+                fx[x], fy[x] = mx - bx, my - by
+                ix, iy = int(bx), int(by)
+                xa[x], xb[x] = min(max(ix, 0), ww - 1), min(max(ix + 1, 0), ww - 1)
+                ya[x], yb[x] = min(max(iy, 0), hh - 1), min(max(iy + 1, 0), hh - 1)
+            for x in range(w):
+                ex, ey = fx[x], fy[x]
+                w00 = (np.float32(1.0) - ey) * (np.float32(1.0) - ex)
+                w01 = (np.float32(1.0) - ey) * ex
+                w10 = ey * (np.float32(1.0) - ex)
+                w11 = ey * ex
+                p00, p01, p10, p11 = (
+                    feats[v, ya[x], xa[x]],
+                    feats[v, ya[x], xb[x]],
+                    feats[v, yb[x], xa[x]],
+                    feats[v, yb[x], xb[x]],
+                )
+                s0 = p00[0] * w00 + p01[0] * w01
+                s0 += p10[0] * w10
+                s0 += p11[0] * w11
+                s1 = p00[1] * w00 + p01[1] * w01
+                s1 += p10[1] * w10
+                s1 += p11[1] * w11
+                s2 = p00[2] * w00 + p01[2] * w01
+                s2 += p10[2] * w10
+                s2 += p11[2] * w11
                 a = min(abs(s0 - ref[y, x, 0]), ti) * ci
                 a += min(abs(s1 - ref[y, x, 1]) + abs(s2 - ref[y, x, 2]), tg) * cg
                 row[x] = a
