@@ -10,7 +10,7 @@ from typing import Any
 
 import cv2
 
-from rigctl.depth.grid import Grid, camera_offsets, grid_order
+from rigctl.depth.grid import Grid, camera_offsets, grid_order, rectified_frame
 from rigctl.errors import ParameterError
 from rigctl.planning.planner import search_range_px
 from rigctl.timecode import Timecode
@@ -39,6 +39,7 @@ class ArrayTake:
         self.spacing = float(g.spacing_x_m)
         positions = {n: g.position_m(n) for n in array.names}
         self.offsets = camera_offsets(positions, list(array.names), self.spacing, name)
+        self.positions, self.principal = rectified_frame(positions, g.K)
         self.names = grid_order(self.offsets)
         self.disparity_range: tuple[float, float] | None = None
 
@@ -77,4 +78,6 @@ class ArrayTake:
             self.spacing,
             truth=truth,
             meta={"take": self.name, "frame": number},
+            positions=self.positions,
+            principal=self.principal,
         )

@@ -1,7 +1,8 @@
-"""A frame set's outputs per camera: disparity + depth as EXR (NUKE layers), PFM, a colour-mapped PNG preview
-(red near, blue far), written in a ``rigctl.layout`` layout, or (``atomic``, the farm) staged beside the frame's
-folder and renamed into it file by file, each file's size and SHA-256 recorded so a resumed run can tell a
-whole file from a damaged one."""
+"""A frame set's outputs per camera: disparity + depth as EXR (NUKE layers: the picture in half floats, depth,
+disparity and confidence in float32, the take's time and the rectified camera as ``worldToCamera`` /
+``worldToNDC``, ``rigctl.exrcam``), PFM, a colour-mapped PNG preview (red near, blue far), written in a
+``rigctl.layout`` layout, or (``atomic``, the farm) staged beside the frame's folder and renamed into it file
+by file, each file's size and SHA-256 recorded so a resumed run can tell a whole file from a damaged one."""
 
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ from pydantic import BaseModel, ConfigDict
 from rigctl.depth.estimate import DepthResult
 from rigctl.depth.grid import Grid
 from rigctl.exr import picture, picture_attributes, write_exr
+from rigctl.exrcam import camera_attributes
 from rigctl.layout import output_path
 from rigctl.pfm import write_pfm
 from rigctl.publish import publish_png
@@ -118,15 +120,17 @@ def write_outputs(
         if col:
             ratio = min(abs(grid.offsets[n][1] - oy) for n in col)
             channels["disparityV.y"] = (-fin * ratio).astype(np.float32)  # shift to the camera below
+        h, w = grid.shape
         attrs = {
             **picture_attributes(target.fps, target.timecode, target.colour),
+            **camera_attributes(np.array(grid.centre(name)), grid.focal_px, grid.principal, (w, h)),
             "rigctl.camera": name,
             "rigctl.focal_px": f"{grid.focal_px:.6f}",
             "rigctl.spacing_x": f"{grid.spacing:.6f}",
             "rigctl.offset": f"{ox:.6f} {oy:.6f}",
             "rigctl.disparity": "pixels of the horizontal spacing; depth.Z holds 1/Z",
         }
-        write_exr(target.path(name, ".exr"), channels, attrs)
+        write_exr(target.path(name, ".exr"), channels, attrs, half=("RGB", "A"))
 
 
 def publish(tmp: Path, final: Path) -> dict[str, FileRecord]:

@@ -106,6 +106,10 @@ class Grid:
     disparity_range: tuple[float, float] | None = None
     truth: dict[str, F32] | None = None
     meta: dict[str, str | int] = field(default_factory=dict)
+    # the rectified frame, when the source has one (a take's rectification): each camera's centre in it and
+    # the principal point of the common K; a grid folder has neither (see :meth:`centre`)
+    positions: Mapping[str, tuple[float, float, float]] | None = None
+    principal: tuple[float, float] | None = None
     frames: FrameImages = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -119,6 +123,14 @@ class Grid:
     @property
     def shape(self) -> tuple[int, int]:
         return self.frames.shape()
+
+    def centre(self, name: str) -> tuple[float, float, float]:
+        """Camera ``name``'s centre in the rectified frame (x right, y down, z ahead); without one (a grid
+        folder), derived from its offset: (ox, oy, 0) times the spacing, r0c0 at the origin."""
+        if self.positions is not None and name in self.positions:
+            return self.positions[name]
+        ox, oy = self.offsets[name]
+        return ox * self.spacing, oy * self.spacing, 0.0
 
     def depth(self, disparity: F32) -> F32:
         """Z = f * spacing / (d + doffs); +inf where there is no estimate or d + doffs <= 0."""
@@ -263,6 +275,15 @@ def camera_offsets(
     return {n: (float(rel[n][0] / spacing), float(rel[n][1] / spacing)) for n in names}
 
 
+def rectified_frame(
+    positions_m: Mapping[str, Any], K: Any
+) -> tuple[dict[str, tuple[float, float, float]], tuple[float, float]]:
+    """A rectification's cameras' centres and its common principal point: a :class:`Grid`'s ``positions``
+    and ``principal``."""
+    positions = {n: (float(p[0]), float(p[1]), float(p[2])) for n, p in positions_m.items()}
+    return positions, (float(K[0][2]), float(K[1][2]))
+
+
 def grid_order(offsets: Mapping[str, tuple[float, float]]) -> list[str]:
     """Camera names row by row, left to right."""
     return sorted(offsets, key=lambda n: (offsets[n][1], offsets[n][0]))
@@ -337,6 +358,7 @@ class TakeGrid(TakeFrames):
         self.focal_px = rect.focal_px
         self.spacing = rect.spacing_x_m
         self.offsets = camera_offsets(rect.positions_m, self.reader.names, self.spacing, str(folder))
+        self.positions, self.principal = rectified_frame(rect.positions_m, rect.K)
         self.names = grid_order(self.offsets)
         self.folder = folder
 
@@ -364,4 +386,6 @@ class TakeGrid(TakeFrames):
             self.spacing,
             truth=truth,
             meta={"take": str(self.folder), "frame": number},
+            positions=self.positions,
+            principal=self.principal,
         )

@@ -13,7 +13,15 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Protocol
 
-from rigctl.depth.grid import Grid, TakeFrames, TakeGrid, camera_offsets, grid_order, load_grid_folder
+from rigctl.depth.grid import (
+    Grid,
+    TakeFrames,
+    TakeGrid,
+    camera_offsets,
+    grid_order,
+    load_grid_folder,
+    rectified_frame,
+)
 from rigctl.errors import ParameterError
 from rigctl.timecode import Timecode
 
@@ -52,6 +60,7 @@ class RectifyingGrid(TakeFrames):
         self.focal_px = rec.focal_px
         self.spacing = rec.spacing_x_m
         self.offsets = camera_offsets(rec.positions_m, self.reader.names, self.spacing, str(calibration))
+        self.positions, self.principal = rectified_frame(rec.positions_m, rec.K)
         self.names = grid_order(self.offsets)
         self.folder = take
 
@@ -61,7 +70,10 @@ class RectifyingGrid(TakeFrames):
         members = self.members(number)
         images = {n: self.rect.frame(n, frame_bgr(self.reader, n, members[n])) for n in self.names}
         meta: dict[str, str | int] = {"take": str(self.folder), "frame": number}
-        return Grid(list(self.names), images, dict(self.offsets), self.focal_px, self.spacing, meta=meta)
+        return Grid(
+            list(self.names), images, dict(self.offsets), self.focal_px, self.spacing, meta=meta,
+            positions=self.positions, principal=self.principal,
+        )  # fmt: skip
 
 
 class OneGrid:

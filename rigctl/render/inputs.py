@@ -156,24 +156,21 @@ class RenderInput:
         return self.frames.timing(number)
 
     def view_camera(self, frame: FrameViews, offset: tuple[float, float]) -> dict[str, object]:
-        """``worldToCamera`` and ``worldToNDC`` (OpenEXR's attributes, ``rigctl.interop.exrcam``) of a view
+        """``worldToCamera`` and ``worldToNDC`` (OpenEXR's attributes, ``rigctl.exrcam``) of a view
         at ``offset`` (in spacings from the cameras' mean, as :meth:`FrameViews.position` gives it), in the
-        take's rectified frame (a grid folder's: centred on its cameras, principal point at the centre)."""
-        from rigctl.interop.exrcam import world_to_camera, world_to_ndc
+        take's rectified frame (a grid folder's: r0c0 at the origin, principal point at the centre)."""
+        from rigctl.exrcam import camera_attributes
 
         h, w = frame.shape
         origin = np.zeros(3)
-        principal = ((w - 1) / 2, (h - 1) / 2)
+        principal = None  # a grid folder's: the picture's centre
         reader = getattr(self.frames, "reader", None)  # a take's (rectified, or rectified as it is read)
         rect = reader.manifest.rectification if reader is not None else None
         if rect is not None:
             origin = np.mean([rect.positions_m[n] for n in frame.views], axis=0)
             principal = (float(rect.K[0][2]), float(rect.K[1][2]))
         centre = origin + np.array([offset[0] * frame.spacing, offset[1] * frame.spacing, 0.0])
-        return {
-            "worldToCamera": np.ascontiguousarray(world_to_camera(centre), np.float32),
-            "worldToNDC": np.ascontiguousarray(world_to_ndc(centre, frame.focal_px, principal, (w, h)), np.float32),
-        }
+        return camera_attributes(centre, frame.focal_px, principal, (w, h))
 
     def frame(self, number: int) -> FrameViews:
         """Frame ``number``'s colour, key and disparity (the last one asked for is kept: the CLI reads the
