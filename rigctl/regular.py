@@ -24,6 +24,9 @@ def open_regular(path: Path, error: type[RigctlError] = TakeError, what: str = "
         os.close(fd)
         kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file (a device, pipe or socket)"
         raise error(f"{path}: {what} is {kind}: refused")
+    # O_NONBLOCK was for the open alone: left on a regular file it makes some filesystems (9p, as a VM's shared
+    # folder) answer each read with one message's worth of bytes, so a frame read short
+    os.set_blocking(fd, True)
     return fd, st.st_size
 
 

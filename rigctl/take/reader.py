@@ -197,7 +197,12 @@ class TakeReader:
                 f"{self.index_path(name)}: byte {i * RECORD_SIZE}: frame of {size} bytes, the format needs "
                 f"{self.bytes_per_frame}"
             )
-        data = os.pread(self._essence_fd(name), size, offset)
+        fd, data = self._essence_fd(name), b""
+        while len(data) < size:  # a read may return fewer bytes than asked (network and shared filesystems)
+            chunk = os.pread(fd, size - len(data), offset + len(data))
+            if not chunk:
+                break
+            data = chunk if not data else data + chunk
         if len(data) != size:
             raise DamagedDataError(f"{path}: byte {offset}: frame of {size} bytes is cut short ({len(data)} read)")
         if verify and rec["crc"] and zlib.crc32(data) != int(rec["crc"]):

@@ -97,3 +97,17 @@ def test_a_pfm_that_is_a_device_or_lies_about_its_size_is_refused_before_reading
     make(path)
     with pytest.raises(TakeError, match=re.escape(f"{name}.pfm: {says}")):
         read_pfm(path)
+
+
+def test_a_regular_file_is_read_through_a_blocking_descriptor(tmp_path: Path) -> None:
+    """open_regular opens without blocking (a FIFO must not hang it) but hands back a blocking descriptor: on a
+    9p shared folder a non-blocking read returns one message's worth of bytes, and frames read short."""
+    from rigctl.regular import open_regular
+
+    f = tmp_path / "frame.bin"
+    f.write_bytes(b"x" * 4096)
+    fd, size = open_regular(f)
+    try:
+        assert size == 4096 and os.get_blocking(fd)
+    finally:
+        os.close(fd)
