@@ -8,7 +8,8 @@ from __future__ import annotations
 import json
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +17,7 @@ import cv2
 import numpy as np
 
 from rigctl.errors import OutputError, ParameterError
-from rigctl.publish import prepare_output, publish_png, publish_text, utf8_path
+from rigctl.publish import OutputLock, prepare_output, publish_png, publish_text, utf8_path
 
 Say = Callable[[str], None]
 MARKER = ".rigctl-demo"
@@ -41,23 +42,36 @@ def _montage(folder: Path, names: list[str], out: Path) -> Path:
     return out
 
 
-def prepare_folder(out: Path, fresh: bool) -> None:
-    """Make ``out`` the demo's empty folder, marked as an unfinished demo until its report is written."""
+@contextmanager
+def prepare_folder(out: Path, fresh: bool) -> Iterator[Path]:
+    """Make ``out`` the demo's empty folder, marked as an unfinished demo until its report is written, held
+    under this run's lock for the length of the ``with``: a second demo on the same folder is refused in one
+    line before it looks at, let alone clears, what the first is writing."""
     utf8_path(out)
     if out.exists() and not out.is_dir():
         raise OutputError(f"--out {out}: is a file, not a folder")
-    if out.exists() and any(out.iterdir()):
-        # an unfinished demo (a step failed or was interrupted) is replaced without asking; a finished demo's
-        # figures, or a folder that is no demo's, only with --fresh
-        unfinished = (out / MARKER).exists() and not (out / "report.md").exists()
-        if not fresh and not unfinished:
-            raise ParameterError(f"{out}: exists and is not empty (choose another --out, or --fresh to replace it)")
-        shutil.rmtree(out)
     prepare_output(out)
-    (out / MARKER).write_text("rigctl demo: until report.md is written, the next demo here replaces this folder\n")
+    with OutputLock(out, "demo"):
+        entries = list(out.iterdir())
+        if entries:
+            # an unfinished demo (a step failed or was interrupted) is replaced without asking; a finished demo's
+            # figures, or a folder that is no demo's, only with --fresh. The folder itself stays: it holds the lock
+            unfinished = (out / MARKER).exists() and not (out / "report.md").exists()
+            if not fresh and not unfinished:
+                raise ParameterError(f"{out}: exists and is not empty (choose another --out, or --fresh to replace it)")
+            for p in entries:
+                shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
+        publish_text(out / MARKER, "rigctl demo: until report.md is written, the next demo here replaces this folder\n")
+        yield out
 
 
 def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh: bool = False) -> Path:
+    """The whole chain into ``out``, held under this run's lock on the folder; returns the report."""
+    with prepare_folder(out, fresh):
+        return _run_demo(out, say, progress_factory)
+
+
+def _run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any]) -> Path:
     from rigctl.calib.report import format_table as calib_table
     from rigctl.calib.report import write_plots
     from rigctl.calib.run import calibrate
@@ -72,7 +86,6 @@ def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh:
     from rigctl.rig import load_rig
     from rigctl.simulated_presenter import presenter
 
-    prepare_folder(out, fresh)
     takes = out / "takes"
     timings: dict[str, float] = {}
     t_all = time.perf_counter()

@@ -248,6 +248,19 @@ def test_a_second_run_on_a_locked_folder_is_refused(tiny, tmp_path: Path) -> Non
     assert rigctl("take", "export", str(tiny[0]), "--out", str(out)).returncode == 0
 
 
+def test_a_demo_on_a_folder_another_demo_is_writing_is_refused_and_clears_nothing(tmp_path: Path) -> None:
+    out = tmp_path / "demo"
+    (out / "takes").mkdir(parents=True)
+    (out / ".rigctl-demo").write_text("an unfinished demo: a second demo would replace it\n")
+    fd = os.open(out, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # as the running demo holds it
+        one_line(rigctl("demo", "--out", str(out), timeout=60), EXIT_DEVICE, str(out), "another rigctl run")
+    finally:
+        os.close(fd)
+    assert (out / "takes").is_dir() and (out / ".rigctl-demo").exists()
+
+
 # 4. numbers bounded to physical ranges; the machine bounds the workers
 
 

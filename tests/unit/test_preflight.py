@@ -163,17 +163,31 @@ def test_an_unfinished_demo_folder_is_replaced_without_flags_a_finished_one_is_k
     from rigctl.errors import ParameterError
 
     out = tmp_path / "demo"
-    prepare_folder(out, fresh=False)
-    assert (out / MARKER).exists()
-    (out / "takes").mkdir()  # a step failed here: no report
-    prepare_folder(out, fresh=False)
-    assert not (out / "takes").exists() and (out / MARKER).exists()
+    with prepare_folder(out, fresh=False):
+        assert (out / MARKER).exists()
+        (out / "takes").mkdir()  # a step failed here: no report
+    with prepare_folder(out, fresh=False):
+        assert not (out / "takes").exists() and (out / MARKER).exists()
     (out / "report.md").write_text("# finished\n")
-    with pytest.raises(ParameterError, match="exists and is not empty"):
-        prepare_folder(out, fresh=False)
+    with pytest.raises(ParameterError, match="exists and is not empty"), prepare_folder(out, fresh=False):
+        pass
     other = tmp_path / "mine"
     other.mkdir()
     (other / "keep.txt").write_text("not a demo")
-    with pytest.raises(ParameterError):
-        prepare_folder(other, fresh=False)
+    with pytest.raises(ParameterError), prepare_folder(other, fresh=False):
+        pass
     assert (other / "keep.txt").exists()
+
+
+def test_a_second_demo_on_a_folder_being_written_is_refused_and_clears_nothing(tmp_path: Path) -> None:
+    from rigctl.demo import MARKER, prepare_folder
+    from rigctl.errors import OutputError
+
+    out = tmp_path / "demo"
+    with prepare_folder(out, fresh=False):
+        (out / "takes").mkdir()  # the first demo at work: unfinished, which a demo would otherwise replace
+        with pytest.raises(OutputError, match="another rigctl run is writing this folder"), prepare_folder(out, True):
+            pass
+        assert (out / "takes").is_dir() and (out / MARKER).exists()
+    with prepare_folder(out, fresh=False):  # the first has ended: its lock went with it
+        assert not (out / "takes").exists()
