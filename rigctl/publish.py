@@ -78,7 +78,8 @@ def prepare_output(out: Path, what: str = "--out") -> Path:
     return out
 
 
-def _fsync_dir(folder: Path) -> None:
+def fsync_dir(folder: Path) -> None:
+    """Make a folder's entries (a rename, a new file) durable: what a rename publishes survives a power cut."""
     fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
     try:
         os.fsync(fd)
@@ -113,13 +114,34 @@ def publishing(path: Path, durable: bool = True) -> Iterator[Path]:
                 os.close(fd)
         os.replace(tmp, path)
         if durable:
-            _fsync_dir(path.parent)
+            fsync_dir(path.parent)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
         raise output_error(path, exc) from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def move_into(staged: Path, final: Path) -> list[Path]:
+    """Publish the whole files of the staging folder ``staged`` (written through :func:`publishing`, so each
+    already fsynced) into ``final`` by rename, one by one (a reader sees a whole file or none), then fsync
+    ``final`` and the folder it is in (it may be new) and remove the empty staging folder. Returns the files
+    as published, in name order."""
+    try:
+        fresh = not final.exists()
+        final.mkdir(parents=True, exist_ok=True)
+        moved = []
+        for f in sorted(staged.iterdir()):
+            os.replace(f, final / f.name)
+            moved.append(final / f.name)
+        fsync_dir(final)
+        if fresh:
+            fsync_dir(final.parent)
+        staged.rmdir()
+    except OSError as exc:
+        raise output_error(final, exc) from None
+    return moved
 
 
 def publish_bytes(path: Path, data: bytes | memoryview, durable: bool = True) -> None:
@@ -236,7 +258,7 @@ def publishing_folder(out: Path, verb: str, exists_message: str) -> Iterator[Pat
             if out.exists() or out.is_symlink():
                 raise TakeError(f"{out}: {exists_message}")
             os.rename(partial, out)
-            _fsync_dir(out.parent)
+            fsync_dir(out.parent)
         except OSError as exc:
             shutil.rmtree(partial, ignore_errors=True)
             raise output_error(out, exc) from None

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import os
 import shutil
 import uuid
 from dataclasses import dataclass
@@ -25,7 +24,7 @@ from rigctl.exr import picture, picture_attributes, write_exr
 from rigctl.exrcam import camera_attributes
 from rigctl.layout import output_path
 from rigctl.pfm import write_pfm
-from rigctl.publish import publish_png
+from rigctl.publish import move_into, publish_png
 from rigctl.timecode import Timecode
 
 F32 = NDArray[np.float32]
@@ -134,14 +133,10 @@ def write_outputs(
 
 
 def publish(tmp: Path, final: Path) -> dict[str, FileRecord]:
-    """Move every finished file into the frame's folder by rename (a reader sees a whole file or none);
-    returns each file's record."""
-    final.mkdir(parents=True, exist_ok=True)
-    records = {}
-    for f in sorted(tmp.iterdir()):
-        records[f.name] = file_record(f)
-        os.replace(f, final / f.name)
-    tmp.rmdir()
+    """Move every finished file into the frame's folder by rename (a reader sees a whole file or none), the
+    folder fsynced after (:func:`rigctl.publish.move_into`); returns each file's record."""
+    records = {f.name: file_record(f) for f in sorted(tmp.iterdir())}
+    move_into(tmp, final)
     return records
 
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 from pathlib import Path
 from typing import Any, Literal
 
@@ -18,6 +17,7 @@ from rigctl.depth.export import FileRecord, is_whole
 from rigctl.depth.report import FrameReport
 from rigctl.depth.take_range import RangeDecision, SearchRounds, SearchState
 from rigctl.errors import TakeError
+from rigctl.publish import publish_text
 
 log = logging.getLogger(__name__)
 
@@ -85,12 +85,10 @@ class Ledger:
         self.frames[name] = entry
 
     def save(self) -> None:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.path.with_name(f".{LEDGER}.{os.getpid()}.tmp")
         data = self.data.model_dump(mode="json", by_alias=True)
         data["frames"] = dict(sorted(data["frames"].items()))
-        tmp.write_text(json.dumps(data, indent=1, default=_finite, allow_nan=False))
-        os.replace(tmp, self.path)
+        # temporary name, fsync, rename, fsync the folder: the ledger a resume trusts survives a power cut
+        publish_text(self.path, json.dumps(data, indent=1, default=_finite, allow_nan=False))
 
 
 def _finite(value: Any) -> Any:

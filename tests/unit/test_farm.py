@@ -143,3 +143,67 @@ def test_resume_skips_a_whole_chunk_only_when_it_started_from_the_take_state(tmp
     assert work.todo(s1) == ([[2, 3]], [0, 1])
     assert work.todo(s2) == ([[0, 1], [2, 3]], [])
     assert Work([[0, 1], [2, 3]], {0, 1, 2, 3}, led, redo=True).todo(s1) == ([[0, 1], [2, 3]], [])
+
+
+def _durability_log(monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, str]]:
+    """Every rename (its source) and fsync (the path of what it made durable) in order."""
+    import os
+
+    events: list[tuple[str, str]] = []
+    real_fsync, real_replace, real_rename = os.fsync, os.replace, os.rename
+
+    def fsync(fd: int) -> None:
+        events.append(("fsync", os.readlink(f"/proc/self/fd/{fd}")))
+        real_fsync(fd)
+
+    def renaming(real):  # type: ignore[no-untyped-def]
+        def rename(src: object, dst: object) -> None:
+            events.append(("rename", str(Path(src).resolve())))  # type: ignore[arg-type]
+            real(src, dst)
+
+        return rename
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    monkeypatch.setattr(os, "replace", renaming(real_replace))
+    monkeypatch.setattr(os, "rename", renaming(real_rename))
+    return events
+
+
+def _durable_after_last_rename(events: list[tuple[str, str]], *folders: Path) -> bool:
+    last = max(i for i, (kind, _) in enumerate(events) if kind == "rename")
+    synced = {p for kind, p in events[last:] if kind == "fsync"}
+    return all(str(f.resolve()) in synced for f in folders)
+
+
+def test_a_farm_frame_is_published_durably_files_then_their_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The farm stages a frame's files and renames them into the frame's folder: the frame's folder (new, so
+    its parent too) is fsynced after the last rename, so a power cut cannot take back a frame the ledger has."""
+    from rigctl.depth.export import publish
+    from rigctl.publish import publish_bytes
+
+    staged = tmp_path / ".partial-000003-abc"
+    for name in ("r0c0.pfm", "r0c0.png"):
+        publish_bytes(staged / name, name.encode() * 100)
+    events = _durability_log(monkeypatch)
+    final = tmp_path / "000003"
+    records = publish(staged, final)
+    assert sorted(records) == ["r0c0.pfm", "r0c0.png"] and not staged.exists()
+    assert (final / "r0c0.pfm").read_bytes() == b"r0c0.pfm" * 100
+    assert _durable_after_last_rename(events, final, tmp_path)
+
+
+def test_the_process_ledger_is_fsynced_before_and_after_its_rename(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    ledger = Ledger(tmp_path)
+    ledger.record("000000", FrameEntry(status="failed", error="x"))
+    events = _durability_log(monkeypatch)
+    ledger.save()
+    renamed = [(i, p) for i, (kind, p) in enumerate(events) if kind == "rename"]
+    assert renamed
+    i, source = renamed[-1]
+    assert ("fsync", source) in events[:i]  # the file's bytes are on the device before its name is
+    assert _durable_after_last_rename(events, tmp_path)
+    assert [p.name for p in tmp_path.iterdir()] == ["process.json"]
