@@ -219,11 +219,11 @@ def import_miv(cameras_json: Path, out: Path, frames: range | None = None) -> li
     """Grid folders ``out/<frame:06d>/`` (grid.yaml, r{row}c{col}.png at 16 bits, truth/r{row}c{col}.pfm: the
     content's own depth as disparity, which ``rigctl depth`` scores against and ``rigctl render`` can render
     with) for ``frames`` (default: all); returns the folders."""
-    import cv2
-
     from rigctl.pfm import write_pfm
+    from rigctl.publish import publish_json, publish_png, publishing_folder, utf8_path
 
-    if out.exists():
+    utf8_path(out)
+    if out.exists() or out.is_symlink():
         raise ParameterError(f"{out}: already exists; the import goes into a new folder")
     content = read_content(cameras_json)
     count = content.frame_count()
@@ -231,22 +231,22 @@ def import_miv(cameras_json: Path, out: Path, frames: range | None = None) -> li
     beyond = [n for n in numbers if n >= count]
     if beyond:
         raise ParameterError(f"{cameras_json}: the content has {count} frame(s); frame {beyond[0]} is beyond it")
-    folders = []
-    for n in numbers:
-        folder = out / f"{n:06d}"
-        (folder / "truth").mkdir(parents=True)
-        grid = {"spacing_x": content.spacing_x, "spacing_y": content.spacing_y, "focal_px": content.focal_px}
-        (folder / "grid.yaml").write_text(json.dumps(grid) + "\n")  # JSON is YAML
-        for cam in content.cameras:
-            y, cb, cr = content.colour(cam, n)
-            rgb = yuv.ycbcr_to_rgb(upsample(y, cb, cr), cam.colour_bits)
-            png = np.rint(rgb[..., ::-1] * 65535.0).astype(np.uint16)
-            cv2.imwrite(str(folder / f"{cam.grid_name}.png"), png)
-            write_pfm(folder / "truth" / f"{cam.grid_name}.pfm", content.disparity(cam, n))
-        folders.append(folder)
-    names = {c.grid_name: c.name for c in content.cameras}
-    (out / "import.json").write_text(json.dumps({"source": str(cameras_json), "cameras": names}, indent=2) + "\n")
-    return folders
+    # built under a hidden partial name beside ``out`` and renamed once whole, every file published whole: a
+    # killed import leaves no half grid under ``out``, and the same command run again starts over
+    with publishing_folder(out, "miv import", "already exists; the import goes into a new folder") as partial:
+        for n in numbers:
+            folder = partial / f"{n:06d}"
+            grid = {"spacing_x": content.spacing_x, "spacing_y": content.spacing_y, "focal_px": content.focal_px}
+            publish_json(folder / "grid.yaml", grid)  # JSON is YAML
+            for cam in content.cameras:
+                y, cb, cr = content.colour(cam, n)
+                rgb = yuv.ycbcr_to_rgb(upsample(y, cb, cr), cam.colour_bits)
+                png = np.rint(rgb[..., ::-1] * 65535.0).astype(np.uint16)
+                publish_png(folder / f"{cam.grid_name}.png", png)
+                write_pfm(folder / "truth" / f"{cam.grid_name}.pfm", content.disparity(cam, n))
+        names = {c.grid_name: c.name for c in content.cameras}
+        publish_json(partial / "import.json", {"source": str(cameras_json), "cameras": names})
+    return [out / f"{n:06d}" for n in numbers]
 
 
 def upsample(y: NDArray[np.uint16], cb: NDArray[np.uint16], cr: NDArray[np.uint16]) -> NDArray[np.uint16]:

@@ -29,7 +29,9 @@ def tiny(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     (rect / "truth" / "settings.yaml").unlink()  # no simulator comparisons: render stays quick
     res = rigctl("depth", str(rect), "--out", str(root / "disp"), "--preset", "fast")
     assert res.returncode == 0, res.stderr
-    return {"take": take, "rect": rect, "disp": root / "disp", "root": root}
+    res = rigctl("miv", "export", str(rect), str(root / "disp"), "--out", str(root / "content"))
+    assert res.returncode == 0, res.stderr
+    return {"take": take, "rect": rect, "disp": root / "disp", "root": root, "content": root / "content"}
 
 
 def command(verb: str, paths: dict[str, Path], out: Path) -> list[str]:
@@ -40,6 +42,8 @@ def command(verb: str, paths: dict[str, Path], out: Path) -> list[str]:
     if verb == "rectify":
         calibration = str(paths["take"] / "truth/calibration.yaml")
         return ["rectify", str(paths["take"]), "--calibration", calibration, "--out", str(out)]
+    if verb == "miv-import":
+        return ["miv", "import", str(paths["content"] / "cameras.json"), "--out", str(out)]
     if verb == "depth":
         return ["depth", str(paths["rect"]), "--out", str(out), "--preset", "fast"]
     return ["render", str(paths["rect"]), "--disparity", str(paths["disp"]), "--at", "1,1", "--out", str(out)]
@@ -85,6 +89,8 @@ CASES = [
     ("depth", "replace", 50, "TERM"),
     ("render", "fsync", 2, "KILL"),
     ("render", "replace", 5, "TERM"),
+    ("miv-import", "fsync", 3, "KILL"),  # a grid folder half written
+    ("miv-import", "replace", 12, "TERM"),  # the import about to be renamed to its name
 ]
 
 
@@ -117,8 +123,8 @@ def test_a_killed_command_leaves_only_whole_files_and_the_same_command_finishes(
         capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL,
     )  # fmt: skip
     assert killed.returncode == -{"KILL": 9, "TERM": 15}[sig], (killed.returncode, killed.stderr)
-    if verb == "rectify":
-        assert not out.exists(), "a half-rectified take carries the name asked for"
+    if verb in ("rectify", "miv-import"):  # built under a partial name, renamed once whole
+        assert not out.exists(), "a half-written folder carries the name asked for"
     else:
         published(out)  # every file at its final name is whole
     res = rigctl(*argv)
