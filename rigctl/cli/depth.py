@@ -23,7 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="per-camera disparity and depth of a rectified take or grid folder (EXR, PFM, PNG)",
         description="Multi-baseline depth: every other camera of the grid with its own baseline, only the keyed "
         "subject, only the planned disparity range (from --near/--far). Writes <frame>/<camera>.exr (scene-linear "
-        "RGB and A, disparityL/R, disparityV, depth.Z = 1/Z), .pfm (disparity, +inf where none) and .png (red near, "
+        "RGB and A, disparityL/R/V as NUKE names them: onto the camera right/left/below, depth.Z = 1/Z), "
+        ".pfm (disparity, +inf where none) and .png (red near, "
         "blue far), and report.json (--layout sequence: <camera>/<camera>.<frame>.exr). Presets: "
         + "; ".join(f"{p.name}: {p.description}" for p in PRESETS.values()),
     )

@@ -20,6 +20,8 @@ from pydantic import BaseModel, ConfigDict
 
 from rigctl.depth.estimate import DepthResult
 from rigctl.depth.grid import Grid
+from rigctl.disparity_layers import header as disparity_header
+from rigctl.disparity_layers import layers, steps
 from rigctl.exr import picture, picture_attributes, write_exr
 from rigctl.exrcam import camera_attributes
 from rigctl.layout import output_path
@@ -103,22 +105,12 @@ def write_outputs(
     if "exr" in formats:
         z = grid.depth(d)
         inv_z = np.where(np.isfinite(z) & (z > 0), 1.0 / z, 0.0).astype(np.float32)
-        fin = np.where(np.isfinite(d), d, 0.0).astype(np.float32)
         # the picture scene-linear and premultiplied by the key matte, as NUKE and Unreal read it
         channels: dict[str, F32] = {**picture(grid.images[name], res.matte, target.colour), "depth.Z": inv_z}
         channels["confidence.Y"] = res.confidence
+        st = steps(grid.offsets, name)
+        channels.update(layers(d, st))
         ox, oy = grid.offsets[name]
-        row = [n for n in grid.names if abs(grid.offsets[n][1] - oy) < 0.25 and n != name]
-        if any(grid.offsets[n][0] < ox for n in row):
-            channels["disparityL.x"] = fin  # the point is d further right in the left neighbour
-            channels["disparityL.y"] = np.zeros_like(fin)
-        if any(grid.offsets[n][0] > ox for n in row):
-            channels["disparityR.x"] = -fin
-            channels["disparityR.y"] = np.zeros_like(fin)
-        col = [n for n in grid.names if abs(grid.offsets[n][0] - ox) < 0.25 and n != name]
-        if col:
-            ratio = min(abs(grid.offsets[n][1] - oy) for n in col)
-            channels["disparityV.y"] = (-fin * ratio).astype(np.float32)  # shift to the camera below
         h, w = grid.shape
         attrs = {
             **picture_attributes(target.fps, target.timecode, target.colour),
@@ -128,6 +120,7 @@ def write_outputs(
             "rigctl.spacing_x": f"{grid.spacing:.6f}",
             "rigctl.offset": f"{ox:.6f} {oy:.6f}",
             "rigctl.disparity": "pixels of the horizontal spacing; depth.Z holds 1/Z",
+            **disparity_header(st),
         }
         write_exr(target.path(name, ".exr"), channels, attrs, half=("RGB", "A"))
 

@@ -1,6 +1,7 @@
 """Render input: the colour of a rectified grid (a rectified take, an ideal simulated take or a grid folder)
 and the disparity of its cameras read from a folder of PFM files (``<frame>/<camera>.pfm``: a depth output
-or a take's ``truth/disparity``). Nothing here depends on how the disparities were made."""
+or a take's ``truth/disparity``), or a depth output's EXRs where it has no PFM (``rigctl.disparity_layers``).
+Nothing here depends on how the disparities were made."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.depth.sources import FrameSource, open_source
+from rigctl.disparity_layers import read_disparity
 from rigctl.errors import ParameterError, TakeError
 from rigctl.keying import Keyer
 from rigctl.pfm import read_pfm
@@ -149,7 +151,9 @@ class RenderInput:
         folder = self.disparity_dir / f"{number:06d}"
         if self.frames.flat and not folder.is_dir():
             folder = self.disparity_dir  # a grid folder's depth output has no frame level
-        return folder / f"{name}.pfm"
+        pfm = folder / f"{name}.pfm"
+        exr = folder / f"{name}.exr"  # a depth output written with --format exr only
+        return exr if not pfm.exists() and exr.exists() else pfm
 
     def timing(self, number: int) -> tuple[float | None, Timecode | None]:
         """A take's rate and frame set ``number``'s timecode, which its views carry (None for a grid folder)."""
@@ -191,7 +195,7 @@ class RenderInput:
         for n in grid.names:
             disp = None
             if n in found:
-                disp = read_pfm(found[n])
+                disp = read_disparity(found[n]) if found[n].suffix == ".exr" else read_pfm(found[n])
                 if disp.ndim != 2:
                     raise TakeError(f"{found[n]}: a disparity is one channel (Pf), this file has three (PF)")
                 if disp.shape != (h, w):
