@@ -37,6 +37,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--frames", type=int, default=10, metavar="N", help="with --video: frame sets per take")
     d.add_argument("--preset", default="best", help="with --size or --video: the depth preset")
     d.add_argument("--cameras", nargs="+", metavar="CAM", help="with --size: cameras to compute (default: all)")
+    d.add_argument(
+        "--workers",
+        type=int,
+        default=10,
+        metavar="N",
+        help="with --size: the farm's workers for the real-time factor (default 10)",
+    )
+    d.add_argument(
+        "--fps",
+        type=float,
+        metavar="FPS",
+        help="with --size: the footage's frame rate for the real-time factor (default: the paper's rig's, 25)",
+    )
     d.set_defaults(func=run_depth_bench)
     render.register_bench(what)
     p.set_defaults(func=lambda ns: (p.print_help(), 2)[1])
@@ -87,23 +100,23 @@ def run_size_bench(ns: argparse.Namespace) -> int:
     """One frame set at the given size in a fresh process: seconds and peak resident memory."""
     import functools
 
-    from rigctl.farm.membench import measure_size, parse_size
+    from rigctl.farm.membench import format_speed, measure_size, parse_size, speed_summary
+    from rigctl.rig import load_rig
     from rigctl.simulated_presenter import presenter
 
     w, h = parse_size(ns.size)
+    if ns.workers < 1:
+        raise ParameterError(f"--workers must be at least 1, got {ns.workers}")
+    fps = ns.fps if ns.fps is not None else load_rig("bmd-micro-studio-4k-3x3").fps
+    if not 0 < fps <= 1000:
+        raise ParameterError(f"--fps must be in (0, 1000], got {ns.fps}")
     cams = tuple(ns.cameras) if ns.cameras else None
     check_depth_bench_memory((w, h), len(cams) if cams else 9, render._available_memory())
     r = measure_size(functools.partial(presenter, True), w, h, ns.preset, cams)
-    if ns.json:
-        print(json.dumps(r))
-        return 0
     t = r["timings_s"]
-    print(
-        f"{w}x{h}, preset {r['preset']}, {len(r['cameras'])} cameras: {r['seconds']:.1f} s per frame set "
-        f"(depth {t['depth']:.1f} s, write {t['write']:.1f} s), peak memory {r['peak_rss_bytes'] / 2**30:.2f} GiB "
-        f"(input images {r['input_bytes'] / 2**30:.2f} GiB, {r['peak_rss_while_building_input_bytes'] / 2**30:.2f} GiB "
-        "while the input was built)"
-    )
+    r["fps"], r["workers"] = fps, ns.workers
+    r["summary"] = speed_summary(t["depth"], t["write"], r["stages_s"], r["sgbm"]["seconds"], fps, ns.workers)
+    print(json.dumps(r) if ns.json else format_speed(r))
     return 0
 
 

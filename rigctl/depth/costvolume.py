@@ -203,10 +203,19 @@ class Sweep:
     no_view: NDArray[np.bool_]  # no view sees the point at the chosen disparity
 
 
-def sweep(views: MatchViews, candidates: list[float | F32], p: VolumeParams, win: int, radius: int) -> Sweep:
+def sweep(
+    views: MatchViews,
+    candidates: list[float | F32],
+    p: VolumeParams,
+    win: int,
+    radius: int,
+    stats: EstimateStats | None = None,
+) -> Sweep:
     """Winner-take-all over ``candidates`` (constant disparities or per-pixel maps, in increasing order),
-    streamed, with the costs of the best's two neighbours kept for a parabola fit."""
+    streamed, with the costs of the best's two neighbours kept for a parabola fit. ``stats`` adds the
+    seconds spent on the matching cost and on its aggregation (``cost_s``, ``aggregation_s``)."""
     agg = Aggregator(views.guide, radius, p.eps)
+    t_cost = t_agg = 0.0
     shape = views.shape
     best = np.full(shape, np.inf, np.float32)
     k_best = np.zeros(shape, np.int32)
@@ -216,9 +225,13 @@ def sweep(views: MatchViews, candidates: list[float | F32], p: VolumeParams, win
     prev = np.full(shape, np.inf, np.float32)
     seen_any = np.zeros(shape, bool)
     for k, d in enumerate(candidates):
+        t0 = time.perf_counter()
         raw = views.costs(d, win, p.keep)
+        t1 = time.perf_counter()
         seen = raw < INVALID_COST * 0.5
         c = np.where(seen, agg(raw), np.float32(INVALID_COST))
+        t_agg += time.perf_counter() - t1
+        t_cost += t1 - t0
         c_plus = np.where(k_best == k - 1, c, c_plus)  # the level right after the current best
         better = c < best
         k_best = np.where(better, k, k_best)
@@ -228,6 +241,9 @@ def sweep(views: MatchViews, candidates: list[float | F32], p: VolumeParams, win
         total += np.minimum(c, TRUNCATE)
         seen_any |= seen
         prev = c
+    if stats is not None:
+        stats["cost_s"] = stats.get("cost_s", 0.0) + t_cost
+        stats["aggregation_s"] = stats.get("aggregation_s", 0.0) + t_agg
     n = len(candidates)
     stack_at = _pick(candidates, k_best, shape)
     step = _pick(candidates, np.minimum(k_best + 1, n - 1), shape) - _pick(candidates, np.maximum(k_best - 1, 0), shape)
@@ -283,19 +299,22 @@ def volume_disparity(
     levels = levels[: max(1, 4 * max(cv.h, cv.w))]  # a range far beyond the image is capped
     stats["levels"] = len(levels)
     stats["coarse_scale"] = s
-    coarse = sweep(cv, list(levels), p, p.window, max(1, round(p.radius * s)))
+    stats["integer_sweep_pixel_levels"] = cv.shape[0] * cv.shape[1] * len(levels)
+    coarse = sweep(cv, list(levels), p, p.window, max(1, round(p.radius * s)), stats)
     stats["integer_sweep_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    d_s, at = coarse.disparity, s
     full = cv if s == 1.0 else MatchViews(images, ref, rel, box, 1.0, centre)
     h, w = full.shape
-    d0 = coarse.disparity / np.float32(s)
-    if s != 1.0:
+    d0 = d_s / np.float32(at)
+    if at != 1.0:
         d0 = np.asarray(cv2.resize(d0, (w, h), interpolation=cv2.INTER_NEAREST), np.float32)
     d0 = np.clip(d0, lo, hi).astype(np.float32)
-    reach = max(1.0, 0.75 / s)  # how far the truth may lie from the coarse result, full-resolution px
+    reach = max(1.0, 0.75 / at)  # how far the truth may lie from the coarser result, full-resolution px
     n_side = math.ceil(reach / FRACTION)
     cands: list[float | F32] = [(d0 + np.float32(k * FRACTION)).astype(np.float32) for k in range(-n_side, n_side + 1)]
-    fine = sweep(full, cands, p, p.window, p.radius)
+    stats["fractional_sweep_pixel_levels"] = h * w * len(cands)
+    fine = sweep(full, cands, p, p.window, p.radius, stats)
     stats["fractional_candidates"] = len(cands)
     stats["fractional_sweep_s"] = time.perf_counter() - t0
     bound = coarse.bound

@@ -34,10 +34,11 @@ def pairs_engine(job: SearchJob) -> BoxEstimate:
     maps = []
     u8: dict[str, NDArray[np.uint8]] = {}
     searched: list[int] = []
+    work: list[int] = []
     for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
         other = neighbour(grid, ref, dx, dy)
         if other is not None:
-            maps.append(pair_disparity(grid, ref, other, d_range, box=box, u8=u8, searched=searched))
+            maps.append(pair_disparity(grid, ref, other, d_range, box=box, u8=u8, searched=searched, work=work))
     if not maps:  # pairs need a camera on the same row or column; the plane sweep does not
         raise ParameterError(
             f"camera {ref} has no other camera on its row or column, which preset {preset.name} matches with; "
@@ -53,6 +54,7 @@ def pairs_engine(job: SearchJob) -> BoxEstimate:
     stats["pairs"] = len(maps)
     stats["levels"] = max(searched, default=0)  # disparities the widest pair searched, in its own pixels
     stats["pairs_s"] = time.perf_counter() - t0
+    stats["pairs_pixel_levels"] = sum(work)
 
     t0 = time.perf_counter()
     fine = SweepLevel(grid, ref, job.moving, 1.0, box)

@@ -95,10 +95,12 @@ def pair_disparity(
     box: tuple[int, int, int, int] | None = None,
     u8: dict[str, NDArray[np.uint8]] | None = None,
     searched: list[int] | None = None,
+    work: list[int] | None = None,
 ) -> F32:
     """SGBM between ``ref`` and one neighbour, returned as disparity of the horizontal spacing for ``ref``.
     ``box`` (y0, y1, x0, x1): only that part of ``ref`` is wanted; a horizontal pair then matches only those
-    rows (all columns: the match may lie outside the box), a vertical pair only those columns."""
+    rows (all columns: the match may lie outside the box), a vertical pair only those columns. ``searched``
+    and ``work`` collect the levels searched and the pixel-levels the matcher evaluated."""
     rx = grid.offsets[other][0] - grid.offsets[ref][0]
     ry = grid.offsets[other][1] - grid.offsets[ref][1]
     h, w = grid.shape
@@ -139,4 +141,6 @@ def pair_disparity(
     d = d[:, x0:x1] if abs(ry) < abs(rx) else d[y0:y1]
     if searched is not None:
         searched.append(int(m.getNumDisparities()))
+    if work is not None:
+        work.append(int(a.shape[0] * a.shape[1] * m.getNumDisparities()))
     return np.ascontiguousarray(d / np.float32(scale), dtype=np.float32)

@@ -40,6 +40,16 @@ class EstimateStats(TypedDict, total=False):
     integer_sweep_s: float
     fractional_candidates: int
     fractional_sweep_s: float
+    # where the time went (the cost volume: summed over its sweeps) and the work each stage did, in pixels
+    # times the disparities evaluated there (issue 24)
+    cost_s: float  # the matching cost of every level and candidate
+    aggregation_s: float  # its guided-filter aggregation
+    candidates_s: float  # the semi-global pairs as a second candidate and the per-pixel choice
+    refinement_s: float  # the continuous refinement along the baselines and the outlier clean-up
+    integer_sweep_pixel_levels: int
+    fractional_sweep_pixel_levels: int
+    pairs_pixel_levels: int  # OpenCV's semi-global matcher, over every pair (its rows or columns x levels)
+    refine_pixel_levels: int  # pixels x Gauss-Newton steps
     pairs: int
     pairs_s: float
     conflict_share: float

@@ -59,9 +59,13 @@ def volume_engine(job: SearchJob) -> BoxEstimate:
         d = np.where(picked, pairs, d).astype(np.float32)
         reach = np.where(picked, np.float32(0.5), np.float32(FRACTION)).astype(np.float32)
         stats["pairs_chosen_share"] = float(picked.mean())
+    t1 = time.perf_counter()
+    stats["candidates_s"] = t1 - t0  # the semi-global pairs as a second candidate, and the choice between them
     if p.lk_iterations:
         d, _ = refine(views, d, job.keep, p.guided_radius, p.guided_eps, p.lk_iterations, reach=reach)
+        stats["refine_pixel_levels"] = d.size * p.lk_iterations  # one disparity per pixel and step
     d, outliers = clean(np.clip(d, lo - 1.0, hi + 1.0).astype(np.float32))
+    stats["refinement_s"] = time.perf_counter() - t1
     stats["outliers_replaced"] = int(outliers.sum())
     # the bands only some views see (the frame's edges at a wide baseline): how many pixels rest on few views
     stats["fewer_than_3_views_pixels"] = int((job.region & (views.seen_count(d) < 3)).sum())

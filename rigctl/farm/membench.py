@@ -63,6 +63,86 @@ def _reset_peak() -> None:
         log.warning("cannot reset the peak memory counter: the peak includes building the input")
 
 
+STAGES = ("cost", "aggregation", "candidates", "refinement")  # EstimateStats' <stage>_s, summed over cameras
+WORK = ("integer_sweep", "fractional_sweep", "pairs", "refine")  # EstimateStats' <stage>_pixel_levels
+SGBM_RUNS = 3  # the reference pair is timed this many times, the median kept
+
+
+def sgbm_reference(grid: Grid, d_range: tuple[float, float], threads: int) -> dict[str, Any]:
+    """One OpenCV SGBM 3WAY pair (the centre camera and its horizontal neighbour) over the same range at the
+    same size, with ``threads`` OpenCV threads: the yardstick of issue 24. Median of SGBM_RUNS runs."""
+    import cv2
+
+    from rigctl.depth.baselines import sgbm_pair
+    from rigctl.depth.pairs import make_sgbm, neighbour
+
+    ref = grid.names[len(grid.names) // 2]
+    other = neighbour(grid, ref, 1, 0) or neighbour(grid, ref, -1, 0)
+    scale = abs(grid.offsets[other][0] - grid.offsets[ref][0]) if other else 1.0
+    levels = int(make_sgbm(d_range[0] * scale, d_range[1] * scale).getNumDisparities())
+    grid.bgr8(ref), grid.bgr8(other or ref)  # the 8-bit images exist before the clock starts, as for a pair
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(threads)
+    try:
+        times = []
+        for _ in range(SGBM_RUNS):
+            t0 = time.perf_counter()
+            sgbm_pair(grid, ref, d_range)
+            times.append(time.perf_counter() - t0)
+    finally:
+        cv2.setNumThreads(before)
+    return {"seconds": float(np.median(times)), "levels": levels, "threads": threads, "pair": [ref, other]}
+
+
+def speed_summary(
+    depth_s: float, write_s: float, stages_s: dict[str, float], sgbm_s: float, fps: float, workers: int
+) -> dict[str, Any]:
+    """The figures of issue 24 from measured times: the ratio of the frame set's depth (and of depth and
+    writing) to one SGBM pair, the stages (what the depth spent outside the named ones is ``other``), the
+    write share, and the real-time factor: compute seconds per second of footage at ``fps``, for one worker
+    and for ``workers`` (chunks are independent: the farm divides it), and the hours a minute of footage takes."""
+    if sgbm_s <= 0 or fps <= 0 or workers < 1:
+        raise ParameterError(f"speed summary needs sgbm_s > 0, fps > 0, workers >= 1 (got {sgbm_s}, {fps}, {workers})")
+    total = depth_s + write_s
+    stages = {k: float(v) for k, v in stages_s.items()}
+    stages["other"] = max(0.0, depth_s - sum(stages.values()))
+    stages["write"] = write_s
+    rtf = total * fps
+    return {
+        "ratio_depth": depth_s / sgbm_s,
+        "ratio_total": total / sgbm_s,
+        "stages_s": stages,
+        "write_share": write_s / total if total > 0 else 0.0,
+        "realtime_factor": {"1": rtf, str(workers): rtf / workers},
+        "hours_per_minute": {"1": rtf * 60 / 3600, str(workers): rtf * 60 / 3600 / workers},
+    }
+
+
+def format_speed(r: dict[str, Any]) -> str:
+    """The size bench as text: the frame set, the SGBM pair beside it, the ratio, stages, memory, real time."""
+    w, h = r["size"]
+    t, sm, sg = r["timings_s"], r["summary"], r["sgbm"]
+    n = str(r["workers"])
+    stages = ", ".join(f"{k} {v:.2f}" for k, v in sm["stages_s"].items())
+    work = ", ".join(f"{k} {v:.3g}" for k, v in r["pixel_levels"].items())
+    return "\n".join(
+        [
+            f"{w}x{h}, preset {r['preset']}, {len(r['cameras'])} cameras: {r['seconds']:.2f} s per frame set "
+            f"(depth {t['depth']:.2f} s, write {t['write']:.2f} s)",
+            f"one OpenCV SGBM 3WAY pair, same size, {sg['levels']} levels, {sg['threads']} thread(s): "
+            f"{sg['seconds']:.3f} s",
+            f"ratio to the SGBM pair: depth {sm['ratio_depth']:.1f}x, depth + write {sm['ratio_total']:.1f}x",
+            f"stages (s, summed over cameras): {stages}; write share {100 * sm['write_share']:.1f} %",
+            f"pixel-levels evaluated: {work}",
+            f"peak memory {r['peak_rss_bytes'] / 2**30:.2f} GiB (input images {r['input_bytes'] / 2**30:.2f} GiB, "
+            f"{r['peak_rss_while_building_input_bytes'] / 2**30:.2f} GiB while the input was built)",
+            f"real-time factor at {r['fps']:g} fps: {sm['realtime_factor']['1']:.0f} s of compute per s of footage "
+            f"on one worker, {sm['realtime_factor'][n]:.1f} on {n} workers "
+            f"({sm['hours_per_minute']['1']:.1f} h and {sm['hours_per_minute'][n]:.2f} h per minute of footage)",
+        ]
+    )
+
+
 def _measure(make: Callable[[], Any], width: int, height: int, preset: str, cameras: tuple[str, ...] | None) -> dict:
     from rigctl.depth.export import Exporter
     from rigctl.depth.pipeline import TakeProcessor
@@ -82,14 +162,24 @@ def _measure(make: Callable[[], Any], width: int, height: int, preset: str, came
         # one frame set through the pipeline as a worker runs it: depth, then staged and published by rename
         done = TakeProcessor(OneGrid(grid), opt, exporter=Exporter(Path(tmp), atomic=True)).process(0)
     seconds = time.perf_counter() - t0
+    peak = _peak_rss()
     stats = done.report
+    cams: list[dict[str, Any]] = [dict(c) for c in stats.cameras.values()]
+    stages = {k: sum(float(c.get(f"{k}_s", 0.0)) for c in cams) for k in STAGES}
+    work = {k: sum(int(c.get(f"{k}_pixel_levels", 0)) for c in cams) for k in WORK}
+    import numba
+
+    sgbm = sgbm_reference(grid, d_range, numba.get_num_threads())  # as many threads as our kernels use
     return {
         "size": [width, height],
         "preset": preset,
         "cameras": list(stats.cameras),
         "seconds": seconds,
         "timings_s": {"depth": stats.timings_s.depth, "write": stats.timings_s.write},
-        "peak_rss_bytes": _peak_rss(),
+        "stages_s": stages,
+        "pixel_levels": work,
+        "sgbm": sgbm,
+        "peak_rss_bytes": peak,
         "peak_rss_while_building_input_bytes": before,
         "input_bytes": int(sum(v.nbytes for v in grid.images.values())),
     }

@@ -1,0 +1,69 @@
+"""The size bench's arithmetic (issue 24) from injected times: ratio to the SGBM pair, stages, write share and
+the real-time factor. No timing is measured here."""
+
+from __future__ import annotations
+
+import pytest
+
+from rigctl.errors import ParameterError
+from rigctl.farm.membench import format_speed, speed_summary
+
+
+def test_ratio_stages_write_share_and_realtime_factor() -> None:
+    s = speed_summary(
+        depth_s=12.0,
+        write_s=3.0,
+        stages_s={"cost": 5.0, "aggregation": 2.0, "candidates": 1.5, "refinement": 0.5},
+        sgbm_s=0.5,
+        fps=25.0,
+        workers=10,
+    )
+    assert s["ratio_depth"] == pytest.approx(24.0)
+    assert s["ratio_total"] == pytest.approx(30.0)
+    # what the named stages did not account for is "other"; writing is its own stage
+    assert s["stages_s"]["other"] == pytest.approx(3.0)
+    assert s["stages_s"]["write"] == pytest.approx(3.0)
+    assert sum(v for k, v in s["stages_s"].items() if k != "write") == pytest.approx(12.0)
+    assert s["write_share"] == pytest.approx(0.2)
+    # 15 s per frame set at 25 fps: 375 s of compute per second of footage; ten workers share it
+    assert s["realtime_factor"]["1"] == pytest.approx(375.0)
+    assert s["realtime_factor"]["10"] == pytest.approx(37.5)
+    assert s["hours_per_minute"]["1"] == pytest.approx(375.0 * 60 / 3600)
+    assert s["hours_per_minute"]["10"] == pytest.approx(375.0 * 60 / 3600 / 10)
+
+
+def test_stages_beyond_the_depth_time_leave_no_negative_other() -> None:
+    s = speed_summary(1.0, 0.0, {"cost": 0.7, "aggregation": 0.4}, 0.1, 25.0, 1)
+    assert s["stages_s"]["other"] == 0.0 and s["write_share"] == 0.0
+    assert s["realtime_factor"] == {"1": pytest.approx(25.0)}
+
+
+@pytest.mark.parametrize(("sgbm_s", "fps", "workers"), [(0.0, 25.0, 1), (0.2, 0.0, 1), (0.2, 25.0, 0)])
+def test_refuses_figures_that_would_divide_by_nothing(sgbm_s: float, fps: float, workers: int) -> None:
+    with pytest.raises(ParameterError):
+        speed_summary(1.0, 1.0, {}, sgbm_s, fps, workers)
+
+
+def test_the_text_names_the_reference_ratio_and_real_time_factor() -> None:
+    times = {"depth": 8.0, "write": 2.0}
+    summary = speed_summary(8.0, 2.0, {"cost": 4.0}, 0.25, 25.0, 4)
+    r = {
+        "size": [1920, 1080],
+        "preset": "best",
+        "cameras": ["c"] * 9,
+        "seconds": 10.0,
+        "timings_s": times,
+        "pixel_levels": {"integer_sweep": 1e9},
+        "sgbm": {"seconds": 0.25, "levels": 128, "threads": 2},
+        "peak_rss_bytes": 2**30,
+        "input_bytes": 2**28,
+        "peak_rss_while_building_input_bytes": 2**29,
+        "fps": 25.0,
+        "workers": 4,
+        "summary": summary,
+    }
+    text = format_speed(r)
+    assert "SGBM 3WAY pair" in text and "128 levels" in text and "0.250 s" in text
+    assert "depth 32.0x" in text and "depth + write 40.0x" in text
+    assert "write share 20.0 %" in text
+    assert "250 s of compute per s of footage on one worker, 62.5 on 4 workers" in text
