@@ -31,9 +31,10 @@ from rigctl.depth.export import FORMATS, PARTIAL_PREFIX, frame_name
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.pipeline import ChunkEnd, chunks, settle
 from rigctl.depth.take_range import RangeDecision, SearchRounds, SearchState, hull
-from rigctl.errors import ParameterError
+from rigctl.errors import DeviceError, ParameterError
 from rigctl.farm.frame import ChunkJob, is_rectified, one_line, run_chunk, take_range
 from rigctl.farm.ledger import FrameEntry, Ledger
+from rigctl.farm.wire import MAX_MESSAGE_BYTES, bounded_messages
 
 log = logging.getLogger(__name__)
 
@@ -228,14 +229,24 @@ def dask_client(options: FarmOptions) -> Iterator[Any]:
     from distributed import Client, LocalCluster
 
     if options.scheduler:
-        try:
-            client = Client(options.scheduler, timeout="10s")
-        except (OSError, TimeoutError) as exc:
-            raise ParameterError(f"--scheduler {options.scheduler}: cannot reach it ({one_line(exc)})") from None
-        try:
-            yield client
-        finally:
-            client.close()
+        what = f"--scheduler {options.scheduler}"
+        with bounded_messages() as refusals:
+            try:
+                client = Client(options.scheduler, timeout="10s")
+            except (OSError, TimeoutError) as exc:
+                refused = refusals.first(what, MAX_MESSAGE_BYTES)
+                if refused:
+                    raise DeviceError(refused) from None
+                raise ParameterError(f"{what}: cannot reach it ({one_line(exc)})") from None
+            try:
+                yield client
+            except Exception:
+                refused = refusals.first(what, MAX_MESSAGE_BYTES)
+                if refused:  # the connection was dropped on a message too large: that is the error
+                    raise DeviceError(refused) from None
+                raise
+            finally:
+                client.close()
         return
     if options.workers < 1:
         raise ParameterError(f"--workers must be at least 1, got {options.workers}")

@@ -398,6 +398,39 @@ def test_a_scheduler_address_that_is_no_dask_scheduler_is_one_line(tiny, tmp_pat
     one_line(res, EXIT_DEVICE, "--scheduler", "not a Dask scheduler")
 
 
+@pytest.mark.parametrize("mode", ["length", "buffers"])
+def test_a_scheduler_that_shakes_hands_then_claims_a_huge_message_is_one_line(tiny, tmp_path: Path, mode: str) -> None:  # type: ignore[no-untyped-def]
+    """Past the handshake (which the probe checks), every message is bounded too: a peer that speaks Dask's
+    handshake, then claims exabytes (or a small header listing terabyte buffers), is refused in one line,
+    within a 2.5 GB address space, instead of a traceback from numpy asked for 4 EiB."""
+    import resource
+    import subprocess
+    import sys
+
+    from tests_support import rigctl_exe  # type: ignore[import-not-found]
+
+    server = subprocess.Popen(
+        [sys.executable, str(Path(__file__).resolve().parents[1] / "hostile_scheduler.py"), mode],
+        stdout=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
+    )  # fmt: skip
+    try:
+        assert server.stdout is not None
+        address = server.stdout.readline().strip()
+        assert address.startswith("tcp://"), address
+
+        def limit() -> None:
+            resource.setrlimit(resource.RLIMIT_AS, (5 << 29, 5 << 29))
+
+        res = subprocess.run(
+            [*rigctl_exe(), "process", str(tiny[1]), "--out", str(tmp_path / "p"), "--scheduler", address],
+            capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL, preexec_fn=limit,
+        )  # fmt: skip
+    finally:
+        server.kill()
+        server.wait()
+    one_line(res, EXIT_DEVICE, "--scheduler", "sent a message of", "refused")
+
+
 @pytest.mark.parametrize(
     ("argv", "fragment"),
     [
