@@ -7,12 +7,18 @@ import math
 import sys
 from typing import NoReturn
 
+from rigctl.cli.helptext import HelpFormatter
 from rigctl.exr import COLOURS
 from rigctl.layout import LAYOUTS
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """An ArgumentParser whose errors are one line on stderr and exit code 2 (no usage dump)."""
+    """An ArgumentParser whose errors are one line on stderr and exit code 2 (no usage dump), and whose help
+    is rigctl's (:mod:`rigctl.cli.helptext`: colour on a terminal, examples at the end)."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
 
     def error(self, message: str) -> NoReturn:
         sys.stderr.write(f"{self.prog}: error: {message} (see {self.prog} --help)\n")

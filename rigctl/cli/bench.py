@@ -7,15 +7,27 @@ import json
 from pathlib import Path
 
 from rigctl.cli import render
+from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress
 from rigctl.errors import ParameterError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("bench", help="benchmarks that report error against run time")
+    depth = ("error against run time of every depth preset and OpenCV", "rigctl bench depth --quick")
+    render_pair = ("the renderer's time for a 1080p stereo pair", "rigctl bench render")
+    summary = "benchmarks that report error against run time"
+    p = sub.add_parser("bench", help=summary, epilog=examples(depth, render_pair))
     what = p.add_subparsers(dest="what", metavar="WHAT")
     d = what.add_parser(
         "depth",
+        epilog=examples(
+            ("every preset and baseline without the ideal presenter, the plot in bench.png",
+             "rigctl bench depth --quick --plot bench.png"),
+            ("time and peak memory of one 960x540 frame set, one camera",
+             "rigctl bench depth --size 960x540 --cameras r1c1"),
+            ("flicker with temporal stabilisation off and on, 4 frame sets a take",
+             "rigctl bench depth --video --frames 4"),
+        ),
         help="every depth preset and the OpenCV baselines on the simulated presenter, Middlebury Motorcycle and "
         "the stratified light-field scenes, as a light field and as parallel cameras see them (+60 px)",
     )

@@ -9,14 +9,21 @@ from pathlib import Path
 from PIL import Image
 
 from rigctl.board import DICTIONARIES, BoardSpec
+from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "board",
+        epilog=examples(
+            ("board.png and board.yaml: the 8x6 ChArUco board of 75 mm squares the simulator shows",
+             "rigctl board --out board"),
+            ("a smaller board for close work, printed at 300 dpi",
+             "rigctl board --out small-board --squares 10x7 --square-mm 30 --marker-mm 22 --dpi 300"),
+        ),
         help="write a printable ChArUco target (PNG) and its description (board.yaml)",
-        description="Write OUT.png, to be printed at 100 %% scale at --dpi, and OUT.yaml describing the board for "
+        description="Write OUT.png, to be printed at 100 % scale at --dpi, and OUT.yaml describing the board for "
         "rigctl calibrate. Measure a printed square and correct square_m in the YAML if the print is off.",
     )
     p.add_argument("--out", type=Path, default=Path("board"), metavar="STEM", help="output stem (default: board)")

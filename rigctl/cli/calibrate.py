@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress
 from rigctl.errors import CalibrationError, ParameterError
 
@@ -14,6 +15,12 @@ from rigctl.errors import CalibrationError, ParameterError
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "calibrate",
+        epilog=examples(
+            ("the demo's ChArUco take: every camera jointly, with the report's plots beside calibration.yaml",
+             "rigctl calibrate rigctl-demo/takes/calibration --out calibration.yaml"),
+            ("a board take recorded by rigctl record's example, also for OpenCV and COLMAP",
+             "rigctl calibrate takes/board --out board-calibration.yaml --opencv opencv.yaml --colmap colmap"),
+        ),
         help="calibrate all cameras jointly from a board take or a folder of frame sets",
         description="INPUT is a take, a folder of frame sets (<frame>/<camera>.png) or a folder of images named "
         "<camera><frame>.png (left01.jpg, right01.jpg: a stereo pair). Corners are detected with sub-pixel "

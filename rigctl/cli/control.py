@@ -8,6 +8,7 @@ import json
 from dataclasses import asdict
 
 from rigctl.camera_control import REFERENCE_SOURCES, check_settings, format_results, worst
+from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
 from rigctl.registry import DeviceSet, open_cameras, open_control
 from rigctl.rig import Rig, load_rig
@@ -16,6 +17,12 @@ from rigctl.rig import Rig, load_rig
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "control",
+        epilog=examples(
+            ("the same shutter and gain on every camera, each value confirmed by the camera's own report",
+             "rigctl control sim-3x3 --exposure-us 10000 --gain 2"),
+            ("white balance of one camera, as JSON",
+             "rigctl control sim-3x3 --white-balance-k 5600 --camera r1c1 --json"),
+        ),
         help="set exposure, gain, white balance, focus, aperture, reference on all cameras (or one)",
         description="Apply camera settings through the rig's camera-control path (camera_control: bridge). "
         "Each setting is reported per camera as confirmed (the camera reports the value), unconfirmed (the "

@@ -6,12 +6,18 @@ import argparse
 import sys
 from pathlib import Path
 
+from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "demo",
+        epilog=examples(
+            ("the whole chain on the simulated rig, ending with rigctl-demo/report.md",
+             "rigctl demo --out rigctl-demo"),
+            ("again, replacing a finished demo", "rigctl demo --out rigctl-demo --fresh"),
+        ),
         help="plan, record, calibrate, rectify, depth and benchmark on the simulated rig, with a report",
         description="Runs every stage on the simulated sim-3x3 rig: plan; record a ChArUco take; calibrate; "
         "record a presenter take; rectify; depth for all cameras; error against run time for the presets and "

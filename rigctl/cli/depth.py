@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 from rigctl.cli.args import add_layout, add_pipeline_options, distance, far_distance
+from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress
 from rigctl.cli.take import damaged_exit
 from rigctl.depth.presets import PRESETS
@@ -20,6 +21,13 @@ from rigctl.take.export import parse_range
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "depth",
+        epilog=examples(
+            ("every camera of the demo's rectified take, frame set 0, within the planned range",
+             "rigctl depth rigctl-demo/takes/presenter-rectified --out depth --frames 0 --near 1.95 --far 2.95"),
+            ("one camera of an ideal simulated take (already rectified), fast preset, scored against the truth",
+             "rigctl depth takes/ideal --out ideal-depth --cameras r1c1 --preset fast"),
+            ("an EXR sequence per camera for NUKE", "rigctl depth takes/ideal --out ideal-nuke --layout sequence"),
+        ),
         help="per-camera disparity and depth of a rectified take or grid folder (EXR, PFM, PNG)",
         description="Multi-baseline depth: every other camera of the grid with its own baseline, only the keyed "
         "subject, only the planned disparity range (from --near/--far). Writes <frame>/<camera>.exr (scene-linear "

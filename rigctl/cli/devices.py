@@ -5,12 +5,21 @@ from __future__ import annotations
 import argparse
 import json
 
+from rigctl.cli.helptext import examples
 from rigctl.discovery import describe_attached
 from rigctl.rig import load_rig
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("devices", help="attached capture devices and their mapping onto the rig")
+    p = sub.add_parser(
+        "devices",
+        help="attached capture devices and their mapping onto the rig",
+        epilog=examples(
+            ("the V4L2 capture devices on this machine and which of the paper's rig's cameras they are "
+             "(exit 1 while any is missing)", "rigctl devices bmd-micro-studio-4k-3x3"),
+            ("the simulated rig's cameras, tally and bridge, as JSON", "rigctl devices sim-3x3 --json"),
+        ),
+    )
     p.add_argument("rig", nargs="?", help="rig file or shipped rig name (default: sim-3x3)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run)

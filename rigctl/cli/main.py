@@ -22,6 +22,7 @@ from pathlib import Path
 
 from rigctl import __version__
 from rigctl.cli import args
+from rigctl.cli.helptext import examples
 from rigctl.errors import EXIT_INTERRUPTED, EXIT_USAGE, RigctlError
 from rigctl.publish import output_error
 
@@ -31,7 +32,7 @@ log = logging.getLogger(__name__)
 # only that module (and what it needs), not every verb's libraries: start-up is part of a take's start
 VERBS = (
     "plan", "devices", "record", "take", "tally", "control", "board", "calibrate", "rectify", "depth", "process",
-    "render", "bench", "demo", "tui", "miv", "usd", "view",
+    "render", "bench", "demo", "tui", "miv", "usd", "view", "completion",
 )  # fmt: skip
 
 
@@ -41,6 +42,17 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     parser = args.OneLineParser(
         prog="rigctl",
         description="Run a planar camera array on set and turn its takes into colour + per-pixel depth.",
+        epilog=examples(
+            ("the whole chain on the simulated rig, ending with rigctl-demo/report.md (1-2 minutes)",
+             "rigctl demo --out rigctl-demo"),
+            ("the nearest distance for a subject 1 m deep on the paper's rig",
+             "rigctl plan bmd-micro-studio-4k-3x3 --subject-depth 1"),
+            ("ten frame sets from the simulated rig into ./takes/T001",
+             "rigctl record sim-3x3 --take T001 --frames 10 --sim deterministic=true"),
+            ("what a command takes, with its own examples", "rigctl depth --help"),
+            ("completion of commands, options, rigs and cameras in bash (rigctl completion --help: installing it)",
+             "source <(rigctl completion bash)"),
+        ),
     )
     parser.add_argument("--version", action="version", version=f"rigctl {__version__}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks and debug logging")

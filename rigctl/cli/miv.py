@@ -10,6 +10,7 @@ import logging
 import re
 from pathlib import Path
 
+from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
 
 log = logging.getLogger(__name__)
@@ -32,13 +33,28 @@ def _frames(text: str) -> range:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("miv", help="MPEG immersive video: IV-PSNR, export and import of MIV content")
+    p = sub.add_parser(
+        "miv",
+        help="MPEG immersive video: IV-PSNR, export and import of MIV content",
+        epilog=examples(
+            ("an ideal simulated take and its true disparity as MIV content",
+             "rigctl miv export takes/ideal takes/ideal/truth/disparity --out miv"),
+            ("that content back as grid folders", "rigctl miv import miv/cameras.json --out miv-grid"),
+        ),
+    )
     verbs = p.add_subparsers(dest="miv_verb", metavar="ACTION")
 
     iv = verbs.add_parser(
         "ivpsnr",
+        epilog=examples(
+            ("a camera's picture scored against itself (the cap: identical pictures)",
+             "rigctl miv ivpsnr miv/r1c1_texture_960x540_yuv420p10le.yuv miv/r1c1_texture_960x540_yuv420p10le.yuv "
+             "--size 960x540 --pix-fmt yuv420p10le"),
+            ("frame 2 of two 8-bit files, as JSON",
+             "rigctl miv ivpsnr ref.yuv test.yuv --size 1920x1080 --frame 2 --json"),
+        ),
         help="IV-PSNR (and PSNR) of a raw YUV 4:2:0 picture against a reference",
-        description="IV-PSNR as MPEG defines it (search range 2, global colour offset tolerated up to 1 %% of "
+        description="IV-PSNR as MPEG defines it (search range 2, global colour offset tolerated up to 1 % of "
         "the peak, components 4:1:1), written from the paper; the same figures as the authors' software.",
     )
     iv.add_argument("reference", type=Path, help="raw .yuv file (the original)")
@@ -52,6 +68,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     ex = verbs.add_parser(
         "export",
+        epilog=examples(
+            ("an ideal simulated take and its true disparity",
+             "rigctl miv export takes/ideal takes/ideal/truth/disparity --out miv"),
+            ("the demo's rectified take with its estimated depth, frame set 0",
+             "rigctl miv export rigctl-demo/takes/presenter-rectified rigctl-demo/depth --out demo-miv --frames 0"),
+        ),
         help="a rectified take and its disparity as MIV content: camera JSON, YUV 4:2:0 10-bit colour, 16-bit depth",
     )
     ex.add_argument("take", type=Path, help="a rectified take (or an ideal=true simulated take)")
@@ -62,6 +84,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     im = verbs.add_parser(
         "import",
+        epilog=examples(
+            ("MIV content as one grid folder per frame", "rigctl miv import miv/cameras.json --out miv-grid"),
+            ("then depth on its first frame, scored against the content's own depth",
+             "rigctl depth miv-grid/000000 --out miv-depth"),
+        ),
         help="MIV content (camera JSON + YUV) as grid folders for rigctl depth and render, one per frame",
     )
     im.add_argument("cameras", type=Path, help="the content's camera JSON")

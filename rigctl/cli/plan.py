@@ -6,6 +6,7 @@ import argparse
 import json
 
 from rigctl.cli import args
+from rigctl.cli.helptext import examples
 from rigctl.planning.report import format_plan, plan_rig
 from rigctl.rig import load_rig
 
@@ -13,6 +14,13 @@ from rigctl.rig import load_rig
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "plan",
+        epilog=examples(
+            ("the nearest distance that keeps adjacent cameras within 4 % for a subject 1 m deep, on the paper's rig",
+             "rigctl plan bmd-micro-studio-4k-3x3 --subject-depth 1"),
+            ("check every camera pair for a subject from 2.5 m to a background at infinity",
+             "rigctl plan sim-3x3 --near 2.5 --far inf"),
+            ("the same plan as JSON, for a script", "rigctl plan sim-3x3 --subject-depth 1 --json"),
+        ),
         help="near/far distances, parallax per camera pair, budget, disparity range",
         description=(
             "Apply equations (1) and (2) to every camera pair of RIG. With --subject-depth alone, solve the "

@@ -10,6 +10,7 @@ import struct
 from pathlib import Path
 
 from rigctl.cli.args import add_pipeline_options, distance, far_distance
+from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress
 from rigctl.depth.presets import PRESETS
 from rigctl.errors import DeviceError
@@ -85,6 +86,12 @@ def probe_scheduler(url: str, timeout: float = PROBE_TIMEOUT_S) -> None:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "process",
+        epilog=examples(
+            ("the demo's rectified take on two local workers",
+             "rigctl process rigctl-demo/takes/presenter-rectified --out farm --workers 2"),
+            ("a take not yet rectified, rectified on the workers; run it again to finish what a stopped run left",
+             "rigctl process rigctl-demo/takes/presenter --calibration rigctl-demo/calibration.yaml --out farm2"),
+        ),
         help="depth for every frame set of a take on a Dask cluster (local processes or a scheduler)",
         description="Chunks of --chunk consecutive frame sets are Dask tasks (the take's range decided first, "
         "once): rectify (when the take is not rectified: --calibration), depth "

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from rigctl.capture.preflight import PreflightReport
 from rigctl.capture.recording import record_take
+from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress
 from rigctl.errors import ParameterError
 from rigctl.publish import utf8_path
@@ -24,9 +25,19 @@ def register(sub: argparse._SubParsersAction) -> None:
         "record",
         help="record a take from every camera",
         description="Record a take from every camera of RIG into OUT/NAME.",
-        epilog="simulated cameras take these --sim settings (KEY=VALUE; per camera KEY.rXcY=VALUE):\n"
-        + sim_settings_help(),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=examples(
+            ("ten frame sets of the simulated presenter into ./takes/T001, the same bytes on any machine",
+             "rigctl record sim-3x3 --take T001 --frames 10 --sim deterministic=true"),
+            ("a ChArUco board take for rigctl calibrate",
+             "rigctl record sim-3x3 --take board --frames 24 --scene charuco --sim board_poses=24 "
+             "--sim deterministic=true"),
+            ("an ideal take (a perfect lattice: already rectified, with exact truth) for depth and render",
+             "rigctl record sim-3x3 --take ideal --frames 3 --sim ideal=true --sim deterministic=true"),
+            ("five seconds in real time, cameras spread over two disks",
+             "rigctl record sim-3x3 --take S01-01-T01 --seconds 5 --out takes --dest takes-b"),
+            before="simulated cameras take these --sim settings (KEY=VALUE; per camera KEY.rXcY=VALUE):\n"
+            + sim_settings_help(),
+        ),
     )
     p.add_argument("rig", nargs="?", help="rig file or shipped rig name (default: sim-3x3)")
     p.add_argument("--take", required=True, metavar="NAME", help="take name (a folder name: letters, digits, . _ -)")

@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress
 from rigctl.cli.take import damaged_exit
 from rigctl.rectification.rectify import rectify_take
@@ -14,6 +15,13 @@ from rigctl.rectification.rectify import rectify_take
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "rectify",
+        epilog=examples(
+            ("the demo's presenter take with the demo's calibration",
+             "rigctl rectify rigctl-demo/takes/presenter --calibration rigctl-demo/calibration.yaml "
+             "--out presenter-rectified"),
+            ("a simulated take with the simulator's true calibration",
+             "rigctl rectify takes/T001 --calibration takes/T001/truth/calibration.yaml --out takes/T001-rectified"),
+        ),
         help="rectify a take onto the array's common plane (rows along rows, columns along columns)",
         description="Warp every frame of TAKE into one shared orientation and camera matrix fitted to the "
         "calibrated camera centres, so that a point lies on the same row in horizontal neighbours and the same "

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from rigctl.cli.args import distance
+from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
 from rigctl.publish import output_folder, utf8_path
 
@@ -41,6 +42,15 @@ def size(text: str) -> tuple[int, int]:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "render",
+        epilog=examples(
+            ("the view between the centre camera and its right neighbour, from the simulator's true disparity",
+             "rigctl render takes/ideal --disparity takes/ideal/truth/disparity --at 1.5,1 --out views"),
+            ("an eye pair 63 mm apart at the centre camera, from the demo's depth",
+             "rigctl render rigctl-demo/takes/presenter-rectified --disparity rigctl-demo/depth --at 1,1 "
+             "--stereo 0.063 --out stereo"),
+            ("each camera rendered from the others and scored against its own picture",
+             "rigctl render rigctl-demo/takes/presenter-rectified --disparity rigctl-demo/depth --leave-one-out"),
+        ),
         help="novel views from colour + disparity (DIBR), and leave-one-out scoring of a disparity",
         description="Renders views anywhere in the array plane from the nearest cameras' colour and disparity: "
         "OUT/<frame>/c<COL>r<ROW>.png and .exr (RGBA, alpha from the key; _L/_R with --stereo; path_NNNN with "
@@ -65,7 +75,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def register_bench(what: argparse._SubParsersAction) -> None:
     b = what.add_parser(
-        "render", help="time a stereo pair from the four nearest cameras; quality on the simulated take"
+        "render",
+        epilog=examples(
+            ("a 1080p stereo pair from the four nearest cameras, the median of 10", "rigctl bench render"),
+            ("a quicker run at 960x540, as JSON", "rigctl bench render --size 960x540 --repeats 3 --json"),
+        ), help="time a stereo pair from the four nearest cameras; quality on the simulated take"
     )
     b.add_argument("--size", type=size, default=(1920, 1080), metavar="WxH", help="default 1920x1080")
     b.add_argument("--repeats", type=int, default=10, help="timed pairs (the median is kept)")

@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from rigctl.cli.args import add_layout
+from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress
 from rigctl.cli.record import format_summary
 from rigctl.errors import EXIT_DAMAGED
@@ -20,17 +21,31 @@ from rigctl.take.reader import TakeReader
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("take", help="inspect, check and export takes")
+    summary = ("frames, drops and skew of a take", "rigctl take info takes/T001")
+    whole = ("every frame's checksum read back", "rigctl take check takes/T001")
+    png = ("frame sets 0 to 2 as 8-bit pictures", "rigctl take export takes/T001 --out T001-png --frames 0-2")
+    p = sub.add_parser("take", help="inspect, check and export takes", epilog=examples(summary, whole, png))
     verbs = p.add_subparsers(dest="take_verb", metavar="info|check|export", required=True)
-    info = verbs.add_parser("info", help="frames, drops, complete frame sets, skew")
+    as_json = ("the same as JSON", "rigctl take info rigctl-demo/takes/presenter --json")
+    info = verbs.add_parser("info", help="frames, drops, complete frame sets, skew", epilog=examples(summary, as_json))
     info.add_argument("take", type=Path)
     info.add_argument("--json", action="store_true")
     info.set_defaults(func=run_info)
-    check = verbs.add_parser("check", help="is everything the take claims readable? (exit 0 when it is)")
+    quick = ("the manifest and indexes only", "rigctl take check rigctl-demo/takes/presenter --quick")
+    what = "is everything the take claims readable? (exit 0 when it is)"
+    check = verbs.add_parser("check", help=what, epilog=examples(whole, quick))
     check.add_argument("take", type=Path)
     check.add_argument("--quick", action="store_true", help="skip reading every frame's checksum")
     check.set_defaults(func=run_check)
-    export = verbs.add_parser("export", help="frame sets as DIR/<frame>/<camera>.png or .exr")
+    export = verbs.add_parser(
+        "export",
+        help="frame sets as DIR/<frame>/<camera>.png or .exr",
+        epilog=examples(
+            png,
+            ("scene-linear ACEScg EXR with the key as alpha, an image sequence per camera for NUKE",
+             "rigctl take export takes/T001 --out T001-exr --format exr --colour acescg --layout sequence"),
+        ),
+    )
     export.add_argument("take", type=Path)
     export.add_argument("--out", type=Path, required=True, metavar="DIR")
     export.add_argument("--frames", metavar="A-B", help="N or A-B, frame-set numbers from 0 (default: all)")

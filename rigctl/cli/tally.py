@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
 from rigctl.registry import open_tally
 from rigctl.rig import load_rig
@@ -11,7 +12,15 @@ from rigctl.tally import TallyState
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("tally", help="send the complete tally state (program / preview) once")
+    p = sub.add_parser(
+        "tally",
+        help="send the complete tally state (program / preview) once",
+        epilog=examples(
+            ("the centre camera on program, its left and right neighbours on preview",
+             "rigctl tally sim-3x3 --program r1c1 --preview r1c0 r1c2"),
+            ("every lamp off", "rigctl tally sim-3x3"),
+        ),
+    )
     p.add_argument("rig", nargs="?", help="rig file or shipped rig name (default: sim-3x3)")
     p.add_argument("--program", nargs="*", default=[], metavar="CAM", help="cameras on program (live)")
     p.add_argument("--preview", nargs="*", default=[], metavar="CAM", help="cameras on preview")

@@ -5,10 +5,17 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from rigctl.cli.helptext import examples
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "tui",
+        epilog=examples(
+            ("the shoot on the simulated rig: takes S01-01-T01, T02, ... in ./takes", "rigctl tui sim-3x3 --out takes"),
+            ("scene 12, shot 3, the simulated cameras filming the ChArUco board",
+             "rigctl tui sim-3x3 --scene S12 --shot 03 --sim scene=charuco"),
+        ),
         help="the shoot: camera tiles, record with r, tally, camera settings, planner",
         description="A terminal UI for the shoot. Cameras stream as soon as it opens; r records a take of every "
         "camera into OUT (named SCENE-SHOT-Tnn, numbered on), q quits (asking first while recording), ? lists keys.",

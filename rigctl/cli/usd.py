@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 from rigctl.cli import args
+from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
 
 log = logging.getLogger(__name__)
@@ -16,6 +17,12 @@ log = logging.getLogger(__name__)
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "usd",
+        epilog=examples(
+            ("the demo's calibrated cameras for Unreal, Blender, Houdini or NUKE",
+             "rigctl usd rigctl-demo/calibration.yaml --out rig.usda"),
+            ("a rectified take's cameras with the light-field window, clipped at the plan's range",
+             "rigctl usd takes/ideal --out ideal.usda --rig sim-3x3 --window"),
+        ),
         help="the cameras of a calibration or a rectified take as a USD stage (Unreal, Blender, Houdini, NUKE)",
         description="One UsdGeom.Camera per array camera: focal length and apertures from the rig's lens and "
         "the calibration, clipping range from the plan, the transform; metres, Y up.",

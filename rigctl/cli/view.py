@@ -8,6 +8,7 @@ import logging
 import sys
 from pathlib import Path
 
+from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
 
 log = logging.getLogger(__name__)
@@ -34,6 +35,13 @@ def address(text: str) -> str:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "view",
+        epilog=examples(
+            ("an ideal simulated take with its true disparity, the page opened in the browser",
+             "rigctl view takes/ideal --disparity takes/ideal/truth/disparity --open"),
+            ("the demo's take and depth on a fixed port, for another machine of the network",
+             "rigctl view rigctl-demo/takes/presenter-rectified --disparity rigctl-demo/depth --bind 0.0.0.0 "
+             "--port 8080"),
+        ),
         help="look around a take in the browser: a real-time light-field viewer (WebGL2) on a local web server",
         description="Serves one page and the take's frame sets; the page renders novel views on the GPU by the "
         "method of rigctl render, moves the eye within the array's window, plays the take, and shows stereo "

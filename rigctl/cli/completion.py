@@ -1,0 +1,144 @@
+"""``rigctl completion bash|zsh|tcsh``: a shell completion script generated from the parser (shtab).
+
+Commands and options come from the parser itself; an argument that is a rig completes the shipped rigs' names
+and rig files, one that names cameras completes the camera names of the take (or grid folder, or rig) given
+earlier on the line, and every other path argument completes file names."""
+
+from __future__ import annotations
+
+import argparse
+from importlib import resources
+from pathlib import Path
+
+from rigctl.cli.helptext import examples
+
+SHELLS = ("bash", "zsh", "tcsh")
+RIG_DESTS = ("rig",)  # positional rig of plan, devices, record, tally, control, tui; --rig of usd
+CAMERA_DESTS = ("cameras", "camera", "program", "preview")
+
+# $1 is the word being completed; COMP_WORDS the line. Names containing "_file" make shtab's script ask bash
+# for file-name treatment (a slash after a folder).
+_BASH = r"""
+_rigctl_rig_or_file() {
+  compgen -W "__RIGS__" -- "$1"
+  compgen -f -- "$1"
+}
+_rigctl_rig_cameras() {  # a rig file's camera names (name: rXcY lines), or a shipped rig's
+  case "$1" in
+__RIG_CASES__
+    *) [ -f "$1" ] && sed -n 's/.*name: *\(r[0-9]*c[0-9]*\).*/\1/p' "$1" ;;
+  esac
+}
+_rigctl_cameras() {  # camera names of the take, grid folder or rig named earlier on the line
+  local w names="" rig=""
+  for w in "${COMP_WORDS[@]:1:COMP_CWORD-1}"; do
+    if [ -f "$w/take.yaml" ] && [ -d "$w/cameras" ]; then
+      names=$(cd "$w/cameras" && for f in *.index; do [ -e "$f" ] && echo "${f%.index}"; done)
+    elif [ -f "$w/grid.yaml" ]; then
+      names=$(cd "$w" && for f in r*c*.png; do [ -e "$f" ] && echo "${f%.png}"; done)
+    elif [ -z "$rig" ] && [[ " __RIGS__ " == *" $w "* || "$w" == *.yaml ]]; then
+      rig=$w
+    fi
+    [ -n "$names" ] && break
+  done
+  [ -z "$names" ] && names=$(_rigctl_rig_cameras "${rig:-sim-3x3}")
+  compgen -W "$names" -- "$1"
+}
+"""
+
+_ZSH = r"""
+_rigctl_rig_or_file() {
+  compadd -- __RIGS__
+  _files
+}
+_rigctl_cameras() {
+  local w
+  local -a names
+  for w in ${words[2,CURRENT-1]}; do
+    if [[ -f $w/take.yaml && -d $w/cameras ]]; then
+      names=($w/cameras/*.index(N:t:r)); break
+    elif [[ -f $w/grid.yaml ]]; then
+      names=($w/r*c*.png(N:t:r)); break
+    fi
+  done
+  (( ${#names} )) || names=(__SIM_CAMERAS__)
+  compadd -- $names
+}
+"""
+
+
+def shipped_rigs() -> dict[str, str]:
+    """Each shipped rig's name and its camera names (space-separated)."""
+    import yaml
+
+    rigs = {}
+    for entry in sorted(resources.files("rigctl.rigs").iterdir(), key=lambda e: e.name):
+        if entry.name.endswith(".yaml"):
+            data = yaml.safe_load(entry.read_text(encoding="utf-8"))
+            rigs[entry.name[: -len(".yaml")]] = " ".join(str(c["name"]) for c in data.get("cameras", []))
+    return rigs
+
+
+def _mark(parser: argparse.ArgumentParser) -> None:
+    """Tell shtab what each argument completes, walking every subcommand."""
+    import shtab
+
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in {id(p): p for p in action.choices.values()}.values():
+                _mark(sub)
+            continue
+        if action.nargs == 0 or action.choices:
+            continue
+        if action.dest in RIG_DESTS:
+            action.complete = {"bash": "_rigctl_rig_or_file", "zsh": "_rigctl_rig_or_file", "tcsh": "f"}  # type: ignore[attr-defined]
+        elif action.dest in CAMERA_DESTS:
+            action.complete = {"bash": "_rigctl_cameras", "zsh": "_rigctl_cameras"}  # type: ignore[attr-defined]
+        elif action.metavar in ("DIR", "OUT", "RECTIFIED_TAKE"):
+            action.complete = shtab.DIRECTORY  # type: ignore[attr-defined]
+        elif action.type is Path:
+            action.complete = shtab.FILE  # type: ignore[attr-defined]
+
+
+def script(shell: str) -> str:
+    """The completion script for ``shell``, from the whole command line's parser."""
+    import shtab
+
+    from rigctl.cli.main import build_parser
+
+    parser = build_parser()
+    _mark(parser)
+    rigs = shipped_rigs()
+    names = " ".join(rigs)
+    cases = "\n".join(f'    {name}) echo "{cams}" ;;' for name, cams in rigs.items())
+    preamble = {
+        "bash": _BASH.replace("__RIGS__", names).replace("__RIG_CASES__", cases),
+        "zsh": _ZSH.replace("__RIGS__", names).replace("__SIM_CAMERAS__", rigs.get("sim-3x3", "")),
+        "tcsh": "",
+    }[shell]
+    return shtab.complete(parser, shell=shell, preamble=preamble)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "completion",
+        help="print a shell completion script (bash, zsh, tcsh): commands, options, rigs, cameras, files",
+        description="Prints a completion script generated from rigctl's own parser: commands and options, the "
+        "shipped rigs' names, the camera names of the take named earlier on the line (--cameras), and file "
+        "names where an argument is a path. Install it once per shell, as the examples show.",
+        epilog=examples(
+            ("bash, for this shell only", "source <(rigctl completion bash)"),
+            ("bash, for every new shell (bash-completion loads it on first use)",
+             "rigctl completion bash > ~/.local/share/bash-completion/completions/rigctl"),
+            ("zsh: a file named _rigctl in a folder of $fpath (then: autoload -U compinit && compinit)",
+             "rigctl completion zsh > ~/.zfunc/_rigctl"),
+            ("tcsh: source it from ~/.tcshrc", "rigctl completion tcsh > ~/.rigctl.completion.csh"),
+        ),
+    )
+    p.add_argument("shell", choices=SHELLS, help="the shell the script is for")
+    p.set_defaults(func=run)
+
+
+def run(ns: argparse.Namespace) -> int:
+    print(script(ns.shell), end="")
+    return 0

@@ -1,0 +1,123 @@
+"""The help teaches what works: the cheap examples of every ``--help`` run as written, in a scratch folder,
+through the installed console script (in the order a reader would run them: a take is recorded before it is
+inspected); ``rigctl completion bash`` is a script bash accepts and completes with; help is coloured on a
+terminal."""
+
+from __future__ import annotations
+
+import os
+import pty
+import shlex
+import subprocess
+from pathlib import Path
+
+import pytest
+from cli_help_support import ALL, example_lines
+from conftest import rigctl_command
+
+HELP_EXAMPLES = {c for _, p in ALL for c in example_lines(p.format_help())}
+
+# examples that need no demo output, no hardware, no server and less than a few seconds each on the simulated rig
+CHEAP = [
+    "rigctl plan bmd-micro-studio-4k-3x3 --subject-depth 1",
+    "rigctl plan sim-3x3 --near 2.5 --far inf",
+    "rigctl plan sim-3x3 --subject-depth 1 --json",
+    "rigctl devices sim-3x3 --json",
+    "rigctl tally sim-3x3 --program r1c1 --preview r1c0 r1c2",
+    "rigctl tally sim-3x3",
+    "rigctl control sim-3x3 --exposure-us 10000 --gain 2",
+    "rigctl control sim-3x3 --white-balance-k 5600 --camera r1c1 --json",
+    "rigctl board --out board",
+    "rigctl board --out small-board --squares 10x7 --square-mm 30 --marker-mm 22 --dpi 300",
+    "rigctl record sim-3x3 --take T001 --frames 10 --sim deterministic=true",
+    "rigctl take info takes/T001",
+    "rigctl take check takes/T001",
+    "rigctl take export takes/T001 --out T001-png --frames 0-2",
+    "rigctl take export takes/T001 --out T001-exr --format exr --colour acescg --layout sequence",
+    "rigctl rectify takes/T001 --calibration takes/T001/truth/calibration.yaml --out takes/T001-rectified",
+    "rigctl record sim-3x3 --take ideal --frames 3 --sim ideal=true --sim deterministic=true",
+    "rigctl render takes/ideal --disparity takes/ideal/truth/disparity --at 1.5,1 --out views",
+    "rigctl usd takes/ideal --out ideal.usda --rig sim-3x3 --window",
+    "rigctl miv export takes/ideal takes/ideal/truth/disparity --out miv",
+    "rigctl miv import miv/cameras.json --out miv-grid",
+    "rigctl miv ivpsnr miv/r1c1_texture_960x540_yuv420p10le.yuv miv/r1c1_texture_960x540_yuv420p10le.yuv "
+    "--size 960x540 --pix-fmt yuv420p10le",
+    "rigctl completion bash > ~/.local/share/bash-completion/completions/rigctl",
+]
+
+
+@pytest.mark.slow
+def test_the_cheap_examples_run_as_written(tmp_path: Path) -> None:
+    assert not [c for c in CHEAP if c not in HELP_EXAMPLES], "an example here is no longer in any --help"
+    exe = Path(rigctl_command()[0]).parent
+    env = {**os.environ, "PATH": f"{exe}:{os.environ['PATH']}", "HOME": str(tmp_path / "home")}
+    (tmp_path / "home" / ".local/share/bash-completion/completions").mkdir(parents=True)
+    work = tmp_path / "work"
+    work.mkdir()
+    for command in CHEAP:
+        res = subprocess.run(
+            ["bash", "-c", command], cwd=work, env=env, capture_output=True, text=True, timeout=300,
+            stdin=subprocess.DEVNULL,
+        )  # fmt: skip
+        assert res.returncode == 0, (command, res.stdout[-1500:], res.stderr[-1500:])
+    # what they wrote is what their comments say
+    assert (work / "takes" / "T001" / "take.yaml").exists() and (work / "takes" / "T001-rectified").is_dir()
+    assert len(list((work / "T001-png").glob("*/*.png"))) == 27 and (work / "views" / "000000").is_dir()
+    assert (tmp_path / "home" / ".local/share/bash-completion/completions/rigctl").stat().st_size > 1000
+
+
+def _complete(script: Path, words: list[str], cwd: Path) -> list[str]:
+    """What bash's completion function offers for the last of ``words`` (the script sourced in a real bash)."""
+    line = " ".join(shlex.quote(w) for w in words)
+    code = (
+        f"source {shlex.quote(str(script))}; COMP_WORDS=({line}); COMP_CWORD={len(words) - 1}; "
+        'COMP_LINE="${COMP_WORDS[*]}"; _shtab_rigctl; printf "%s\\n" "${COMPREPLY[@]}"'
+    )
+    res = subprocess.run(["bash", "-c", code], capture_output=True, text=True, cwd=cwd, timeout=60, check=True)
+    return sorted(w for w in res.stdout.splitlines() if w)
+
+
+def test_bash_completion_script_is_accepted_and_completes_commands_rigs_and_cameras(tmp_path: Path) -> None:
+    res = subprocess.run([*rigctl_command(), "completion", "bash"], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    script = tmp_path / "rigctl.bash"
+    script.write_text(res.stdout)
+    subprocess.run(["bash", "-n", str(script)], check=True, timeout=60)
+    assert _complete(script, ["rigctl", "de"], tmp_path) == ["demo", "depth", "devices"]
+    assert _complete(script, ["rigctl", "take", "e"], tmp_path) == ["export"]
+    assert _complete(script, ["rigctl", "plan", "bmd"], tmp_path) == ["bmd-micro-studio-4k-3x3"]
+    assert "--subject-depth" in _complete(script, ["rigctl", "plan", "--sub"], tmp_path)
+    # the cameras of the take named earlier on the line (a take's camera files, as the recorder names them)
+    take = tmp_path / "T9"
+    (take / "cameras").mkdir(parents=True)
+    (take / "take.yaml").write_text("spec: 1\n")
+    for cam in ("r0c0", "r0c1", "r1c0"):
+        (take / "cameras" / f"{cam}.index").write_bytes(b"")
+    assert _complete(script, ["rigctl", "depth", "T9", "--cameras", "r0"], tmp_path) == ["r0c0", "r0c1"]
+    # a rig's cameras for tally, and file names where the argument is a path
+    assert _complete(script, ["rigctl", "tally", "sim-3x3", "--program", "r2"], tmp_path) == ["r2c0", "r2c1", "r2c2"]
+    assert _complete(script, ["rigctl", "take", "info", "T"], tmp_path) == ["T9"]
+
+
+def test_zsh_and_tcsh_scripts_are_generated() -> None:
+    for shell, marker in (("zsh", "#compdef rigctl"), ("tcsh", "complete rigctl")):
+        res = subprocess.run([*rigctl_command(), "completion", shell], capture_output=True, text=True, timeout=120)
+        assert res.returncode == 0 and marker in res.stdout, (shell, res.stderr)
+
+
+def test_help_is_coloured_on_a_terminal(tmp_path: Path) -> None:
+    pid, fd = pty.fork()
+    if pid == 0:  # the child: rigctl's help on a real terminal
+        os.execvpe(rigctl_command()[0], [*rigctl_command(), "board", "--help"], {**os.environ, "COLUMNS": "100"})
+    out = b""
+    while True:
+        try:
+            chunk = os.read(fd, 65536)
+        except OSError:
+            break
+        if not chunk:
+            break
+        out += chunk
+    os.waitpid(pid, 0)
+    text = out.decode()
+    assert "\x1b[" in text and "examples:" in text and "%%" not in text
