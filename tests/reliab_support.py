@@ -59,6 +59,7 @@ def camera_file(take: Path, cam: str, kind: str) -> Path:
     return take / data["cameras"][cam][kind]
 
 
+# "res": the camera tag of index version 2 (rigctl.take.index.camera_tag), 0 in version 1
 FIELDS = ("magic", "version", "flags", "sequence", "capture_ns", "host_ns", "offset", "size", "crc", "set", "tc", "res")
 
 

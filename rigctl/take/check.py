@@ -33,6 +33,7 @@ def check_take(folder: Path, verify_data: bool = True) -> CheckReport:
         return report
     man = reader.manifest
     report.errors += reader.proof  # what the take fails to prove (rigctl.take.proof)
+    report.warnings += [reader.notice] if reader.notice else []
     if not any(len(i) for i in reader.index.values()):
         report.errors.append(f"{folder}: the take holds no readable frame")
     if man.status == "recording":

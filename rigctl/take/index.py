@@ -5,7 +5,7 @@ frame, so a reader can tell a complete frame from one torn by a crash and never 
 
     offset size field
     0      4    magic b"RGIX"
-    4      2    version (1)
+    4      2    version (2; version 1 still read)
     6      2    flags (rigctl.interfaces.FrameFlags)
     8      8    sequence number (device)
     16     8    capture timestamp, ns (CLOCK_MONOTONIC)
@@ -16,8 +16,13 @@ frame, so a reader can tell a complete frame from one torn by a crash and never 
     48     4    frame set number assigned at capture (-1: none yet)
     52     4    timecode as frames since midnight (valid when flags has TIMECODE) at the nominal rate of the
                 take's fps, drop-frame when flags has DROP_FRAME (rigctl.timecode.Timecode)
-    56     4    reserved (0)
+    56     4    camera: CRC-32 of the camera's name (``r1c2``) the record belongs to (version 2; 0 in version 1)
     60     4    CRC-32 of bytes 0..59
+
+Version 2 (rigctl 0.x from issue 25 on) names the camera in every record, so a camera's files swapped with
+another's, or renamed to another's, are caught by the reader (:func:`rigctl.take.proof.identity_problems`)
+although every checksum holds. Version 1 records (older takes, 0 there) still read; such a take cannot prove
+which camera its files belong to, and the reader says so once.
 """
 
 from __future__ import annotations
@@ -37,8 +42,9 @@ from rigctl.regular import open_regular, read_regular
 from rigctl.timecode import Timecode
 
 MAGIC = b"RGIX"
-VERSION = 1
-RECORD = struct.Struct("<4sHHQqqQIIiI4s")
+VERSION = 2  # 1: no camera in the record (still read)
+VERSIONS = (1, 2)
+RECORD = struct.Struct("<4sHHQqqQIIiII")
 assert RECORD.size == 60
 RECORD_SIZE = 64
 MAX_INDEX_BYTES = RECORD_SIZE << 24  # 16 million frames: 6 days at 30 fps
@@ -68,8 +74,15 @@ DTYPE = np.dtype(
         ("flags", "<u2"),
         ("set", "<i4"),
         ("timecode", "<u4"),
+        ("camera", "<u4"),  # camera_tag(name) of the camera the record names (0: a version 1 record)
+        ("version", "<u2"),
     ]
 )
+
+
+def camera_tag(name: str) -> int:
+    """What a version 2 record holds for camera ``name``: the CRC-32 of its name."""
+    return zlib.crc32(name.encode("utf-8"))
 
 
 def pack_into(
@@ -83,10 +96,13 @@ def pack_into(
     crc: int,
     frame_set: int = -1,
     timecode: int = 0,
+    camera: int | None = None,
 ) -> None:
-    """Fill ``buf`` (64 bytes, reused for every frame) with one record."""
+    """Fill ``buf`` (64 bytes, reused for every frame) with one record: version 2 naming the camera by its
+    :func:`camera_tag`, or (``camera`` None) an old version 1 record that names none."""
+    version, tag = (1, 0) if camera is None else (VERSION, camera)
     RECORD.pack_into(
-        buf, 0, MAGIC, VERSION, flags, seq, capture_ns, host_ns, offset, size, crc, frame_set, timecode, b""
+        buf, 0, MAGIC, version, flags, seq, capture_ns, host_ns, offset, size, crc, frame_set, timecode, tag
     )
     struct.pack_into("<I", buf, 60, zlib.crc32(memoryview(buf)[:60]))
 
@@ -138,9 +154,9 @@ def read_index(
         if rec[:4] != MAGIC or zlib.crc32(rec[:60]) != crc:
             problems.append(IndexProblem(path, at, "record checksum mismatch", torn_tail=(i == n - 1)))
             continue
-        _, version, flags, seq, cap, host, off, size, dcrc, fset, tc, _ = RECORD.unpack_from(rec, 0)
-        if version != VERSION:
-            problems.append(IndexProblem(path, at, f"record version {version} unknown (this rigctl reads {VERSION})"))
+        _, version, flags, seq, cap, host, off, size, dcrc, fset, tc, camera = RECORD.unpack_from(rec, 0)
+        if version not in VERSIONS:
+            problems.append(IndexProblem(path, at, f"record version {version} unknown (this rigctl reads {VERSIONS})"))
             continue
         if essence_size is not None and off + size > essence_size:
             problems.append(
@@ -152,6 +168,6 @@ def read_index(
                 )
             )
             continue
-        out[i] = (seq, cap, host, off, size, dcrc, flags, fset, tc)
+        out[i] = (seq, cap, host, off, size, dcrc, flags, fset, tc, camera if version > 1 else 0, version)
         good[i] = True
     return out[good], problems

@@ -6,6 +6,8 @@ every problem; :class:`~rigctl.take.reader.TakeReader` refuses on the first):
 - the frame period agrees with the rate;
 - each camera's records lie in its own essence file, in the order they were written, none overlapping
   another, each of the format's size;
+- each camera's records name that camera (index version 2): two cameras' files swapped or renamed are caught
+  though every checksum holds;
 - each camera's capture times increase, never two frames within half a frame period, and all cameras'
   times together span no more than their frames can (a hostile time would ask for billions of frame sets).
 
@@ -22,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.rig import MAX_FRAME_PIXELS
-from rigctl.take.index import RECORD_SIZE
+from rigctl.take.index import RECORD_SIZE, camera_tag
 from rigctl.take.manifest import Manifest
 
 MAX_PIXELS = MAX_FRAME_PIXELS  # 134 million pixels a frame (16384 x 8192): beyond it a manifest is lying
@@ -123,3 +125,39 @@ def file_problems(folder: Path, paths: Mapping[str, tuple[Path, Path]]) -> list[
                 out.append(f"{folder / 'take.yaml'}: cameras.{name}: {p} is also camera {seen[real]}'s file")
             seen[real] = name
     return out
+
+
+def identity_problems(ipath: Path, idx: NDArray[np.void], name: str, names: list[str]) -> list[str]:
+    """Camera ``name``'s records must name ``name``: a record of another camera of the take (files swapped or
+    renamed), of no camera of it, or a version 1 record among version 2 ones is a lie."""
+    if len(idx) == 0:
+        return []
+    version = idx["version"].astype(np.int64)
+    if np.all(version == 1):
+        return []  # an older take: its records name no camera (see :func:`unproven_identity`)
+    old = np.flatnonzero(version == 1)
+    if old.size:
+        k = int(old[0])
+        return [f"{ipath}: byte {k * RECORD_SIZE}: a version 1 record (no camera) among version 2 records"]
+    tags = idx["camera"].astype(np.int64)
+    wrong = np.flatnonzero(tags != camera_tag(name))
+    if not wrong.size:
+        return []
+    k = int(wrong[0])
+    owner = next((n for n in names if camera_tag(n) == int(tags[k])), None)
+    whose = f"camera {owner}'s" if owner else "a camera not in this take"
+    return [
+        f"{ipath}: byte {k * RECORD_SIZE}: record of {whose} frame in camera {name}'s index: the cameras' files "
+        "are swapped or renamed"
+    ]
+
+
+def unproven_identity(folder: Path, index: Mapping[str, NDArray[np.void]]) -> str | None:
+    """The notice for a take whose records name no camera (written before index version 2)."""
+    old = [n for n, i in index.items() if len(i) and np.all(i["version"] == 1)]
+    if not old:
+        return None
+    return (
+        f"{folder}: index records of {', '.join(old)} name no camera (written by a rigctl before index version 2): "
+        "two cameras' files swapped on disk cannot be detected in this take"
+    )

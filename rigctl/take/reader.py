@@ -95,10 +95,14 @@ class TakeReader:
             self.problems[name] = problems
             self._check_claims(name, essence, size)
             self.proof += proof.record_problems(self.index_path(name), idx, self.bytes_per_frame, self.period_ns)
+            self.proof += proof.identity_problems(self.index_path(name), idx, name, self.names)
             self._prove(prove)
         span = proof.span_problem(self.folder, self.index, self.period_ns)
         self.proof += [span] if span else []
         self._prove(prove)
+        self.notice = proof.unproven_identity(self.folder, self.index)  # an older take: read, with a notice
+        if self.notice and prove:  # ``take check`` (prove=False) lists it with its other warnings
+            log.warning("%s", self.notice)
         if self.status == "recording":  # a take cut off by a crash: free the space its recorder kept
             remove_stale_reserves({self.folder} | {self.essence_path(n).parent.parent for n in self.names})
 

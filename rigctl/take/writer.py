@@ -65,6 +65,7 @@ class CameraWriter:
         except FileExistsError:
             raise TakeError(f"{self.essence_path}: already exists; takes are never overwritten") from None
         self._record = bytearray(index.RECORD_SIZE)
+        self._tag = index.camera_tag(camera)  # every record names its camera: swapped files are caught
         self.offset = 0
         self.frames = 0
         self.bytes = 0
@@ -90,6 +91,7 @@ class CameraWriter:
             crc,
             frame_set,
             tc,
+            self._tag,
         )
         _write_all(self._index, memoryview(self._record), self.index_path)
         self.offset += len(data)

@@ -127,6 +127,51 @@ def test_index_records_that_lie_with_a_valid_crc_are_refused(tiny, tmp_path: Pat
     assert nothing_in(tmp_path / "x")
 
 
+@pytest.mark.parametrize("which", ["both", "index"])
+def test_two_cameras_files_swapped_on_disk_are_refused(tiny, tmp_path: Path, which: str) -> None:  # type: ignore[no-untyped-def]
+    """Every checksum holds when two cameras' files trade places; the index records name their camera."""
+    for src, name in ((tiny[0], "t"), (tiny[1], "r")):
+        take = copy_take(src, tmp_path / name)
+        for kind in ("essence", "index") if which == "both" else ("index",):
+            a, b = camera_file(take, "r0c0", kind), camera_file(take, "r0c1", kind)
+            a.rename(a.with_name("swap")), b.rename(a), a.with_name("swap").rename(b)
+        res = rigctl("take", "check", str(take), timeout=60)
+        assert res.returncode == EXIT_CHECK_FAILED, res.stderr
+        assert "record of camera r0c1's frame in camera r0c0's index" in res.stderr and "swapped" in res.stderr
+        out = tmp_path / f"x-{name}"
+        one_line(rigctl("take", "export", str(take), "--out", str(out), timeout=60), EXIT_BAD_INPUT, "swapped")
+        assert nothing_in(out)
+    res = rigctl("depth", str(tmp_path / "r"), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=60)
+    one_line(res, EXIT_BAD_INPUT, "r0c0", "swapped")
+    assert nothing_in(tmp_path / "d")
+
+
+def test_a_take_whose_records_name_no_camera_still_reads_with_a_notice(tiny, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """An older take (index version 1: no camera in its records) reads as before; readers say once that a swap
+    of its files cannot be detected."""
+    take = copy_take(tiny[0], tmp_path / "t")
+    for cam in ("r0c0", "r1c1"):
+
+        def old(i: int, f: dict[str, Any]) -> None:
+            f["version"], f["res"] = 1, 0
+
+        rewrite_records(camera_file(take, cam, "index"), old)
+    res = rigctl("take", "check", str(take), timeout=60)
+    assert res.returncode == 0, res.stderr
+    assert "r0c0, r1c1 name no camera" in res.stdout + res.stderr and "cannot be detected" in res.stdout + res.stderr
+    res = rigctl("take", "export", str(take), "--out", str(tmp_path / "x"), timeout=60)
+    assert res.returncode == 0 and res.stderr.count("cannot be detected") == 1, res.stderr
+    reference = rigctl("take", "export", str(tiny[0]), "--out", str(tmp_path / "y"), timeout=60)
+    assert reference.returncode == 0, reference.stderr
+    mine = sorted(p.relative_to(tmp_path / "x") for p in (tmp_path / "x").rglob("*.png"))
+    assert mine and mine == sorted(p.relative_to(tmp_path / "y") for p in (tmp_path / "y").rglob("*.png"))
+    assert all((tmp_path / "x" / p).read_bytes() == (tmp_path / "y" / p).read_bytes() for p in mine)
+    # one camera's records mixing both versions is no older take: refused
+    rewrite_records(camera_file(take, "r0c0", "index"), lambda i, f: f.update(version=2, res=0) if i == 0 else None)
+    res = rigctl("take", "check", str(take), timeout=60)
+    assert res.returncode == EXIT_CHECK_FAILED and "a version 1 record" in res.stderr, res.stderr
+
+
 @pytest.mark.parametrize(
     ("case", "fragment"),
     [
