@@ -28,7 +28,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from rigctl.simulators import scenes
+from rigctl.simulators import scenes, soft_edges
 from rigctl.simulators.raycast import RayCamera, RenderResult, Scene, render
 from rigctl.simulators.rays import rays_for
 from rigctl.simulators.settings import SimSettings
@@ -257,7 +257,8 @@ class SimArray:
         half = self.rig.model.sensor.width_mm / (2 * self.rig.model.lens.focal_length_mm)
         return scenes.board_poses(self.settings, self.board, half)
 
-    def scene(self, state: int) -> Scene:
+    def scene(self, state: int, dt: float = 0.0) -> Scene:
+        """The scene of ``state``, ``dt`` seconds after its instant (motion blur samples the exposure)."""
         if self.settings.scene == "charuco":
             pose = self.board_poses[state]
             # a power of two per square: the texture's mip levels then need no resampling, which would
@@ -265,7 +266,7 @@ class SimArray:
             need = self.rig.c0_px * self.board.square_m / self.settings.board_distance_m[0] * 2
             px = int(2 ** np.clip(np.ceil(np.log2(need)), 5, 9))
             return scenes.charuco(self.settings, self.board, pose, px)
-        return scenes.presenter(self.settings, state * scenes.MOTION_PERIOD_S / self.settings.motion_states)
+        return scenes.presenter(self.settings, state * scenes.MOTION_PERIOD_S / self.settings.motion_states + dt)
 
     def _static(self, scene: Scene, name: str, rectified: bool) -> RenderResult:
         """The scene's static background through one camera, rendered once."""
@@ -280,9 +281,11 @@ class SimArray:
                 self._backgrounds[key] = cached
         return cached
 
-    def _render_camera(self, scene: Scene, name: str) -> NDArray[np.uint8]:
+    def _render_camera(self, scene: Scene, name: str, state: int) -> NDArray[np.uint8]:
         base = self._static(scene, name, rectified=False)
         res: RenderResult = render(scene, self.rays(name), base=base, skip=scene.static)
+        if self.settings.edges == "soft":
+            res.rgb = soft_edges.render_soft(self, state, name, res, rectified=False).rgb
         rgb = np.asarray(cv2.multiply(res.rgb, self._effects(name)), dtype=np.float32)
         return from_rgb(np.clip(rgb, 0.0, 1.0, out=rgb), self.format.pixel_format)
 
@@ -295,6 +298,7 @@ class SimArray:
             __file__,
             sys.modules[render.__module__].__file__,
             sys.modules[rays_for.__module__].__file__,
+            soft_edges.__file__,
         ]
         return DiskCache.for_inputs(inputs, [Path(m) for m in sources if m], self.names, self.format.bytes_per_frame)
 
@@ -305,7 +309,7 @@ class SimArray:
             for name in self.names:  # the first time: rays while this thread builds the scene's textures
                 pool.submit(self.rays, name)
             scene = self.scene(state)
-            return list(pool.map(lambda n: self._render_camera(scene, n), self.names))
+            return list(pool.map(lambda n: self._render_camera(scene, n, state), self.names))
 
     @cached_property
     def states(self) -> StateStore:

@@ -78,6 +78,9 @@ class Primitive:
     name: str = ""
     # world extent of the texture across (metres), for mip selection
     texture_extent_m: float = 1.0
+    # thinner than a pixel (a strand of hair): one ray per pixel may miss it, so supersampling covers all of
+    # its box instead of only where the pixel centres show an edge
+    thin: bool = False
 
     def bounding_sphere(self) -> tuple[F64, float]:
         raise NotImplementedError

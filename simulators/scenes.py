@@ -25,6 +25,7 @@ PRESENTER_DEPTH_M = 0.9  # hands to the back of the torso
 MOTION_PERIOD_S = 1.6
 
 
+F64 = NDArray[np.float64]
 PHOTO_FILES = {"immunohistochemistry": "ihc.png", "rocket": "rocket.jpg"}  # the rest are NAME.png
 
 
@@ -111,6 +112,33 @@ def _rot_y(deg: float) -> NDArray[np.float64]:
     return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
 
 
+HAIR = (0.62, 0.48, 0.30)  # dark blond: neither the head's photograph nor the screen
+HAIR_STRANDS = 90
+HAIR_RADIUS_M = 0.0004  # 0.8 mm across: about half a pixel at the presenter's distance on the paper's rig
+
+
+def _hair(seed: int, centre: F64, radii: F64, rot: F64) -> list[Primitive]:
+    """Strands from the top and sides of the head, each three straight pieces that droop, thinner than a pixel
+    (``thin``: the soft-edge renderer supersamples all of their box). Drawn from the seed, fixed to the head."""
+    rng = np.random.default_rng(seed + 577)
+    tex = Texture.from_image(np.full((4, 4, 3), HAIR, dtype=np.float32))
+    out: list[Primitive] = []
+    for k in range(HAIR_STRANDS):
+        angle = rng.uniform(-math.pi * 0.95, -math.pi * 0.05)  # around the crown, in the picture's plane
+        local = np.array([math.cos(angle), math.sin(angle), rng.uniform(-0.3, 0.6)])
+        local /= np.linalg.norm(local)
+        point = centre + rot @ (radii * local * 0.97)
+        step = rot @ local * rng.uniform(0.010, 0.022)
+        for piece in range(3):
+            step = step + np.array([rng.uniform(-0.004, 0.004), 0.006 + 0.003 * piece, 0.0])
+            nxt = point + step
+            strand = _segment(point, nxt, HAIR_RADIUS_M, tex, f"hair {k}.{piece}")
+            strand.thin = True
+            out.append(strand)
+            point = nxt
+    return out
+
+
 def presenter(settings: SimSettings, time_s: float) -> Scene:
     """The paper's scenario: a presenter about 0.9 m deep (hands forward), a desk, a green screen."""
     kind = settings.texture
@@ -131,6 +159,8 @@ def presenter(settings: SimSettings, time_s: float) -> Scene:
             texture_extent_m=0.17,
         )
     )
+    if settings.edges == "soft":
+        prims.extend(_hair(settings.seed, head_c, np.array([0.085, 0.115, 0.1]), _rot_y(12 * math.sin(phase))))
     prims.append(
         Ellipsoid(
             texture=_texture(kind, "skin"),

@@ -45,6 +45,12 @@ class SimSettings(BaseModel):
         "frame (the simulator renders them meanwhile, so the cameras stream at once); 0: every pose from the "
         "first frame, all rendered before the cameras stream",
     )
+    edges: Literal["hard", "soft"] = Field(
+        "hard",
+        description="soft: hair-like strands on the presenter and every edge pixel's colour and coverage from 4x4 "
+        "samples (spread over the exposure time when the presenter moves: motion blur); the truth then holds "
+        "each camera's alpha and unmixed foreground colour; hard: one ray per pixel, a binary matte",
+    )
     texture: Literal["photo", "flat", "repetitive"] = Field(
         "photo", description="photo: real photographs; flat: uniform colours; repetitive: periodic patterns"
     )

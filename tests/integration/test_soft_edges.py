@@ -1,0 +1,61 @@
+"""The subject's soft edge (issue 31): a simulated take with ``edges=soft`` (hair-like strands thinner than a
+pixel, every edge pixel integrated from 4x4 rays) records the truth's alpha and unmixed foreground colour."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from tests_support import run_rigctl
+
+from rigctl.depth.grid import TakeGrid
+from rigctl.imagefile import read_png
+from rigctl.pfm import read_pfm
+
+CAMERA = "r1c1"
+
+
+@pytest.fixture(scope="module", params=[False, True], ids=["still", "moving"])
+def take(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One frame set of the ideal seed-3 presenter with soft edges: still, or moving (the simulator's default:
+    its first frame is the first pose, blurred over the exposure)."""
+    out = tmp_path_factory.mktemp("soft")
+    res = run_rigctl(
+        "record", "--take", "soft", "--frames", "1", "--out", str(out),
+        "--sim", "ideal=true", "--sim", "seed=3", "--sim", f"motion={str(request.param).lower()}",
+        "--sim", "edges=soft", "--sim", "deterministic=true", "--force",
+        timeout=900,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    return out / "soft"
+
+
+def _truth(take: Path, kind: str) -> np.ndarray:
+    path = take / "truth" / kind / "000000" / f"{CAMERA}.pfm"
+    assert path.is_file(), f"{path} missing: the soft-edge truth was not written"
+    return read_pfm(path)
+
+
+def test_the_truth_holds_a_fractional_alpha_and_the_unmixed_colour(take: Path) -> None:
+    alpha, colour = _truth(take, "alpha"), _truth(take, "foreground")
+    matte = read_png(take / "truth" / "matte" / "000000" / f"{CAMERA}.png") > 127
+    assert alpha.shape == matte.shape and colour.shape == (*matte.shape, 3)
+    assert np.isfinite(alpha).all() and np.isfinite(colour).all()
+    assert alpha.min() >= 0.0 and alpha.max() <= 1.0
+    fractional = (alpha > 0) & (alpha < 1)
+    # a binary matte has no fractional pixel; here the whole outline and the strands have them
+    assert fractional.sum() > 3000, int(fractional.sum())
+    # strands thinner than a pixel: partly covered pixels whose centre misses the subject
+    assert int((fractional & ~matte).sum()) > 1000
+    assert np.all(colour[alpha == 0] == 0) and colour[alpha > 0].max() > 0.2
+    # the picture the camera recorded is the truth's mix: a F + (1 - a) B, B the screen the pixel's
+    # neighbours show; checked on the luma, which 4:2:2 keeps per pixel
+    rgb = TakeGrid(take).grid(0).images[CAMERA]
+    luma = np.array([0.2126, 0.7152, 0.0722], np.float32)
+    y, y_f = rgb @ luma, colour @ luma
+    screen = alpha == 0
+    y_b = float(np.median(y[screen]))
+    edge = fractional & (np.abs(y_f - y_b) > 0.1)
+    mixed = alpha[edge] * y_f[edge] + (1 - alpha[edge]) * y_b
+    assert float(np.median(np.abs(mixed - y[edge]))) < 0.03
