@@ -3,7 +3,9 @@ over its area (and, when the presenter moves, over the exposure time: motion blu
 anti-aliased and a strand of hair thinner than a pixel covers a fraction of it, as a real sensor integrates
 light. The same samples give the truth a matting benchmark needs: the share of the pixel the subject covers
 (alpha) and the subject's own colour there, unmixed from the screen behind it (the mean of the samples that
-hit the subject).
+hit the subject). Samples are added as light (scene-linear, through the inverse of BT.709's OETF) and the
+sums encoded again, as a camera's pixel integrates light before its transfer function; the truth's colour is
+in the picture's code values, like the picture.
 
 Only the pixels that need it are supersampled: within two pixels of a change of the visible primitive in the
 one-ray render, and all of every thin primitive's box (one ray per pixel may miss a strand altogether).
@@ -19,6 +21,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 from rigctl.simulators.raycast import RayCamera, RenderResult, Scene, render
+
+from rigctl.exr import bt709_to_linear, linear_to_bt709
 
 if TYPE_CHECKING:
     from rigctl.simulators.array import SimArray
@@ -78,16 +82,17 @@ def supersample(
         sample_cam = RayCamera(cam.origin, np.ascontiguousarray(dirs, np.float32), cam.focal_px, _by_column(cam, xs))
         dt = ((k + 0.5) / TIMES - 0.5) * exposure_s if moving else 0.0
         res = render(scene_at(dt) if moving else scene, sample_cam)
-        rgb_sum += res.rgb.sum(axis=0)
-        fg_sum += (res.rgb * res.subject[..., None]).sum(axis=0)
+        light = bt709_to_linear(res.rgb)  # a sensor adds light: the mix is linear, the picture's code values not
+        rgb_sum += light.sum(axis=0)
+        fg_sum += (light * res.subject[..., None]).sum(axis=0)
         hits += res.subject.sum(axis=0)
     n = float(SUB * SUB)
     rgb = centre.rgb.copy()
-    rgb[ys, xs] = (rgb_sum / n).astype(np.float32)
+    rgb[ys, xs] = linear_to_bt709(rgb_sum / n)
     alpha = centre.subject.astype(np.float32)
     alpha[ys, xs] = (hits / n).astype(np.float32)
     foreground = np.where(centre.subject[..., None], centre.rgb, np.float32(0.0)).astype(np.float32)
-    foreground[ys, xs] = (fg_sum / np.maximum(hits, 1.0)[:, None]).astype(np.float32)
+    foreground[ys, xs] = np.where(hits[:, None] > 0, linear_to_bt709(fg_sum / np.maximum(hits, 1.0)[:, None]), 0.0)
     return SoftRender(rgb, alpha, foreground)
 
 
