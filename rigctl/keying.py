@@ -67,6 +67,11 @@ class Keyer:
             a[small[labels]] = 0.0
         return a
 
+    def soft(self, rgb: F32) -> SoftKey:
+        """The subject's coverage of every pixel (alpha, fractional on the edge) and its colour unmixed from
+        the screen behind it (:func:`soft_key`); all ones and the picture itself without a screen."""
+        return soft_key(rgb, self)
+
     @staticmethod
     def despill(rgb: F32, matte: F32) -> F32:
         limit = np.maximum(rgb[..., 0], rgb[..., 2])
@@ -83,3 +88,117 @@ def subject_box(mask: NDArray[np.bool_], margin: int) -> tuple[int, int, int, in
         return None
     h, w = mask.shape
     return max(0, ys[0] - margin), min(h, ys[-1] + 1 + margin), max(0, xs[0] - margin), min(w, xs[-1] + 1 + margin)
+
+
+# ---- the soft key ---------------------------------------------------------------------------------------
+
+RGB_TO_YCC = np.array(
+    [[0.2126, 0.7152, 0.0722], [-0.1146, -0.3854, 0.5], [0.5, -0.4542, -0.0458]], np.float32
+)  # BT.709: Y, Cb, Cr
+YCC_TO_RGB = np.linalg.inv(RGB_TO_YCC).astype(np.float32)
+SURE = 0.02  # alpha within this of 0 or 1 is 0 or 1 (sensor noise on the screen and on the subject)
+MIN_LUMA_LEVER = 0.02  # below this luma between a pair and the screen, both pixels of the pair share alpha
+SMALL_ALPHA = 0.1  # below this the unmixed colour leans on the nearby subject's (dividing by alpha is noise)
+
+
+@dataclass(frozen=True)
+class SoftKey:
+    alpha: F32  # H x W, the share of each pixel the subject covers
+    foreground: F32  # H x W x 3, the subject's own colour (unmixed from the screen, spill suppressed)
+
+
+def _local_mean(values: F32, weight: F32, sigmas: tuple[float, ...]) -> tuple[F32, F32]:
+    """Normalised convolution: the weighted local mean of ``values`` (H x W x C) at the first of ``sigmas``
+    that has weight nearby, else the next; and where none had any (a 0/1 map)."""
+    out = np.zeros(values.shape, np.float32)
+    done = np.zeros(weight.shape, bool)
+    h, w = weight.shape
+    for sigma in sigmas:
+        both = np.concatenate([values * weight[..., None], weight[..., None]], axis=2)
+        scale = max(1, int(sigma // 4))  # a wide blur at a coarser scale: the same field, a fraction of the time
+        if scale > 1:
+            small = cv2.resize(both, (max(1, w // scale), max(1, h // scale)), interpolation=cv2.INTER_AREA)
+            both = cv2.resize(cv2.GaussianBlur(small, (0, 0), sigma / scale), (w, h), interpolation=cv2.INTER_LINEAR)
+        else:
+            both = cv2.GaussianBlur(both, (0, 0), sigma)
+        num, den = both[..., :-1], both[..., -1]
+        take = ~done & (den > 0.02)
+        out[take] = num[take] / den[take][:, None]
+        done |= take
+    return out, done.astype(np.float32)
+
+
+def soft_key(rgb: F32, keyer: Keyer) -> SoftKey:
+    """Alpha and the unmixed subject colour on a green screen.
+
+    The screen's colour is estimated at every pixel from the screen around it (a smooth field: uneven light is
+    measured, not assumed away), and so is the nearby subject's. A pixel is a mix I = a F + (1 - a) B: along
+    the screen's chroma direction the mix gives ``a`` (the colour-difference key, with the local subject's own
+    green measured rather than taken as zero). The chroma of a 4:2:2 picture (SDI, the simulator) is shared by
+    two pixels, so it gives the pair's mean alpha; the luma, per pixel, splits it between them where it differs
+    from the screen's enough to tell. The subject colour is then unmixed, F = B + (I - B) / a (chroma per pair,
+    luma per pixel), leaning on the nearby subject's colour where ``a`` is small, and its spill suppressed: its
+    component along the screen's chroma is held to the nearby subject's (the screen's light bounced onto the
+    subject, or what is left of the screen in an under-estimated alpha, is not the subject's colour)."""
+    rgb = np.clip(np.asarray(rgb, np.float32), 0.0, 1.0)
+    hard = keyer.matte(rgb)
+    if keyer.screen_excess(rgb) <= 0:
+        return SoftKey(np.ones(rgb.shape[:2], np.float32), rgb.copy())
+    ycc = np.asarray(rgb @ RGB_TO_YCC.T, np.float32)
+    # 4:2:2 decoded: the two pixels of each pair share their chroma (but where decoding clipped)
+    w = hard.shape[1]
+    pairs = w % 2 == 0 and float(np.mean(np.abs(ycc[:, 0::2, 1:] - ycc[:, 1::2, 1:]) < 2e-3)) > 0.95
+    k3 = np.ones((3, 3), np.uint8)
+    solid = cv2.erode((hard >= 1).astype(np.uint8), k3).astype(np.float32)
+    screen = cv2.erode((hard <= 0).astype(np.uint8), k3).astype(np.float32)
+    alpha = hard
+    for _ in range(2):  # the second pass measures the screen without the faint strands the first one found
+        back, _ = _local_mean(ycc, screen, (4.0, 16.0, 64.0))
+        front, have_front = _local_mean(ycc, solid, (3.0, 12.0))
+        chroma_b = back[..., 1:]
+        level = np.maximum(np.linalg.norm(chroma_b, axis=2), 1e-3)
+        u = chroma_b / level[..., None]  # the screen's chroma direction
+        e_i = np.einsum("hwc,hwc->hw", ycc[..., 1:], u)
+        e_f = np.where(have_front > 0, np.einsum("hwc,hwc->hw", front[..., 1:], u), 0.0)
+        e_f = np.minimum(e_f, 0.5 * level)
+        pair_alpha = np.clip((level - e_i) / (level - e_f), 0.0, 1.0).astype(np.float32)
+        alpha = _split_pairs(pair_alpha, ycc[..., 0], back[..., 0]) if pairs else pair_alpha
+        alpha = np.where(alpha < SURE, 0.0, np.where(alpha > 1 - SURE, 1.0, alpha)).astype(np.float32)
+        alpha[cv2.erode(solid.astype(np.uint8), k3) > 0] = 1.0  # well inside the hard key: the subject
+        screen = cv2.erode((alpha <= 0).astype(np.uint8), k3).astype(np.float32)
+    fg = _unmix(ycc, back, front, have_front, alpha, pair_alpha if pairs else alpha, u)
+    return SoftKey(alpha, fg)
+
+
+def _split_pairs(pair_alpha: F32, luma: F32, screen_luma: F32) -> F32:
+    """Per-pixel alpha from a pair's mean alpha and each pixel's luma: with the pair's mix Ybar = abar Y_F +
+    (1 - abar) Y_B, a1 - a2 = abar (Y1 - Y2) / (Ybar - Y_B); where Ybar is too close to the screen's luma to
+    tell, both keep the pair's."""
+    y1, y2 = luma[:, 0::2], luma[:, 1::2]
+    abar = pair_alpha[:, 0::2]
+    lever = 0.5 * (y1 + y2) - 0.5 * (screen_luma[:, 0::2] + screen_luma[:, 1::2])
+    usable = np.abs(lever) >= MIN_LUMA_LEVER
+    half = np.where(usable, abar * (y1 - y2) / np.where(usable, 2 * lever, 1.0), 0.0)
+    # within [0, 1] with the pair's sum kept where it can be
+    half = np.clip(half, np.maximum(abar - 1, -abar), np.minimum(1 - abar, abar))
+    out = np.empty_like(pair_alpha)
+    out[:, 0::2], out[:, 1::2] = abar + half, abar - half
+    return np.clip(out, 0.0, 1.0).astype(np.float32)
+
+
+def _unmix(ycc: F32, back: F32, front: F32, have_front: F32, alpha: F32, chroma_alpha: F32, u: F32) -> F32:
+    """F = B + (I - B) / a, luma per pixel and chroma with the alpha it was mixed with; toward the nearby
+    subject's colour as alpha goes to 0; spill held to the nearby subject's along the screen's chroma."""
+    y = back[..., 0] + (ycc[..., 0] - back[..., 0]) / np.maximum(alpha, 1e-3)
+    c = back[..., 1:] + (ycc[..., 1:] - back[..., 1:]) / np.maximum(chroma_alpha, 1e-3)[..., None]
+    unmixed = np.concatenate([y[..., None], c], axis=2)
+    near = np.where(have_front[..., None] > 0, front, unmixed)
+    t = np.clip(np.minimum(alpha, chroma_alpha) / SMALL_ALPHA, 0.0, 1.0)[..., None]
+    f = t * unmixed + (1 - t) * near
+    e_near = np.maximum(np.einsum("hwc,hwc->hw", near[..., 1:], u), 0.0)
+    excess = np.maximum(np.einsum("hwc,hwc->hw", f[..., 1:], u) - e_near, 0.0)
+    f[..., 1:] -= excess[..., None] * u
+    rgb = np.clip(f @ YCC_TO_RGB.T, 0.0, 1.0).astype(np.float32)
+    solid = alpha >= 1
+    rgb[solid] = np.clip(ycc[solid] @ YCC_TO_RGB.T, 0.0, 1.0)  # the subject as captured where it is whole
+    return rgb

@@ -24,6 +24,7 @@ from rigctl.disparity_layers import header as disparity_header
 from rigctl.disparity_layers import layers, steps
 from rigctl.exr import picture, picture_attributes, write_exr
 from rigctl.exrcam import camera_attributes
+from rigctl.keying import Keyer
 from rigctl.layout import output_path
 from rigctl.pfm import write_pfm
 from rigctl.publish import move_into, publish_png
@@ -105,8 +106,11 @@ def write_outputs(
     if "exr" in formats:
         z = grid.depth(d)
         inv_z = np.where(np.isfinite(z) & (z > 0), 1.0 / z, 0.0).astype(np.float32)
-        # the picture scene-linear and premultiplied by the key matte, as NUKE and Unreal read it
-        channels: dict[str, F32] = {**picture(grid.images[name], res.matte, target.colour), "depth.Z": inv_z}
+        # the picture scene-linear, A the subject's coverage (the soft key) and RGB its unmixed colour
+        # premultiplied by it, as NUKE and Unreal read it; unkeyed (no screen, or --no-key) opaque
+        key = Keyer().soft(grid.images[name]) if bool((res.matte < 1).any()) else None
+        rgb, alpha = (key.foreground, key.alpha) if key is not None else (grid.images[name], res.matte)
+        channels: dict[str, F32] = {**picture(rgb, alpha, target.colour), "depth.Z": inv_z}
         channels["confidence.Y"] = res.confidence
         st = steps(grid.offsets, name)
         channels.update(layers(d, st))

@@ -48,8 +48,9 @@ def export_take(
 ) -> dict[str, int]:
     """Write every member of the chosen frame sets; returns counts of images written and members missing.
 
-    PNG holds the camera's BT.709 picture as captured (8-bit); EXR holds it scene-linear with the key matte
-    as ``A`` (premultiplied), ``chromaticities``, ``framesPerSecond`` and the frame's ``timeCode``.
+    PNG holds the camera's BT.709 picture as captured (8-bit); EXR holds it scene-linear with the soft key's
+    coverage as ``A`` and the subject's unmixed colour premultiplied by it as RGB, ``chromaticities``,
+    ``framesPerSecond`` and the frame's ``timeCode``.
     """
     if fmt not in ("png", "exr"):
         raise ParameterError(f"--format {fmt!r}: choose png or exr")
@@ -78,7 +79,8 @@ def export_take(
                 rgb = np.asarray(image, np.float32)
                 attrs = picture_attributes(reader.fps, tc, colour)
                 attrs.update({"rigctl:camera": name, "rigctl:frame_set": str(n)})
-                write_exr(path, picture(rgb, keyer.matte(rgb), colour), attrs)
+                key = keyer.soft(rgb)  # A: the subject's coverage; RGB: its unmixed colour, premultiplied
+                write_exr(path, picture(key.foreground, key.alpha, colour), attrs)
             written += 1
         if progress:
             progress(k + 1, len(chosen))

@@ -368,8 +368,18 @@ def test_cli_depth_sequence_layout_carries_linear_rgb_alpha_and_timecode(ideal_t
     a = channels["A"]
     solid = a == 1.0
     assert 0.1 < solid.mean() < 0.9 and (a == 0).any()  # the subject keyed against the green screen
-    # scene-linear: the camera's code values decoded, premultiplied by A, in half floats (depth stays float32)
-    assert np.allclose(channels["RGB"], bt709_to_linear(code) * a[..., None], rtol=2**-10, atol=1e-6)
+    # A is the subject's coverage: fractional along the outline, so a compositor's edge is not a staircase
+    soft = (a > 0) & (a < 1)
+    assert 0.002 < soft.mean() < 0.05
+    # scene-linear: the camera's code values decoded where the subject is whole, in half floats (depth stays
+    # float32); premultiplied (nothing where A is 0), and on the outline the subject's colour unmixed from the
+    # screen: never brighter than A allows, and less green than the captured mix
+    rgb = channels["RGB"]
+    assert np.allclose(rgb[solid], bt709_to_linear(code)[solid], rtol=2**-10, atol=1e-6)
+    assert np.all(rgb[a == 0] == 0) and np.all(rgb[soft] <= a[soft][:, None] + 1e-3)
+    mixed = bt709_to_linear(code)[soft]
+    unmixed = rgb[soft] / a[soft][:, None]
+    assert np.mean(unmixed[:, 1] - unmixed[:, [0, 2]].max(1)) < np.mean(mixed[:, 1] - mixed[:, [0, 2]].max(1))
     assert np.allclose(header["chromaticities"], REC709_CHROMATICITIES, atol=1e-6)
     assert header["framesPerSecond"] == Fraction(25)
     t = header["timeCode"]

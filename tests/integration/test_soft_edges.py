@@ -1,5 +1,8 @@
 """The subject's soft edge (issue 31): a simulated take with ``edges=soft`` (hair-like strands thinner than a
-pixel, every edge pixel integrated from 4x4 rays) records the truth's alpha and unmixed foreground colour."""
+pixel, every edge pixel integrated from 4x4 rays) records the truth's alpha and unmixed foreground colour, and
+the soft key recovers both from the captured 4:2:2 picture far better than the hard key did: alpha SAD and
+MSE on the edge band at most half of the hard key's, measured here in the same run, and the unmixed colour
+closer to the truth's than the captured (mixed) colour is."""
 
 from __future__ import annotations
 
@@ -10,7 +13,9 @@ import pytest
 from tests_support import run_rigctl
 
 from rigctl.depth.grid import TakeGrid
+from rigctl.depth.matte_scores import matte_scores
 from rigctl.imagefile import read_png
+from rigctl.keying import Keyer
 from rigctl.pfm import read_pfm
 
 CAMERA = "r1c1"
@@ -59,3 +64,28 @@ def test_the_truth_holds_a_fractional_alpha_and_the_unmixed_colour(take: Path) -
     edge = fractional & (np.abs(y_f - y_b) > 0.1)
     mixed = alpha[edge] * y_f[edge] + (1 - alpha[edge]) * y_b
     assert float(np.median(np.abs(mixed - y[edge]))) < 0.03
+
+
+def test_the_soft_key_halves_the_hard_keys_alpha_error_and_unmixes_the_colour(take: Path) -> None:
+    truth, truth_colour = _truth(take, "alpha"), _truth(take, "foreground")
+    rgb = TakeGrid(take).grid(0).images[CAMERA]
+    keyer = Keyer()
+    hard = matte_scores(keyer.matte(rgb), truth)  # the key every output used before
+    key = keyer.soft(rgb)
+    soft = matte_scores(key.alpha, truth)
+    assert hard["band_pixels"] == soft["band_pixels"] > 5000
+    fractional = (truth > 0) & (truth < 1)
+    mixed_error = float(np.abs(rgb - truth_colour)[fractional].mean())
+    unmixed_error = float(np.abs(key.foreground - truth_colour)[fractional].mean())
+    print(
+        f"edge band {soft['band_pixels']} px: SAD {hard['sad_k']:.3f}k -> {soft['sad_k']:.3f}k, "
+        f"MSE {hard['mse']:.4f} -> {soft['mse']:.4f}, gradient {hard['gradient_k']:.4f}k -> "
+        f"{soft['gradient_k']:.4f}k, connectivity {hard['connectivity_k']:.3f}k -> {soft['connectivity_k']:.3f}k; "
+        f"foreground colour error on {int(fractional.sum())} partly covered px: captured {mixed_error:.4f}, "
+        f"unmixed {unmixed_error:.4f}"
+    )
+    assert soft["sad_k"] <= 0.5 * hard["sad_k"]
+    assert soft["mse"] <= 0.5 * hard["mse"]
+    assert unmixed_error < mixed_error
+    assert np.isfinite(key.alpha).all() and np.isfinite(key.foreground).all()
+    assert key.alpha.min() >= 0 and key.alpha.max() <= 1
