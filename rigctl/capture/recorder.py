@@ -28,6 +28,7 @@ from rigctl.take.build import TakeState, finalise, take_manifest, thumbnail
 from rigctl.take.manifest import End, Manifest, write_manifest
 from rigctl.take.plan import FramePool, TakePlan
 from rigctl.take.reserve import create_reserve, release_reserve
+from rigctl.take.staging import Staging
 from rigctl.take.trend import QueueTrend
 from rigctl.take.writer import CameraWriter, DiskFullError
 
@@ -53,7 +54,8 @@ class Recorder:
     ) -> None:
         self.rig = rig
         self.devices = devices
-        self.plan = plan
+        self.plan = plan  # where the take is published at its end; recorded under hidden names until then
+        self.staging = Staging(plan)
         self.cameras: dict[str, Camera] = devices.cameras
         self.names = sorted(self.cameras, key=lambda n: rig.camera_names.index(n))
         self.format = self.capture_format(rig)
@@ -153,24 +155,23 @@ class Recorder:
         self.t0_ns = grid - self.period_ns // 2
         self.t1_ns = self.t0_ns + frames * self.period_ns if frames else None
         self.started_utc = dt.datetime.now(dt.UTC).isoformat(timespec="milliseconds")
-        write_manifest(self.plan.folder, take_manifest(self._state(), "recording"))
+        write_manifest(self.staging.plan.folder, take_manifest(self._state(), "recording"))
         self.pace.place()
 
     def _create_take(self) -> None:
-        folder = self.plan.folder
-        if folder.exists():
-            raise TakeError(f"{folder}: a take of that name exists already; takes are never overwritten")
+        staged = self.staging.plan
+        folder = staged.folder
         try:
-            folder.mkdir(parents=True)
+            self.staging.create()  # refused when the name is taken or being recorded
             for name in self.names:
-                self.plan.camera_folders[name].mkdir(parents=True, exist_ok=True)
-            for dest in {p.parent for p in self.plan.camera_folders.values()} | {folder}:
+                staged.camera_folders[name].mkdir(parents=True, exist_ok=True)
+            for dest in {p.parent for p in staged.camera_folders.values()} | {folder}:
                 self._reserves[dest] = create_reserve(dest, RESERVE_BYTES)  # locked: see take/reserve.py
         except OSError as exc:
             raise TakeError(f"{folder}: cannot create the take: {exc.strerror}") from None
         for name in self.names:
             self._writers[name] = self.writer_factory(
-                name, self.plan.camera_folders[name], self.format.fps, checksum=self.checksum, sync_interval_s=0
+                name, staged.camera_folders[name], self.format.fps, checksum=self.checksum, sync_interval_s=0
             )
             self._writer_busy[name] = None
             t = threading.Thread(target=self._write, args=(name,), name=f"writer-{name}", daemon=True)
@@ -381,6 +382,7 @@ class Recorder:
                 log.warning("stopping %s: %s", cam.name, exc)
         if not self._writers:  # never started a take
             self.devices.close()
+            self.staging.discard()  # made, if at all, by this run: nothing in it
             return None
         for name in self.names:
             self._queues[name].put(None)
@@ -411,13 +413,19 @@ class Recorder:
         end = End(reason=self.end_reason, message=str(self.error) if self.error else "")
         index_paths = {n: w.index_path for n, w in self._writers.items()}
         disk_full = isinstance(self.error, DiskFullError)
-        return finalise(self._state(), index_paths, status, end, self.devices.truth, disk_full)
+        if not any(st.written for st in self.stats.values()):  # nothing to keep: the name stays free
+            self.staging.discard()
+            self.error = self.error or TakeError(f"{self.plan.folder}: no frame was recorded; nothing was kept")
+            return None
+        manifest = finalise(self._state(), index_paths, status, end, self.devices.truth, disk_full)
+        self.staging.publish()  # the take appears under its name whole, or (killed before) stays hidden
+        return manifest
 
     def _state(self) -> TakeState:
         return TakeState(
             self.plan.name,
-            self.plan.folder,
-            self.plan.camera_folders,
+            self.staging.plan.folder,
+            self.staging.plan.camera_folders,
             self.names,
             self.rig,
             self.format,
@@ -431,4 +439,5 @@ class Recorder:
             self.t0_ns,
             self.t1_ns,
             self.pace.clock,
+            self.plan.camera_folders,
         )

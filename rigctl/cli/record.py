@@ -109,6 +109,8 @@ def run(ns: argparse.Namespace) -> int:
         )
     finally:
         bar.close()
+    if result.manifest is None and result.recorder.error is not None:  # nothing was kept: the name is free
+        raise result.recorder.error
     reader = TakeReader(result.folder, skip_damaged=True)  # the summary of what was written
     summary = reader.summary()
     summary["path"] = str(result.folder)

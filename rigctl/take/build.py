@@ -61,13 +61,16 @@ class TakeState:
     t0_ns: int | None = None
     t1_ns: int | None = None
     clock: str = "CLOCK_MONOTONIC"  # "simulated": a deterministic simulation's times
+    published_camera_folders: dict[str, Path] | None = None  # where the camera folders are once published
 
 
 def camera_entry(state: TakeState, name: str) -> CameraEntry:
     st = state.stats[name]
     cam_folder = state.camera_folders[name]
     rel = os.path.relpath(cam_folder, state.folder)
-    base = rel if not rel.startswith("..") else str(cam_folder)
+    # on another destination: the absolute path the take's files have once published (rigctl.take.staging)
+    published = (state.published_camera_folders or {}).get(name, cam_folder)
+    base = rel if not rel.startswith("..") else os.path.abspath(published)
     return CameraEntry(
         essence=f"{base}/{name}.essence",
         index=f"{base}/{name}.index",

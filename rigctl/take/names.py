@@ -30,9 +30,11 @@ def take_name(scene: str, shot: str, number: int) -> str:
 
 def next_take_number(destinations: list[Path], scene: str, shot: str) -> int:
     """One above the highest take number of ``scene`` and ``shot`` on any destination (1 when there is none),
-    so a restarted shoot goes on numbering instead of meeting the takes already on disk."""
+    so a restarted shoot goes on numbering instead of meeting the takes already on disk, recorded or not yet
+    published."""
     check_take_name(take_name(scene, shot, 1))
-    pattern = re.compile(rf"^{re.escape(scene)}-{re.escape(shot)}-T(?P<take>\d{{2,}})$")
+    # a take still being recorded (or cut off) is under its hidden name (rigctl.take.staging): it counts too
+    pattern = re.compile(rf"^\.?{re.escape(scene)}-{re.escape(shot)}-T(?P<take>\d{{2,}})(\.rigctl-recording)?$")
     highest = 0
     for dest in destinations:
         if not dest.is_dir():

@@ -36,10 +36,11 @@ def test_sigkill_mid_take_leaves_a_readable_take(tmp_path: Path) -> None:
         stderr=subprocess.PIPE,
         stdin=subprocess.DEVNULL,
     )
-    index = tmp_path / "crash" / "cameras" / "r2c2.index"
+    staged = tmp_path / ".crash.rigctl-recording"  # recorded under a hidden name, published at its end
+    indexes = [staged / "cameras" / f"r{r}c{c}.index" for r in range(3) for c in range(3)]
     deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        if index.exists() and index.stat().st_size >= 30 * RECORD_SIZE:
+    while time.monotonic() < deadline:  # every camera's writer past 30 frames (they go at their own pace)
+        if all(i.exists() and i.stat().st_size >= 30 * RECORD_SIZE for i in indexes):
             break
         time.sleep(0.05)
     else:
@@ -48,6 +49,19 @@ def test_sigkill_mid_take_leaves_a_readable_take(tmp_path: Path) -> None:
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=10)
     folder = tmp_path / "crash"
+    assert not folder.exists(), "a take cut off carries the name before anyone looked at it"
+    # the frames are readable where they are, and the next recording on the destination publishes them
+    assert yaml.safe_load((staged / "take.yaml").read_text())["status"] == "recording"
+    check = subprocess.run([*rigctl_exe(), "take", "check", str(staged)], capture_output=True, text=True)
+    assert check.returncode == 0, check.stderr
+    again = subprocess.run(
+        [*rigctl_exe(), "record", "--take", "crash", "--frames", "2", "--out", str(tmp_path), *STEADY],
+        capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL,
+    )  # fmt: skip
+    assert again.returncode == 3, again.stderr  # the name is the cut-off take's now: never overwritten
+    recovered = [ln for ln in again.stderr.splitlines() if "cut off are kept as take crash" in ln]
+    assert len(recovered) == 1 and "exists already" in again.stderr.splitlines()[-1], again.stderr
+    assert not staged.exists()
     assert yaml.safe_load((folder / "take.yaml").read_text())["status"] == "recording"
     check = subprocess.run([*rigctl_exe(), "take", "check", str(folder)], capture_output=True, text=True)
     assert check.returncode == 0, check.stderr
@@ -201,3 +215,62 @@ def test_corruption_is_located_by_file_and_byte(tmp_path: Path) -> None:
         TakeReader(folder)
     assert os.path.exists(essence)
     _ = TakeError
+
+
+RUNNER = Path(__file__).resolve().parents[1] / "fault_runner.py"
+
+
+def _record(tmp_path: Path, name: str, *extra: str, runner: tuple[str, ...] = ()) -> subprocess.CompletedProcess[str]:
+    import sys
+
+    argv = ["record", "--take", name, "--frames", "3", "--out", str(tmp_path / "takes"), *STEADY, *extra]
+    cmd = [sys.executable, str(RUNNER), *runner, "--", *argv] if runner else [*rigctl_exe(), *argv]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
+
+
+def test_a_record_killed_before_its_first_frame_leaves_the_name_free(tmp_path: Path) -> None:
+    """Killed while writing its first manifest (no frame yet): nothing under the name; the same command run
+    again says in one line that it removed the leftover, and records the take."""
+    killed = _record(tmp_path, "t", runner=("fsync", "1", "KILL"))
+    assert killed.returncode == -9, killed.stderr
+    takes = tmp_path / "takes"
+    assert [p.name for p in takes.iterdir()] == [".t.rigctl-recording"]
+    res = _record(tmp_path, "t")
+    assert res.returncode == 0, res.stderr
+    assert len([ln for ln in res.stderr.splitlines() if "before its first frame" in ln]) == 1, res.stderr
+    assert [p.name for p in takes.iterdir()] == ["t"]
+    assert check_take(takes / "t").ok and len(TakeReader(takes / "t").complete_sets()) == 3
+
+
+def test_a_record_killed_as_it_publishes_keeps_its_whole_take(tmp_path: Path) -> None:
+    """Killed at the rename that publishes the take (everything written, the final manifest too): the next
+    recording on the destination publishes it under its name, complete, and is refused that name."""
+    killed = _record(tmp_path, "t", runner=("replace", "23", "KILL"))
+    assert killed.returncode == -9, killed.stderr
+    takes = tmp_path / "takes"
+    staged = takes / ".t.rigctl-recording"
+    assert not (takes / "t").exists()
+    assert yaml.safe_load((staged / "take.yaml").read_text())["status"] == "complete", "killed elsewhere"
+    res = _record(tmp_path, "t")
+    assert res.returncode == 3 and "exists already" in res.stderr.splitlines()[-1], res.stderr
+    assert not staged.exists() and check_take(takes / "t").ok
+    assert len(TakeReader(takes / "t").complete_sets()) == 3
+    assert _record(tmp_path, "u").returncode == 0  # and the destination records on
+
+
+def test_a_record_that_keeps_no_frame_leaves_nothing(small_fs: Path) -> None:
+    """A destination too full for one frame: the record fails in one line and leaves no folder (the take's
+    name stays free), where it used to leave a take folder without frames under the name."""
+    (small_fs / "filler").write_bytes(b"\0" * (small_fs_free(small_fs) - (1 << 20) - (256 << 10)))
+    res = subprocess.run(
+        [*rigctl_exe(), "record", "--take", "full", "--frames", "3", "--out", str(small_fs), "--force", *STEADY],
+        capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL,
+    )  # fmt: skip
+    assert res.returncode != 0
+    assert [ln for ln in res.stderr.splitlines() if "--force" not in ln] == [res.stderr.splitlines()[-1]], res.stderr
+    assert sorted(p.name for p in small_fs.iterdir()) == ["filler"]
+
+
+def small_fs_free(folder: Path) -> int:
+    st = os.statvfs(folder)
+    return st.f_bavail * st.f_frsize

@@ -26,3 +26,12 @@ def test_numbers_go_on_from_the_highest_take_of_that_scene_and_shot(tmp_path: Pa
 def test_a_scene_that_would_escape_the_destination_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ParameterError, match="escape"):
         next_take_number([tmp_path], "../x", "01")
+
+
+def test_a_take_still_being_recorded_or_cut_off_counts_for_the_next_number(tmp_path: Path) -> None:
+    from rigctl.take.names import next_take_name
+
+    (tmp_path / "S1-2-T03").mkdir()
+    (tmp_path / ".S1-2-T07.rigctl-recording").mkdir()  # recorded under its hidden name until published
+    (tmp_path / ".S1-2-T09.other").mkdir()
+    assert next_take_name([tmp_path], "S1", "2") == "S1-2-T08"
