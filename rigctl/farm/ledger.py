@@ -18,10 +18,12 @@ from rigctl.depth.report import FrameReport
 from rigctl.depth.take_range import RangeDecision, SearchRounds, SearchState
 from rigctl.errors import TakeError
 from rigctl.publish import publish_text
+from rigctl.regular import read_regular
 
 log = logging.getLogger(__name__)
 
 LEDGER = "process.json"
+MAX_LEDGER_BYTES = 256 << 20  # some 500,000 frame sets with their files' records
 
 
 class FrameEntry(BaseModel):
@@ -55,7 +57,9 @@ class Ledger:
         self.data = LedgerFile()
         if self.path.exists():
             try:
-                self.data = LedgerFile.model_validate_json(self.path.read_bytes())
+                # a regular file, bounded: a ledger that is /dev/zero or a FIFO is refused, not read for ever
+                data = read_regular(self.path, MAX_LEDGER_BYTES, TakeError, "process ledger")
+                self.data = LedgerFile.model_validate_json(data)
             except OSError as exc:
                 raise TakeError(f"{self.path}: cannot read the process ledger ({exc.strerror})") from None
             except ValidationError as exc:

@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 from rigctl.errors import ParameterError, RigFileError
 from rigctl.interop import yuv
 from rigctl.interop.miv import levels_disparity, omaf_to_cv
+from rigctl.regular import read_regular
 
 log = logging.getLogger(__name__)
 
@@ -105,10 +106,8 @@ def _field(path: Path, cam: dict[str, Any], key: str, n: int | None = None) -> A
 
 def read_content(path: Path) -> MivContent:
     """The camera JSON at ``path`` (its YUV files beside it), checked to be a planar grid."""
-    try:
-        if path.stat().st_size > MAX_JSON:
-            raise RigFileError(f"{path}: over {MAX_JSON >> 20} MB: not a camera file")
-        doc = json.loads(path.read_text())
+    try:  # a regular file of bounded size, checked on the open descriptor (/dev/zero or a FIFO is refused)
+        doc = json.loads(read_regular(path, MAX_JSON, RigFileError, "camera file").decode("utf-8"))
     except OSError as exc:
         raise RigFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except (ValueError, UnicodeDecodeError) as exc:
