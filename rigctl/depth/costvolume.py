@@ -6,7 +6,8 @@
    combined cost is filtered by a guided filter with the reference image as guide (cost-volume filtering,
    Hosni et al. 2013: edge-aware aggregation that stays unbiased on slanted surfaces). Wide ranges are swept at
    a coarser scale first.
-2. Fractional sweep: quarter-pixel candidates around the integer result, same cost, a parabola through the
+2. Fractional sweep: quarter-pixel candidates (half-pixel after a quarter-scale sweep, whose wider reach
+   would take 25) around the integer result, same cost, a parabola through the
    best three.
 3. Continuous refinement (``refine.py``): multi-view photometric least squares along the baselines, which has
    no preferred fractional value, so nothing locks to the sampling grid.
@@ -36,6 +37,11 @@ log = logging.getLogger(__name__)
 MAX_LEVELS = 32  # integer levels swept at full resolution; a wider range is swept at a coarser scale first
 # (the presenter's 48 levels at half scale: bad 1.0 1.86 % against 2.04 % at full, a quarter of the sweep's time)
 FRACTION = 0.25  # step of the fractional sweep, px
+# after a sweep at a quarter scale the fractional sweep must reach +-3 px: there it steps by half a pixel (13
+# candidates instead of 25; the parabola and the refinement, which keeps its quarter-pixel reach, do the
+# rest). Issue 24: at 1920x1080 the realistic presenter's bad 0.1 to 2.0 are all as good or better and the
+# sweep takes 60 % of the time (tests/integration/test_depth_wide_step.py)
+WIDE_STEP = 0.5
 # matching cost: truncated intensity and gradient differences, weights and truncations of Hosni et al. (2013)
 ALPHA, TAU_I, TAU_G = 0.9, 7 / 255, 2 / 255
 COMPILED = True  # the matching cost by the compiled kernel; False: the OpenCV and numpy reference
@@ -303,19 +309,20 @@ def volume_disparity(
     coarse = sweep(cv, list(levels), p, p.window, max(1, round(p.radius * s)), stats)
     stats["integer_sweep_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    d_s, at = coarse.disparity, s
     full = cv if s == 1.0 else MatchViews(images, ref, rel, box, 1.0, centre)
     h, w = full.shape
-    d0 = d_s / np.float32(at)
-    if at != 1.0:
+    d0 = coarse.disparity / np.float32(s)
+    if s != 1.0:
         d0 = np.asarray(cv2.resize(d0, (w, h), interpolation=cv2.INTER_NEAREST), np.float32)
     d0 = np.clip(d0, lo, hi).astype(np.float32)
-    reach = max(1.0, 0.75 / at)  # how far the truth may lie from the coarser result, full-resolution px
-    n_side = math.ceil(reach / FRACTION)
-    cands: list[float | F32] = [(d0 + np.float32(k * FRACTION)).astype(np.float32) for k in range(-n_side, n_side + 1)]
+    reach = max(1.0, 0.75 / s)  # how far the truth may lie from the coarse result, full-resolution px
+    step = FRACTION if s >= 0.5 else WIDE_STEP
+    n_side = math.ceil(reach / step)
+    cands: list[float | F32] = [(d0 + np.float32(k * step)).astype(np.float32) for k in range(-n_side, n_side + 1)]
     stats["fractional_sweep_pixel_levels"] = h * w * len(cands)
     fine = sweep(full, cands, p, p.window, p.radius, stats)
     stats["fractional_candidates"] = len(cands)
+    stats["fractional_step"] = step
     stats["fractional_sweep_s"] = time.perf_counter() - t0
     bound = coarse.bound
     if s != 1.0:

@@ -39,6 +39,7 @@ class EstimateStats(TypedDict, total=False):
     coarse_scale: float
     integer_sweep_s: float
     fractional_candidates: int
+    fractional_step: float  # px between the fractional sweep's candidates
     fractional_sweep_s: float
     # where the time went (the cost volume: summed over its sweeps) and the work each stage did, in pixels
     # times the disparities evaluated there (issue 24)
