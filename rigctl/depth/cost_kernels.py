@@ -241,3 +241,42 @@ def combined_costs(
     out = np.empty((h, w), np.float32)
     _aggregate(ad, outside, win, keep, invalid, out)
     return out
+
+
+@njit(parallel=True, cache=True, fastmath=False)
+def _better_half(stack: F32, seen_by: F32, limit: bool, mean: F32, count: F32) -> None:
+    h, w, nv = stack.shape
+    for y in prange(h):
+        buf = np.empty(nv, np.float32)
+        for x in range(w):
+            n = 0
+            for v in range(nv):  # insertion sort of the few views (inf, unseen, last)
+                val = stack[y, x, v]
+                j = v
+                while j > 0 and buf[j - 1] > val:
+                    buf[j] = buf[j - 1]
+                    j -= 1
+                buf[j] = val
+                n += np.isfinite(val)
+            c = np.float32(n)
+            views = min(c, seen_by[y, x]) if limit else c
+            keep = max(1, int(np.floor((views + np.float32(1.0)) / np.float32(2.0))))
+            acc = np.float32(0.0)
+            for v in range(keep):
+                acc += buf[v] if np.isfinite(buf[v]) else np.float32(0.0)
+            mean[y, x] = np.float32(np.float64(acc) / np.float64(keep)) if views > 0 else np.float32(np.inf)
+            count[y, x] = c
+
+
+def better_half_mean(stack: F32, seen_by: F32 | None = None) -> tuple[F32, F32]:
+    """Per pixel of an (h, w, views) stack of differences (inf: the view does not see it): the mean of its
+    better half (the smallest ceil(n / 2) of the n seen, n at most ``seen_by``), inf where none is seen, and
+    n. What ``edge._better_half_reference`` computes with a sort and a running sum over the views (the
+    same sums in the same order, so the same bits; ``tests/unit/test_cost_kernels.py``)."""
+    h, w, _ = stack.shape
+    mean = np.empty((h, w), np.float32)
+    count = np.empty((h, w), np.float32)
+    limit = seen_by is not None
+    seen = np.ascontiguousarray(seen_by if seen_by is not None else np.zeros((h, w), np.float32), np.float32)
+    _better_half(np.ascontiguousarray(stack, np.float32), seen, limit, mean, count)
+    return mean, count

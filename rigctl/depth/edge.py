@@ -25,12 +25,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.depth.cost import F32
+from rigctl.depth.cost_kernels import better_half_mean
 from rigctl.depth.grid import Grid
 
 DEPTH_COVERAGE = 0.5  # depth where the subject covers at least this share of the pixel
 WINDOW = 2  # radius of the window the local subject and screen colours are taken from
 MIN_LUMA_STEP = 0.03  # below this luma difference between subject and screen, the green excess decides
 LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)  # BT.709
+COMPILED = True  # the better half's mean by the compiled kernel; False: the numpy reference
 AGREE_MARGIN = 0.02  # how much better (mean absolute difference, 0..1) the views must agree unshifted
 
 
@@ -72,31 +74,45 @@ def coverage(rgb: F32, matte: F32) -> F32:
 
 
 def _disagreement(
-    grid: Grid, ref: str, views: list[str], shift: F32, box: tuple[int, int, int, int], seen_by: F32 | None = None
+    lumas: dict[str, F32],
+    ref_y: F32,
+    offsets: dict[str, tuple[float, float]],
+    ref: str,
+    views: list[str],
+    shift: F32,
+    box: tuple[int, int, int, int],
+    seen_by: F32 | None = None,
 ) -> tuple[F32, F32]:
     """Per pixel of ``box``: the mean over the better half of the views that see it (sampled ``shift``
     disparity along their baseline, inside the image) of the 3x3 mean absolute luma difference between the
     reference and the view (inf where no view sees it), and how many views see it. ``seen_by``: use each
-    pixel's better half of that many views, so two shifts are compared over the same number of views."""
+    pixel's better half of that many views, so two shifts are compared over the same number of views.
+    ``lumas``: the views' luma and ``ref_y`` the reference's in ``box``, computed once for the calls of one
+    camera (the same arithmetic as per call, so the same values)."""
     y0, y1, x0, x1 = box
-    ox, oy = grid.offsets[ref]
-    ref_y = np.asarray(grid.images[ref][y0:y1, x0:x1] @ LUMA, np.float32)
+    ox, oy = offsets[ref]
     gy, gx = np.mgrid[y0:y1, x0:x1].astype(np.float32)
-    diffs = []
-    for n in views:
-        dx, dy = grid.offsets[n][0] - ox, grid.offsets[n][1] - oy
-        img = np.asarray(grid.images[n] @ LUMA, np.float32)
-        seen = cv2.remap(img, gx - shift * np.float32(dx), gy - shift * np.float32(dy), cv2.INTER_LINEAR,
+    stack = np.empty((y1 - y0, x1 - x0, len(views)), np.float32)  # views last: one pixel's in one cache line
+    for i, n in enumerate(views):
+        dx, dy = offsets[n][0] - ox, offsets[n][1] - oy
+        seen = cv2.remap(lumas[n], gx - shift * np.float32(dx), gy - shift * np.float32(dy), cv2.INTER_LINEAR,
                          borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)  # fmt: skip
         diff = np.abs(seen - ref_y)
         outside = cv2.blur((seen < 0).astype(np.float32), (3, 3)) > 0
-        diffs.append(np.where(outside, np.inf, cv2.blur(diff, (3, 3))).astype(np.float32))
-    stack = np.sort(np.stack(diffs), axis=0)
-    count = np.isfinite(stack).sum(axis=0).astype(np.float32)
+        stack[..., i] = np.where(outside, np.inf, cv2.blur(diff, (3, 3)))
+    if COMPILED:
+        return better_half_mean(stack, seen_by)
+    return _better_half_reference(stack, seen_by)
+
+
+def _better_half_reference(stack: F32, seen_by: F32 | None) -> tuple[F32, F32]:
+    """``cost_kernels.better_half_mean`` with numpy: sorted views, their running sum."""
+    stack = np.sort(stack, axis=-1)
+    count = np.isfinite(stack).sum(axis=-1).astype(np.float32)
     n_views = count if seen_by is None else np.minimum(count, seen_by)
     keep = np.maximum(1, np.floor((n_views + 1) / 2)).astype(np.int64)
-    csum = np.cumsum(np.where(np.isfinite(stack), stack, 0.0), axis=0)
-    mean = np.take_along_axis(csum, (keep - 1)[None], axis=0)[0] / keep
+    csum = np.cumsum(np.where(np.isfinite(stack), stack, np.float32(0.0)), axis=-1)
+    mean = np.take_along_axis(csum, (keep - 1)[..., None], axis=-1)[..., 0] / keep
     return np.asarray(np.where(n_views > 0, mean, np.inf), np.float32), count
 
 
@@ -114,11 +130,17 @@ def sensor_fixed(
     box = (int(ys.min()), int(ys.max()) + 1, int(xs.min()), int(xs.max()) + 1)
     y0, y1, x0, x1 = box
     d = np.where(have[y0:y1, x0:x1], disparity[y0:y1, x0:x1], 0.0).astype(np.float32)
-    at_estimate, count = _disagreement(grid, ref, views, d, box)
-    unshifted, _ = _disagreement(grid, ref, views, np.zeros_like(d), box, seen_by=count)
+    lumas = {n: np.asarray(grid.images[n] @ LUMA, np.float32) for n in views}
+    ref_y = np.asarray(grid.images[ref][y0:y1, x0:x1] @ LUMA, np.float32)
+    off = grid.offsets
+    at_estimate, count = _disagreement(lumas, ref_y, off, ref, views, d, box)
+    unshifted, _ = _disagreement(lumas, ref_y, off, ref, views, np.zeros_like(d), box, seen_by=count)
     # a match, not a flat patch that agrees at any shift: one pixel of disparity either way agrees worse
     nearby = np.minimum(
-        *(_disagreement(grid, ref, views, np.full_like(d, step), box, seen_by=count)[0] for step in (-1.0, 1.0))
+        *(
+            _disagreement(lumas, ref_y, off, ref, views, np.full_like(d, step), box, seen_by=count)[0]
+            for step in (-1.0, 1.0)
+        )
     )
     seen = np.isfinite(at_estimate) & np.isfinite(unshifted) & have[y0:y1, x0:x1]
     weak = seen & (unshifted < AGREE_MARGIN) & (unshifted <= at_estimate)

@@ -55,3 +55,27 @@ def test_the_compiled_cost_matches_the_reference(scale: float, win: int, keep: i
         assert np.all(fast[invalid] == want[invalid])
         if (~invalid).any():
             assert np.abs(fast - want)[~invalid].max() <= tol
+
+
+@pytest.mark.parametrize("limit", [False, True])
+def test_the_compiled_better_half_matches_the_numpy_reference_bit_for_bit(limit: bool) -> None:
+    """``edge.sensor_fixed``'s mean over the better half of the views: compiled (insertion sort, running
+    float32 sum) against the reference (np.sort, np.cumsum), identical bits; unseen views (inf), pixels no view
+    sees, ties, and a view budget ``seen_by`` smaller and larger than the views seen."""
+    from rigctl.depth.cost_kernels import better_half_mean
+    from rigctl.depth.edge import _better_half_reference
+
+    rng = np.random.default_rng(3)
+    h, w, nv = 37, 53, 8
+    stack = rng.random((h, w, nv), dtype=np.float32) * np.float32(0.2)
+    stack[rng.random((h, w, nv)) < 0.3] = np.inf  # views that do not see the point
+    stack[:3] = np.inf  # rows no view sees
+    stack[5, :, :4] = np.float32(0.05)  # ties
+    seen_by = rng.integers(0, nv + 2, (h, w)).astype(np.float32) if limit else None
+    mean, count = better_half_mean(stack, seen_by)
+    ref_mean, ref_count = _better_half_reference(stack, seen_by)
+    assert np.array_equal(count, ref_count)
+    assert np.array_equal(mean, ref_mean)  # inf where none is seen, in both
+    assert np.isinf(mean[:3]).all() and (count[:3] == 0).all()
+    views = count if seen_by is None else np.minimum(count, seen_by)
+    assert np.isfinite(mean[views > 0]).all() and np.isinf(mean[views == 0]).all()
