@@ -17,7 +17,7 @@ import logging
 import re
 from pathlib import Path
 
-from rigctl.errors import ParameterError, TakeError
+from rigctl.errors import OutputError, ParameterError, TakeError
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +40,20 @@ def safe_camera(name: object, where: str = "camera name") -> str:
     return name
 
 
+def inside(out: Path, folder: Path) -> Path:
+    """``folder`` (below ``out``), refused in one line when a folder between them is a symbolic link or not a
+    folder: a link planted in the output folder (``out/000001 -> /elsewhere``) would have the run write
+    outside it. ``out`` itself may be a link: that is the user's choice of output folder."""
+    rel = folder.relative_to(out)
+    step = out
+    for part in rel.parts:
+        step = step / part
+        if step.is_symlink() or (step.exists() and not step.is_dir()):
+            kind = "a symbolic link" if step.is_symlink() else "not a folder"
+            raise OutputError(f"{step}: is {kind} inside the output folder {out}: refused (rigctl writes only in it)")
+    return folder
+
+
 def output_path(out: Path, layout: str, frame: int, camera: str, ext: str) -> Path:
     """The file of one camera's output at one frame set; ``ext`` with its dot (``.exr``)."""
     if layout not in (*LAYOUTS, "flat"):
@@ -50,7 +64,7 @@ def output_path(out: Path, layout: str, frame: int, camera: str, ext: str) -> Pa
     if isinstance(frame, bool) or not isinstance(frame, int) or not 0 <= frame <= MAX_FRAME:
         raise TakeError(f"frame number {frame!r} refused as a file name (0 to {MAX_FRAME})")
     if layout == "frames":
-        return out / f"{frame:06d}" / f"{camera}{ext}"
+        return inside(out, out / f"{frame:06d}") / f"{camera}{ext}"
     if layout == "sequence":
-        return out / camera / f"{camera}.{frame:06d}{ext}"
+        return inside(out, out / camera) / f"{camera}.{frame:06d}{ext}"
     return out / f"{camera}{ext}"

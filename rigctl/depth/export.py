@@ -25,7 +25,7 @@ from rigctl.disparity_layers import layers, steps
 from rigctl.exr import picture, picture_attributes, write_exr
 from rigctl.exrcam import camera_attributes
 from rigctl.keying import Keyer
-from rigctl.layout import output_path
+from rigctl.layout import inside, output_path
 from rigctl.pfm import write_pfm
 from rigctl.publish import move_into, publish_png
 from rigctl.timecode import Timecode
@@ -169,6 +169,6 @@ class Exporter:
         try:
             for cam, res in results.items():
                 write_outputs(staging, cam, grid, res, d_range, self.formats)
-            return publish(tmp, self.out / name)
+            return publish(tmp, inside(self.out, self.out / name))
         finally:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from rigctl.errors import ParameterError, RigctlError
 from rigctl.exr import picture, picture_attributes, write_exr
+from rigctl.layout import inside
 from rigctl.publish import publish_png
 from rigctl.render.inputs import F32, FrameViews, RenderInput
 from rigctl.render.score import Score, full_frame_psnr_db, score
@@ -159,7 +160,7 @@ def render_views(
                     f"positions {same.col!r},{same.row!r} and {eye.col!r},{eye.row!r} would both be written as "
                     f"{eye.stem}: give each position once (names keep 6 significant digits)"
                 )
-        folder = out / f"{n:06d}"
+        folder = inside(out, out / f"{n:06d}")  # never a link planted to write elsewhere
         earlier = sorted({f.stem for f in folder.glob("*.png")} - set(stems)) if folder.is_dir() else []
         if earlier:
             names = ", ".join(earlier[:4]) + (", ..." if len(earlier) > 4 else "")
@@ -177,7 +178,7 @@ def render_views(
             }
             if not res.rgba8[..., 3].any():
                 log.warning("frame %06d: view %s is empty: no source camera sees anything there", n, eye.stem)
-            write_view(out / f"{n:06d}", eye.stem, res.rgba, attrs)
+            write_view(folder, eye.stem, res.rgba, attrs)
             row: ViewRow = {
                 "frame": f"{n:06d}",
                 "view": eye.stem,

@@ -293,6 +293,30 @@ def test_a_second_run_on_a_locked_folder_is_refused(tiny, tmp_path: Path) -> Non
     assert rigctl("take", "export", str(tiny[0]), "--out", str(out)).returncode == 0
 
 
+def test_a_link_planted_in_the_output_folder_is_not_followed_out_of_it(tiny, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """A frame folder that is a symbolic link to elsewhere (left by someone, or by a hostile user) would have
+    a run write its files outside --out: refused in one line, the place it points at untouched."""
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    runs = {
+        "export": ("take", "export", str(tiny[0]), "--out"),
+        "depth": ("depth", str(tiny[1]), "--preset", "fast", "--out"),
+        "render": ("render", str(tiny[1]), "--disparity", str(tiny[1] / "truth" / "disparity"), "--at", "1,1", "--out"),
+        "process": ("process", str(tiny[1]), "--workers", "1", "--preset", "fast", "--out"),
+    }
+    for verb, argv in runs.items():
+        out = tmp_path / verb
+        frames = out / "depth" if verb == "process" else out
+        frames.mkdir(parents=True)
+        (frames / "000001").symlink_to(victim)
+        res = rigctl(*argv, str(out), timeout=120)
+        if verb == "process":  # the farm records the frame as failed and goes on with the others (exit 1)
+            assert res.returncode == EXIT_CHECK_FAILED and "000001: is a symbolic link inside" in res.stderr
+        else:
+            one_line(res, EXIT_DEVICE, "000001", "symbolic link inside the output folder")
+        assert not any(victim.iterdir()), verb
+
+
 def test_a_demo_on_a_folder_another_demo_is_writing_is_refused_and_clears_nothing(tmp_path: Path) -> None:
     out = tmp_path / "demo"
     (out / "takes").mkdir(parents=True)
