@@ -35,3 +35,21 @@ def test_a_take_still_being_recorded_or_cut_off_counts_for_the_next_number(tmp_p
     (tmp_path / ".S1-2-T07.rigctl-recording").mkdir()  # recorded under its hidden name until published
     (tmp_path / ".S1-2-T09.other").mkdir()
     assert next_take_name([tmp_path], "S1", "2") == "S1-2-T08"
+
+
+def test_a_second_recording_of_a_name_being_recorded_is_refused_and_touches_nothing(tmp_path: Path) -> None:
+    from rigctl.errors import TakeError
+    from rigctl.take.plan import TakePlan
+    from rigctl.take.staging import Staging
+
+    first = Staging(TakePlan.spread("t", [tmp_path / "a", tmp_path / "b"], ["r0c0", "r0c1"]))
+    first.create()
+    (first.plan.folder / "take.yaml").write_text("being recorded\n")
+    second = Staging(TakePlan.spread("t", [tmp_path / "a", tmp_path / "b"], ["r0c0", "r0c1"]))
+    with pytest.raises(TakeError, match="another rigctl run is recording"):
+        second.create()  # its recovery of leftovers must not take a live recording for one either
+    assert (first.plan.folder / "take.yaml").read_text() == "being recorded\n"
+    assert sorted(p.name for p in (tmp_path / "b").iterdir()) == [".t.rigctl-recording"]
+    first.publish()
+    assert (tmp_path / "a" / "t" / "take.yaml").exists() and (tmp_path / "b" / "t").is_dir()
+    assert not list(tmp_path.rglob("*.rigctl-recording"))
