@@ -19,6 +19,7 @@ import yaml
 from numpy.typing import NDArray
 
 from rigctl.errors import CalibrationError, RigFileError
+from rigctl.publish import publish_text
 from rigctl.rig import CAMERA_NAME
 from rigctl.yamlfile import check_spec, line_of, load_yaml_with_lines
 
@@ -115,10 +116,8 @@ class ArrayCalibration:
         return out
 
     def save(self, path: Path) -> None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        tmp.write_text(yaml.safe_dump(self.as_dict(), sort_keys=False, default_flow_style=None))
-        tmp.replace(path)
+        """Published whole (temporary name, fsync, rename, fsync the folder): ``rigctl.publish``."""
+        publish_text(path, yaml.safe_dump(self.as_dict(), sort_keys=False, default_flow_style=None))
 
 
 def _matrix(path: Path, lines: dict[Any, int], loc: tuple[Any, ...], value: Any, shape: tuple[int, ...]) -> F64:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +30,7 @@ from numpy.typing import NDArray
 
 from rigctl.errors import ParameterError, TakeError
 from rigctl.interop import yuv
+from rigctl.publish import publish_text, publishing_folder
 
 log = logging.getLogger(__name__)
 
@@ -168,28 +170,33 @@ def export_miv(take: Path, disparity_dir: Path, out: Path, frames: range | None 
         camera_entry(n, positions[i], (width, height), focal, (K[0, 2], K[1, 2]), (near, far))
         for i, n in enumerate(names)
     ]
-    out.mkdir(parents=True)
-    written = [out / JSON_NAME]
-    (out / JSON_NAME).write_text(json.dumps({"Version": "4.0", "cameras": cameras}, indent=2) + "\n")
-    handles = {}
-    try:
-        for cam in names:
-            for kind in (texture_name(cam, width, height), depth_name(cam, width, height)):
-                handles[kind] = open(out / kind, "wb")  # noqa: SIM115 - closed below, all together
-                written.append(out / kind)
-        neutral = np.full(((height + 1) // 2, (width + 1) // 2), 1 << (DEPTH_BITS - 1), np.uint16)
-        for number in numbers:
-            g = grid.grid(number)
-            for n in names:
-                planes = yuv.rgb_to_yuv420(g.images[n], COLOUR_BITS)
-                yuv.write_frame(handles[texture_name(n, width, height)], planes, COLOUR_BITS)
-                levels = depth_levels(_disparity(disparity_dir, number, n), focal, spacing, near, far)
-                yuv.write_frame(handles[depth_name(n, width, height)], [levels, neutral, neutral], DEPTH_BITS)
-    finally:
-        for f in handles.values():
-            f.close()
-    written.append(_readme(out, take, disparity_dir, numbers, names, width, height, (near, far)))
-    return written
+    # built under a hidden partial name beside ``out`` and renamed once whole (rigctl.publish): a killed export
+    # leaves no half content under ``out``, and the same command run again starts over
+    with publishing_folder(out, "miv export", "already exists; MIV content goes into a new folder") as stage:
+        publish_text(stage / JSON_NAME, json.dumps({"Version": "4.0", "cameras": cameras}, indent=2) + "\n")
+        written = [JSON_NAME]
+        handles = {}
+        try:
+            for cam in names:
+                for kind in (texture_name(cam, width, height), depth_name(cam, width, height)):
+                    handles[kind] = open(stage / kind, "wb")  # noqa: SIM115 - closed below, all together
+                    written.append(kind)
+            neutral = np.full(((height + 1) // 2, (width + 1) // 2), 1 << (DEPTH_BITS - 1), np.uint16)
+            for number in numbers:
+                g = grid.grid(number)
+                for n in names:
+                    planes = yuv.rgb_to_yuv420(g.images[n], COLOUR_BITS)
+                    yuv.write_frame(handles[texture_name(n, width, height)], planes, COLOUR_BITS)
+                    levels = depth_levels(_disparity(disparity_dir, number, n), focal, spacing, near, far)
+                    yuv.write_frame(handles[depth_name(n, width, height)], [levels, neutral, neutral], DEPTH_BITS)
+            for f in handles.values():  # on the device before the folder is renamed to its name
+                f.flush()
+                os.fsync(f.fileno())
+        finally:
+            for f in handles.values():
+                f.close()
+        written.append(_readme(stage, take, disparity_dir, numbers, names, width, height, (near, far)).name)
+    return [out / name for name in written]
 
 
 def _readme(
@@ -211,5 +218,5 @@ def _readme(
             "(0: no depth), chroma neutral."
         )
     path = out / "README.txt"
-    path.write_text("\n".join(lines) + "\n")
+    publish_text(path, "\n".join(lines) + "\n")
     return path

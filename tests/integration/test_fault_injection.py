@@ -42,6 +42,8 @@ def command(verb: str, paths: dict[str, Path], out: Path) -> list[str]:
     if verb == "rectify":
         calibration = str(paths["take"] / "truth/calibration.yaml")
         return ["rectify", str(paths["take"]), "--calibration", calibration, "--out", str(out)]
+    if verb == "miv-export":
+        return ["miv", "export", str(paths["rect"]), str(paths["disp"]), "--out", str(out)]
     if verb == "miv-import":
         return ["miv", "import", str(paths["content"] / "cameras.json"), "--out", str(out)]
     if verb == "depth":
@@ -89,6 +91,8 @@ CASES = [
     ("depth", "replace", 50, "TERM"),
     ("render", "fsync", 2, "KILL"),
     ("render", "replace", 5, "TERM"),
+    ("miv-export", "fsync", 2, "KILL"),  # the first camera's YUV files written, the rest not
+    ("miv-export", "replace", 3, "TERM"),  # the whole content about to be renamed to its name
     ("miv-import", "fsync", 3, "KILL"),  # a grid folder half written
     ("miv-import", "replace", 12, "TERM"),  # the import about to be renamed to its name
 ]
@@ -123,7 +127,7 @@ def test_a_killed_command_leaves_only_whole_files_and_the_same_command_finishes(
         capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL,
     )  # fmt: skip
     assert killed.returncode == -{"KILL": 9, "TERM": 15}[sig], (killed.returncode, killed.stderr)
-    if verb in ("rectify", "miv-import"):  # built under a partial name, renamed once whole
+    if verb in ("rectify", "miv-import", "miv-export"):  # built under a partial name, renamed once whole
         assert not out.exists(), "a half-written folder carries the name asked for"
     else:
         published(out)  # every file at its final name is whole
