@@ -65,13 +65,15 @@ def prepare_folder(out: Path, fresh: bool) -> Iterator[Path]:
         yield out
 
 
-def run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any], fresh: bool = False) -> Path:
-    """The whole chain into ``out``, held under this run's lock on the folder; returns the report."""
+def run_demo(out: Path, say: Say, progress_factory: Callable[[str, str], Any], fresh: bool = False) -> Path:
+    """The whole chain into ``out``, held under this run's lock on the folder; returns the report.
+    ``progress_factory(label, unit)`` gives each step's progress: a context manager with ``update(done, total,
+    what)`` and ``steps(done, total)`` (the CLI's rich display)."""
     with prepare_folder(out, fresh):
         return _run_demo(out, say, progress_factory)
 
 
-def _run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any]) -> Path:
+def _run_demo(out: Path, say: Say, progress_factory: Callable[[str, str], Any]) -> Path:
     from rigctl.calib.report import format_table as calib_table
     from rigctl.calib.report import write_plots
     from rigctl.calib.run import calibrate
@@ -98,11 +100,11 @@ def _run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any]) -> Pa
 
     def record(take: str, frames: int, *sim: str) -> None:
         # a planned take of a few frame sets: preflight says go whenever memory holds it, on any disk
-        bar = progress_factory(f"recording {take}")
-        try:
-            result = record_take(rig, take, [takes], frames=frames, sim=["deterministic=true", *sim], progress=bar)
-        finally:
-            bar.close()
+        with progress_factory(f"recording {take}", "frame sets") as bar:
+            result = record_take(
+                rig, take, [takes], frames=frames, sim=["deterministic=true", *sim],
+                progress=lambda share: bar.update(round(share * frames), frames),
+            )  # fmt: skip
         say(f"preflight {result.preflight.outcome}: " + "; ".join(v.message for v in result.preflight.verdicts))
         if result.recorder.error is not None:
             raise result.recorder.error
@@ -119,11 +121,8 @@ def _run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any]) -> Pa
     timings["record calibration take"] = time.perf_counter() - t0
 
     t0 = step("calibrate all nine cameras jointly")
-    bar = progress_factory("calibrating")
-    try:
-        result = calibrate(takes / "calibration", progress=lambda label, d, n: bar(d / max(n, 1), label))
-    finally:
-        bar.close()
+    with progress_factory("calibrating", "views") as bar:
+        result = calibrate(takes / "calibration", progress=lambda what, done, total: bar.update(done, total, what))
     cal_path = out / "calibration.yaml"
     result.calibration.save(cal_path)
     cal_plots = write_plots(result, out / "calibration")
@@ -137,31 +136,23 @@ def _run_demo(out: Path, say: Say, progress_factory: Callable[[str], Any]) -> Pa
     timings["record presenter take"] = time.perf_counter() - t0
 
     t0 = step("rectify the presenter take with the calibration")
-    bar = progress_factory("rectifying")
-    try:
+    with progress_factory("rectifying", "frames") as bar:
         rect = rectify_take(takes / "presenter", cal_path, takes / "presenter-rectified", bar.steps)
-    finally:
-        bar.close()
     timings["rectify"] = time.perf_counter() - t0
 
     t0 = step(f"depth for all nine cameras (frame set 0, planned range {near:.2f}-{far:.2f} m, keyed)")
-    bar = progress_factory("depth")
-    try:
+    with progress_factory("depth", "cameras") as bar:
         depth = run_depth(
-            takes / "presenter-rectified", out / "depth", DepthOptions(near_m=near, far_m=far), [0], progress=bar
-        )
-    finally:
-        bar.close()
+            takes / "presenter-rectified", out / "depth", DepthOptions(near_m=near, far_m=far), [0],
+            progress=bar.update,
+        )  # fmt: skip
     frame = next(iter(depth.frames.values()))
     montage = _montage(out / "depth" / "000000", rig.camera_names, out / "depth-previews.png")
     timings["depth"] = time.perf_counter() - t0
 
     t0 = step("error against run time: presets and OpenCV baselines in one run")
-    bar = progress_factory("bench")
-    try:
-        bench = run_bench([presenter(False), motorcycle()], progress=bar)
-    finally:
-        bar.close()
+    with progress_factory("bench", "runs") as bar:
+        bench = run_bench([presenter(False), motorcycle()], progress=bar.update)
     bench_plot = plot(bench, out / "error-vs-time.png")
     say(bench_table(bench))
     timings["bench"] = time.perf_counter() - t0

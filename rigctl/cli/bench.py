@@ -8,7 +8,7 @@ from pathlib import Path
 
 from rigctl.cli import render
 from rigctl.cli.helptext import examples
-from rigctl.cli.progress import Progress
+from rigctl.cli.progress import Progress, add_quiet
 from rigctl.errors import ParameterError
 
 
@@ -62,6 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="FPS",
         help="with --size: the footage's frame rate for the real-time factor (default: the paper's rig's, 25)",
     )
+    add_quiet(d)
     d.set_defaults(func=run_depth_bench)
     render.register_bench(what)
     p.set_defaults(func=lambda ns: (p.print_help(), 2)[1])
@@ -78,13 +79,10 @@ def run_depth_bench(ns: argparse.Namespace) -> int:
         return run_video_bench(ns)
     if ns.repeats < 1:
         raise ParameterError(f"--repeats must be at least 1, got {ns.repeats}")
-    bar = Progress("bench depth")
-    try:
+    with Progress("bench depth", "runs", ns.quiet) as bar:
         datasets = ([] if ns.quick else [presenter(True)]) + [presenter(False), motorcycle(), *stratified()]
         datasets += stratified_shifted()  # the scenes as a light field and as parallel cameras see them
-        result = run_bench(datasets, repeats=ns.repeats, progress=bar)
-    finally:
-        bar.close()
+        result = run_bench(datasets, repeats=ns.repeats, progress=bar.update)
     plot(result, ns.plot)
     if ns.json:
         print(json.dumps(result.to_json(), default=float))
@@ -143,15 +141,12 @@ def run_video_bench(ns: argparse.Namespace) -> int:
     if ns.preset not in PRESETS:
         raise ParameterError(f"--preset: unknown preset {ns.preset!r} (presets: {', '.join(PRESETS)})")
     plot_path = ns.plot if ns.plot != Path("bench-depth.png") else Path("bench-depth-video.png")
-    bar = Progress("bench depth --video")
-    try:
+    with Progress("bench depth --video", "frames", ns.quiet) as bar:
         takes = [
             VideoTake("still", presenter_video(False, ns.frames), still=True),
             VideoTake("moving", presenter_video(True, ns.frames), still=False),
         ]
-        result = run_video_bench(takes, ns.preset, progress=bar)
-    finally:
-        bar.close()
+        result = run_video_bench(takes, ns.preset, progress=bar.update)
     plot_video(result, plot_path)
     if ns.json:
         print(json.dumps(result.to_json()))

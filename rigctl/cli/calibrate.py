@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from rigctl.cli.helptext import examples
-from rigctl.cli.progress import Progress
+from rigctl.cli.progress import Progress, add_quiet
 from rigctl.errors import CalibrationError, ParameterError
 
 
@@ -45,6 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots next to --out")
     p.add_argument("--force", action="store_true", help="write the calibration even when the diagnosis finds problems")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -68,18 +69,15 @@ def run(ns: argparse.Namespace) -> int:
         target = None
     if not ns.reject > 1:
         raise ParameterError(f"--reject must be above 1 (times the median view error), got {ns.reject}")
-    bar = Progress(f"calibrating {ns.input.name}")
     log = (lambda m: print(m, file=sys.stderr)) if not ns.json else None
-    try:
+    with Progress(f"calibrating {ns.input.name}", "views", ns.quiet) as bar:
         result = calibrate(
             ns.input,
             target,
             Options(model=ns.distortion, reject_factor=ns.reject),
-            progress=lambda label, d, n: bar(d / max(n, 1), label),
+            progress=lambda what, done, total: bar.update(done, total, what),
             log=log,
         )
-    finally:
-        bar.close()
     report = result.report
     problems = result.diagnosis
     if ns.json:

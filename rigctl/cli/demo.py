@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from rigctl.cli.helptext import examples
-from rigctl.cli.progress import Progress
+from rigctl.cli.progress import Progress, add_quiet
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -27,6 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--fresh", action="store_true", help="replace a finished demo in DIR (an unfinished one is always replaced)"
     )
+    add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -36,6 +37,6 @@ def run(ns: argparse.Namespace) -> int:
     def say(text: str) -> None:
         print(text, flush=True)
 
-    report = run_demo(ns.out, say, lambda label: Progress(label), fresh=ns.fresh)
+    report = run_demo(ns.out, say, lambda label, unit: Progress(label, unit, ns.quiet), fresh=ns.fresh)
     print(f"\nreport: {report}", file=sys.stdout)
     return 0

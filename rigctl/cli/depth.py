@@ -9,7 +9,7 @@ from pathlib import Path
 
 from rigctl.cli.args import add_layout, add_pipeline_options, distance, far_distance
 from rigctl.cli.helptext import examples
-from rigctl.cli.progress import Progress
+from rigctl.cli.progress import Progress, add_quiet
 from rigctl.cli.take import damaged_exit
 from rigctl.depth.presets import PRESETS
 from rigctl.depth.run import DepthOptions, run_depth
@@ -53,6 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_layout(p)
     p.add_argument("--json", action="store_true")
     p.add_argument("--check", action="store_true", help="add leave-one-out PSNR/SSIM (rigctl render) to report.json")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -76,20 +77,17 @@ def run(ns: argparse.Namespace) -> int:
             "--check renders each computed camera from the others: give at least two --cameras, or none for all"
         )
     with output_folder(ns.out, "depth"):  # usable, locked for this run, an interrupted run's leftovers removed
-        bar = Progress(f"depth {ns.input.name}")
-        try:
+        with Progress(f"depth {ns.input.name}", "cameras", ns.quiet) as bar:
             report = run_depth(
                 ns.input,
                 ns.out,
                 opt,
                 frames,
-                progress=bar,
+                progress=bar.update,
                 skip_damaged=ns.skip_damaged,
                 layout=ns.layout,
                 colour=ns.colour,
             )
-        finally:
-            bar.close()
         data = report.to_json()
         if ns.check:
             from rigctl.cli.render import leave_one_out_report

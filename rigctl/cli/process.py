@@ -11,7 +11,7 @@ from pathlib import Path
 
 from rigctl.cli.args import add_pipeline_options, distance, far_distance
 from rigctl.cli.helptext import examples
-from rigctl.cli.progress import Progress
+from rigctl.cli.progress import Progress, add_quiet
 from rigctl.depth.presets import PRESETS
 from rigctl.errors import DeviceError
 from rigctl.publish import output_folder
@@ -123,6 +123,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_pipeline_options(p)
     p.add_argument("--redo", action="store_true", help="compute frames again even when done")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -157,16 +158,13 @@ def run(ns: argparse.Namespace) -> int:
         workers=ns.workers,
         memory_limit=ns.memory_limit,
     )
-    bar = Progress(f"process {ns.take.name}")
+    with Progress(f"process {ns.take.name}", "frame sets", ns.quiet) as bar:
 
-    def show(st: Status) -> None:
-        bar(st.finished / max(st.total, 1), st.line())
+        def show(st: Status) -> None:
+            bar.update(st.finished, st.total, f"{st.failed} failed" if st.failed else "")
 
-    try:
         with output_folder(ns.out, "process"):  # usable, and one run at a time on a folder
             summary = process_take(opt, progress=show)
-    finally:
-        bar.close()
     if ns.json:
         print(summary.model_dump_json())
     else:

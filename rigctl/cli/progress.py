@@ -1,35 +1,147 @@
-"""A progress bar on stderr for long work (only when stderr is a terminal; silent in CI logs)."""
+"""The one progress display of every command that runs longer than a second (record, calibrate, rectify, depth,
+process, render, take export, bench, demo), built on ``rich.progress``.
+
+On a terminal (stderr a tty): a bar with the items done of the total, the rate, the time elapsed and the time
+remaining, and what is being done. Anywhere else (a pipe, a CI log): nothing while it runs and one summary
+line at the end, ``LABEL: N of N UNIT in S s (R UNIT/s)``, and only when the work finished (an error is the
+command's one line, nothing else). ``--quiet`` silences both. The library layers report through plain
+callbacks (``done, total, what``); only this module knows how progress is shown."""
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
+from collections.abc import Callable
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, TextIO
+
+if TYPE_CHECKING:
+    from rich.progress import Progress as RichProgress
+
+
+def add_quiet(p: argparse.ArgumentParser) -> None:
+    """``--quiet`` of every command that shows progress."""
+    p.add_argument("--quiet", action="store_true", help="no progress bar on a terminal, no summary line elsewhere")
+
+
+def _columns(unit: str) -> list[Any]:
+    from rich.progress import BarColumn, ProgressColumn, TextColumn
+    from rich.table import Column
+    from rich.text import Text
+
+    def clock(seconds: float | None) -> str:
+        if seconds is None:
+            return "-:--"
+        s = int(seconds)
+        return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+
+    class Count(ProgressColumn):
+        def render(self, task: Any) -> Text:
+            total = "?" if task.total is None else f"{task.total:g}"
+            return Text(f"{task.completed:g}/{total} {unit}".rstrip(), style="progress.download")
+
+    class Rate(ProgressColumn):
+        def render(self, task: Any) -> Text:
+            speed = task.finished_speed or task.speed
+            return Text("-/s" if speed is None else f"{speed:.2f}/s", style="progress.data.speed")
+
+    class Times(ProgressColumn):
+        def render(self, task: Any) -> Text:
+            left = 0.0 if task.finished else task.time_remaining
+            return Text(f"{clock(task.elapsed)} elapsed, {clock(left)} left", style="progress.remaining")
+
+    class What(ProgressColumn):  # what is being done: the column cut short when the line is too long
+        def render(self, task: Any) -> Text:
+            return Text(task.fields["what"], style="progress.elapsed", no_wrap=True, overflow="ellipsis")
+
+    def fixed() -> Column:
+        return Column(no_wrap=True)
+
+    return [
+        TextColumn("{task.description}", table_column=fixed()), BarColumn(bar_width=12, table_column=fixed()),
+        Count(table_column=fixed()), Rate(table_column=fixed()), Times(table_column=fixed()),
+        What(table_column=Column(overflow="ellipsis")),
+    ]  # fmt: skip
 
 
 class Progress:
-    def __init__(self, label: str, enabled: bool | None = None) -> None:
-        self.label = label
-        self.enabled = sys.stderr.isatty() if enabled is None else enabled
-        self._last = 0.0
-        self.started = time.monotonic()
+    """Progress of one piece of work: ``update(done, total, what)`` as it goes (``total`` None: not known),
+    ``close()`` at the end (or use it as a context manager: no summary when the work raised)."""
 
-    def __call__(self, fraction: float, detail: str = "") -> None:
-        if not self.enabled:
+    def __init__(
+        self,
+        label: str,
+        unit: str = "",
+        quiet: bool = False,
+        total: int | None = None,
+        stream: TextIO | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.label, self.unit, self.quiet = label, unit, quiet
+        self.stream = sys.stderr if stream is None else stream
+        self.live = not quiet and self.stream.isatty()
+        self.clock = clock
+        self.started = clock()
+        self.done, self.what = 0, ""
+        self.total = total
+        self._bar: RichProgress | None = None
+        self._task: Any = None
+        self._closed = False
+
+    def update(self, done: int, total: int | None = None, what: str = "") -> None:
+        """``done`` items of ``total`` (keeps the last total when None), doing ``what``."""
+        changed = done != self.done
+        self.done, self.what = done, what or self.what
+        if total is not None:
+            self.total = total
+        if not self.live or self._closed:
             return
-        now = time.monotonic()
-        if now - self._last < 0.1 and fraction < 1.0:
-            return
-        self._last = now
-        width = 30
-        filled = round(width * max(0.0, min(1.0, fraction)))
-        bar = "#" * filled + "-" * (width - filled)
-        sys.stderr.write(f"\r{self.label} [{bar}] {fraction * 100:5.1f}% {detail}".ljust(78))
-        sys.stderr.flush()
+        if self._bar is None:
+            from rich.console import Console
+            from rich.progress import Progress as RichProgress
+
+            self._bar = RichProgress(*_columns(self.unit), console=Console(file=self.stream), transient=False)
+            self._bar.start()
+            self._task = self._bar.add_task(self.label, total=self.total, what=self.what)
+        self._bar.update(self._task, completed=done, total=self.total, what=self.what, refresh=changed)
 
     def steps(self, done: int, total: int) -> None:
-        self(done / max(total, 1), f"{done}/{total}")
+        """The ``(done, total)`` callback of take export and rectify."""
+        self.update(done, total)
 
-    def close(self) -> None:
-        if self.enabled:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
+    def fraction(self, share: float, what: str = "") -> None:
+        """For work that reports a share of its length: as items of the total when one is known."""
+        total = self.total if self.total is not None else 100
+        self.update(round(max(0.0, min(1.0, share)) * total), total, what)
+
+    def summary(self) -> str:
+        """The line a run that is not on a terminal ends with."""
+        seconds = self.clock() - self.started
+        unit = f" {self.unit}" if self.unit else ""
+        if self.total is None and not self.done:  # open-ended work that counted nothing (a take until Ctrl-C)
+            return f"{self.label}: finished in {seconds:.1f} s"
+        of = f"{self.done} of {self.total}" if self.total is not None else f"{self.done}"
+        rate = f" ({self.done / seconds:.2f}{unit}/s)" if seconds > 0 and self.done else ""
+        return f"{self.label}: {of}{unit} in {seconds:.1f} s{rate}"
+
+    def close(self, finished: bool = True) -> None:
+        """Stop the bar (it stays on the terminal as it last was), or print the summary line when the work
+        ``finished`` and the bar was not on a terminal."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._bar is not None:
+            if finished and self.total is not None:
+                self._bar.update(self._task, completed=self.done, total=self.total)
+            self._bar.stop()
+        elif finished and not self.quiet and not self.live:
+            print(self.summary(), file=self.stream, flush=True)
+
+    def __enter__(self) -> Progress:
+        return self
+
+    def __exit__(
+        self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close(finished=kind is None)

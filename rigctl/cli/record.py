@@ -10,7 +10,7 @@ from pathlib import Path
 from rigctl.capture.preflight import PreflightReport
 from rigctl.capture.recording import record_take
 from rigctl.cli.helptext import examples
-from rigctl.cli.progress import Progress
+from rigctl.cli.progress import Progress, add_quiet
 from rigctl.errors import ParameterError
 from rigctl.publish import utf8_path
 from rigctl.rig import load_rig
@@ -66,6 +66,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="frame buffers per camera (default: a second of frames within a 3 GB budget)",
     )
     p.add_argument("--json", action="store_true", help="print the take's summary as JSON")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -78,11 +79,8 @@ def run(ns: argparse.Namespace) -> int:
         raise ParameterError(f"--seconds must be positive, got {ns.seconds}")
     frames = ns.frames if ns.frames is not None else (round(ns.seconds * rig.fps) if ns.seconds else None)
     sim = list(ns.sim) + ([f"scene={ns.scene}"] if ns.scene else [])
-    bar = Progress(f"recording {name}")
 
-    def say(text: str) -> None:
-        if bar.enabled:
-            sys.stderr.write("\n")
+    def say(text: str) -> None:  # above the bar while one is shown (rich redirects stderr meanwhile)
         print(f"rigctl record: {text}", file=sys.stderr, flush=True)
 
     def show_preflight(report: PreflightReport) -> None:
@@ -92,7 +90,7 @@ def run(ns: argparse.Namespace) -> int:
 
     for dest in (ns.out, *ns.dest):  # refused before a frame is taken, not after the manifest says complete
         utf8_path(dest, "--out" if dest is ns.out else "--dest")
-    try:
+    with Progress(f"recording {name}", "frame sets", ns.quiet, total=frames) as bar:
         result = record_take(
             rig,
             name,
@@ -102,15 +100,13 @@ def run(ns: argparse.Namespace) -> int:
             checksum=not ns.no_checksum,
             buffers_per_camera=ns.buffers,
             force=ns.force,
-            progress=bar,
+            progress=bar.fraction,
             catch_interrupt=True,
             say=say,
             on_preflight=show_preflight,
         )
-    finally:
-        bar.close()
-    if result.manifest is None and result.recorder.error is not None:  # nothing was kept: the name is free
-        raise result.recorder.error
+        if result.manifest is None and result.recorder.error is not None:  # nothing was kept: the name is free
+            raise result.recorder.error  # inside: a failed take ends with its error line alone, no summary
     reader = TakeReader(result.folder, skip_damaged=True)  # the summary of what was written
     summary = reader.summary()
     summary["path"] = str(result.folder)

@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from rigctl.cli.helptext import examples
-from rigctl.cli.progress import Progress
+from rigctl.cli.progress import Progress, add_quiet
 from rigctl.cli.take import damaged_exit
 from rigctl.rectification.rectify import rectify_take
 
@@ -38,15 +38,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(damaged_skipped) and exit 5",
     )
     p.add_argument("--json", action="store_true")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 
 def run(ns: argparse.Namespace) -> int:
-    bar = Progress(f"rectifying {ns.take.name}")
-    try:  # built under a partial name and renamed once whole: no half-rectified take is ever left behind
+    # built under a partial name and renamed once whole: no half-rectified take is ever left behind
+    with Progress(f"rectifying {ns.take.name}", "frames", ns.quiet) as bar:
         summary = rectify_take(ns.take, ns.calibration, ns.out, bar.steps, skip_damaged=ns.skip_damaged)
-    finally:
-        bar.close()
     if ns.json:
         print(json.dumps(summary.to_json()))
     else:

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from rigctl.cli.args import distance
 from rigctl.cli.helptext import examples
+from rigctl.cli.progress import Progress, add_quiet
 from rigctl.errors import ParameterError
 from rigctl.publish import output_folder, utf8_path
 
@@ -70,6 +71,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frames", metavar="A-B", help="frame sets (default: every complete one with a disparity)")
     p.add_argument("--out", type=Path, metavar="OUT")
     p.add_argument("--json", action="store_true")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -158,7 +160,8 @@ def run(ns: argparse.Namespace) -> int:
     first = inp.frame(numbers[0])
     truth, box = simulator_hooks(ns.input, first.shape[1])
     if ns.leave_one_out:
-        rows = leave_one_out(inp, numbers, ns.cameras, box)
+        with Progress(f"leave-one-out {ns.input.name}", "views", ns.quiet) as bar:
+            rows = leave_one_out(inp, numbers, ns.cameras, box, bar.update)
         print(json.dumps({"leave_one_out": rows}) if ns.json else format_table(rows))
         return 0
     if ns.path:
@@ -172,8 +175,11 @@ def run(ns: argparse.Namespace) -> int:
 
     for eye in eyes(first):  # positions no camera sees are refused before the output folder is made
         first.position(eye.col, eye.row)
-    with output_folder(ns.out, "render"):  # locked for this run; an interrupted run's leftovers removed
-        views = render_views(inp, numbers, eyes, ns.out, truth, box)
+    with (
+        output_folder(ns.out, "render"),  # locked for this run; an interrupted run's leftovers removed
+        Progress(f"render {ns.input.name}", "views", ns.quiet) as bar,
+    ):
+        views = render_views(inp, numbers, eyes, ns.out, truth, box, bar.update)
     if ns.json:
         print(json.dumps({"views": views}))
         return 0

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from rigctl.cli.args import add_layout
 from rigctl.cli.helptext import examples
-from rigctl.cli.progress import Progress
+from rigctl.cli.progress import Progress, add_quiet
 from rigctl.cli.record import format_summary
 from rigctl.errors import EXIT_DAMAGED
 from rigctl.publish import output_folder, utf8_path
@@ -56,6 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="leave out frames that fail their checksum or are missing, list them in DIR/export.json and exit 5",
     )
     add_layout(export)
+    add_quiet(export)
     export.set_defaults(func=run_export)
 
 
@@ -86,14 +87,13 @@ def run_check(ns: argparse.Namespace) -> int:
 def run_export(ns: argparse.Namespace) -> int:
     utf8_path(ns.out)
     reader = TakeReader(ns.take, skip_damaged=ns.skip_damaged)
-    with output_folder(ns.out, "take export"):  # locked for this run; an interrupted run's leftovers removed
-        bar = Progress(f"exporting {reader.manifest.take}")
-        try:
-            result = export_take(
-                reader, ns.out, ns.frames, ns.format, progress=bar.steps, layout=ns.layout, colour=ns.colour
-            )
-        finally:
-            bar.close()
+    with (
+        output_folder(ns.out, "take export"),  # locked for this run; an interrupted run's leftovers removed
+        Progress(f"exporting {reader.manifest.take}", "frame sets", ns.quiet) as bar,
+    ):
+        result = export_take(
+            reader, ns.out, ns.frames, ns.format, progress=bar.steps, layout=ns.layout, colour=ns.colour
+        )
     print(
         f"{result['images']} images from {result['sets']} frame sets written to {ns.out}"
         + (f" ({result['missing']} members not captured)" if result["missing"] else "")

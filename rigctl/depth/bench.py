@@ -154,7 +154,7 @@ def run_bench(
     datasets: list[Dataset],
     methods: list[str] | None = None,
     repeats: int = 1,
-    progress: Callable[[float, str], None] | None = None,
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> DepthBenchResult:
     """Every method on every dataset: metrics and seconds (the median of ``repeats`` runs)."""
     cv2.setNumThreads(2)
@@ -166,7 +166,7 @@ def run_bench(
         mask = np.isfinite(ds.truth)
         for m in names:
             if progress:
-                progress(k / total, f"{ds.name}: {m}")
+                progress(k, total, f"{ds.name}: {m}")
             k += 1
             if m in PRESETS and len(ds.grid.names) < 2:
                 continue
@@ -182,7 +182,7 @@ def run_bench(
             assert disp is not None
             rows.append(BenchRow(ds.name, m, float(np.median(times)), score(disp, ds.truth, mask)))
     if progress:
-        progress(1.0, "done")
+        progress(total, total, "done")
     return DepthBenchResult(rows, [d.name for d in datasets], repeats)
 
 

@@ -83,7 +83,7 @@ def run_depth(
     opt: DepthOptions,
     frames: list[int] | None = None,
     formats: tuple[str, ...] = ("exr", "pfm", "png"),
-    progress: Callable[[float, str], None] | None = None,
+    progress: Callable[[int, int, str], None] | None = None,
     skip_damaged: bool = False,
     layout: str = "frames",
     colour: str = "rec709",
@@ -113,7 +113,8 @@ def run_depth(
     def step(n: int, cam: str) -> None:
         if progress:
             again = f" (round {this_round}: the take's range was widened)" if this_round > 1 else ""
-            progress((position[n] + cams.index(cam) / len(cams)) / len(numbers), f"frame {n} camera {cam}{again}")
+            total = len(numbers) * len(cams)  # cameras started of all cameras of every frame set
+            progress(position[n] * len(cams) + cams.index(cam), total, f"frame {n} camera {cam}{again}")
 
     def run_round(state: SearchState, n: int) -> list[ChunkEnd]:
         """Every chunk from ``state``: a later round replaces every output and report of the one before."""
@@ -137,5 +138,5 @@ def run_depth(
     report.seconds = time.perf_counter() - t_start
     report.write(out / "report.json")
     if progress:
-        progress(1.0, "done")
+        progress(len(numbers) * len(cams), len(numbers) * len(cams), "done")
     return report

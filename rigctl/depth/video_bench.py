@@ -129,7 +129,7 @@ class VideoBenchResult:
 
 
 def run_video_bench(
-    takes: list[VideoTake], preset: str = "best", progress: Callable[[float, str], None] | None = None
+    takes: list[VideoTake], preset: str = "best", progress: Callable[[int, int, str], None] | None = None
 ) -> VideoBenchResult:
     """Each take with temporal stabilisation off, then on."""
     runs = []
@@ -139,14 +139,14 @@ def run_video_bench(
     def step(label: str) -> None:
         nonlocal k
         if progress:
-            progress(k / total, label)
+            progress(k, total, label)
         k += 1
 
     for take in takes:
         for temporal in (False, True):
             runs.append(run_take(take, temporal, preset, step))
     if progress:
-        progress(1.0, "done")
+        progress(total, total, "done")
     return VideoBenchResult(runs)
 
 

@@ -14,7 +14,6 @@ A worker that dies takes its task back to the scheduler, which runs it elsewhere
 from __future__ import annotations
 
 import logging
-import math
 import re
 import shutil
 import time
@@ -64,45 +63,18 @@ class FarmOptions:
     memory_limit: str | int = "auto"
 
 
-def eta_text(seconds: float | None) -> str:
-    if seconds is None or not math.isfinite(seconds):
-        return "--:--"
-    s = int(seconds)
-    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
-
-
 @dataclass
 class Status:
-    """Counts for the progress line; ``clock`` is injected so rate and ETA are testable."""
+    """The counts a run reports as it goes (``rigctl process`` shows them with rate and time remaining)."""
 
     total: int
     skipped: int = 0
     done: int = 0
     failed: int = 0
-    clock: Callable[[], float] = time.monotonic
-    started: float = field(default=0.0)
-
-    def __post_init__(self) -> None:
-        self.started = self.clock()
 
     @property
     def finished(self) -> int:
         return self.done + self.failed
-
-    def rate(self) -> float:
-        """Frame sets per second since the start (0 before the first one)."""
-        elapsed = self.clock() - self.started
-        return self.finished / elapsed if elapsed > 0 and self.finished else 0.0
-
-    def eta_s(self) -> float | None:
-        r = self.rate()
-        return (self.total - self.finished) / r if r > 0 else None
-
-    def line(self) -> str:
-        return (
-            f"{self.done} done, {self.failed} failed of {self.total}, {self.rate():.2f} frames/s, "
-            f"ETA {eta_text(self.eta_s())}"
-        )
 
 
 @dataclass
@@ -280,7 +252,7 @@ def process_take(
     depth_dir.mkdir(parents=True, exist_ok=True)
     for stale in depth_dir.glob(PARTIAL_PREFIX + "*"):  # left by a run that was stopped mid-write
         shutil.rmtree(stale, ignore_errors=True)
-    status = Status(total=0, clock=clock)
+    status = Status(total=0)
     workers: dict[str, int] = {}
     failed: dict[str, str] = {}
     computed: dict[str, FrameEntry] = {}  # this run's last result of every frame set

@@ -143,14 +143,18 @@ def render_views(
     out: Path,
     truth: TruthFn | None = None,
     ignore: Box | None = None,
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> list[ViewRow]:
-    """Render and write every eye of every frame; score against ``truth`` where the simulator gives one."""
+    """Render and write every eye of every frame; score against ``truth`` where the simulator gives one.
+    ``progress(views written, views in all, the last one)`` after each view."""
     rows: list[ViewRow] = []
     ren: Renderer | None = None
+    total = 0
     for n in numbers:
         frame = inp.frame(n)
         ren = renderer_for(frame, previous=ren)
         wanted = eyes(frame)
+        total = total or len(wanted) * len(numbers)  # every frame set has the same eyes
         stems: dict[str, Eye] = {}
         for eye in wanted:  # every position checked before the frame's first view is written
             frame.position(eye.col, eye.row)
@@ -197,6 +201,8 @@ def render_views(
                 alpha = inp.keyer.matte(rgb)
                 row["against_truth"] = score(res.rgba[..., :3], rgb, alpha, ignore)
             rows.append(row)
+            if progress:
+                progress(len(rows), total, f"frame {n:06d} {eye.stem}")
     return rows
 
 
@@ -220,9 +226,14 @@ def _rendered(ren: Renderer, frame: FrameViews, eyes: list[Eye]) -> Iterator[tup
 
 
 def leave_one_out(
-    inp: RenderInput, numbers: list[int], cameras: list[str] | None = None, ignore: Box | None = None
+    inp: RenderInput,
+    numbers: list[int],
+    cameras: list[str] | None = None,
+    ignore: Box | None = None,
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> list[LeaveOneOutRow]:
-    """Every named camera rendered from the others (never from itself) and scored against its own image."""
+    """Every named camera rendered from the others (never from itself) and scored against its own image;
+    ``progress(cameras scored, cameras in all, the last one)`` after each."""
     rows: list[LeaveOneOutRow] = []
     ren: Renderer | None = None
     for n in numbers:
@@ -247,6 +258,8 @@ def leave_one_out(
                  "ivpsnr_db": sc["ivpsnr_db"], "pixels": sc["pixels"], "full_frame_psnr_db": full,
                  "sources": res.sources, "ms": round(ms, 2)}
             )  # fmt: skip
+            if progress:
+                progress(len(rows), len(numbers) * len(names), f"frame {n:06d} {cam}")
     return rows
 
 

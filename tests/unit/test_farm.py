@@ -1,4 +1,4 @@
-"""Logic of ``rigctl process`` that needs no cluster: scheduler addresses, the progress line's rate and ETA
+"""Logic of ``rigctl process`` that needs no cluster: scheduler addresses, the memory bound
 (clock injected), the ledger."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 from rigctl.depth.export import file_record
 from rigctl.errors import ParameterError, TakeError
 from rigctl.farm.ledger import FrameEntry, Ledger
-from rigctl.farm.run import Status, eta_text, scheduler_url, worker_memory_bytes
+from rigctl.farm.run import scheduler_url, worker_memory_bytes
 
 
 @pytest.mark.parametrize("url", ["tcp://127.0.0.1:8786", "tcp://render-01.studio.lan:1", "tcp://[::1]:65535"])
@@ -25,18 +25,6 @@ def test_scheduler_addresses_accepted(url: str) -> None:
 def test_scheduler_addresses_refused(url: str) -> None:
     with pytest.raises(ParameterError, match="--scheduler: expected tcp://HOST:PORT"):
         scheduler_url(url)
-
-
-def test_rate_and_eta_follow_the_clock() -> None:
-    now = [100.0]
-    st = Status(total=10, clock=lambda: now[0])
-    assert st.rate() == 0.0 and st.eta_s() is None and "ETA --:--" in st.line()
-    now[0] = 120.0
-    st.done, st.failed = 3, 1
-    assert st.rate() == pytest.approx(0.2)
-    assert st.eta_s() == pytest.approx(30.0)
-    assert st.line() == "3 done, 1 failed of 10, 0.20 frames/s, ETA 0:00:30"
-    assert eta_text(3725.0) == "1:02:05" and eta_text(float("inf")) == "--:--"
 
 
 def test_ledger_is_rewritten_whole_and_refuses_what_is_not_one(tmp_path: Path) -> None:
