@@ -107,6 +107,7 @@ def run(ns: argparse.Namespace) -> int:
         )
         if result.manifest is None and result.recorder.error is not None:  # nothing was kept: the name is free
             raise result.recorder.error  # inside: a failed take ends with its error line alone, no summary
+        bar.close(finished=result.recorder.error is None)  # a take cut short by an error: its line, no summary
     reader = TakeReader(result.folder, skip_damaged=True)  # the summary of what was written
     summary = reader.summary()
     summary["path"] = str(result.folder)
