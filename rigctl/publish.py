@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import io
 import json
 import logging
 import os
@@ -26,7 +27,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from rigctl.errors import DiskFullError, OutputError, ParameterError, RigctlError, TakeError
 
@@ -166,6 +167,13 @@ def publish_png(path: Path, image: NDArray[np.integer] | NDArray[np.floating], d
     if not ok:
         raise OutputError(f"{path}: the image could not be encoded as PNG")
     publish_bytes(path, buf.data, durable)
+
+
+def publish_figure(path: Path, figure: Any, dpi: int) -> None:
+    """A matplotlib figure rendered as PNG in memory and published whole (``savefig`` writes in place)."""
+    buf = io.BytesIO()
+    figure.savefig(buf, format="png", dpi=dpi)
+    publish_bytes(path, buf.getbuffer())
 
 
 def remove_stale_temps(folder: Path) -> int:

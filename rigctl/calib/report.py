@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from rigctl.calib.run import Result
+from rigctl.publish import publish_figure
 
 
 def _f(v: Any, fmt: str = ".3f") -> str:
@@ -117,7 +118,7 @@ def write_plots(result: Result, stem: Path) -> list[Path]:
     fig.suptitle("detected corners (blue used, red rejected)", fontsize=9)
     fig.tight_layout()
     path = stem.with_name(stem.name + "_coverage.png")
-    fig.savefig(path, dpi=90)
+    publish_figure(path, fig, 90)  # whole or absent, never a cut PNG
     plt.close(fig)
     out.append(path)
 
@@ -148,7 +149,7 @@ def write_plots(result: Result, stem: Path) -> list[Path]:
         ax.legend(fontsize=7)
     fig.tight_layout()
     path = stem.with_name(stem.name + "_residuals.png")
-    fig.savefig(path, dpi=90)
+    publish_figure(path, fig, 90)  # whole or absent, never a cut PNG
     plt.close(fig)
     out.append(path)
     return out

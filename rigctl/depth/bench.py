@@ -22,6 +22,7 @@ from rigctl.depth.metrics import score
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.presets import PRESETS
 from rigctl.depth.scenes import SCENES, SPACING, seen_by_all, shifted
+from rigctl.publish import publish_figure
 
 # the Middlebury 2014 Motorcycle calibration (REFERENCE.md): quarter resolution of f, doffs as shipped
 MOTORCYCLE = {"focal_px": 994.978, "spacing": 0.193001, "doffs": 31.086}
@@ -287,6 +288,6 @@ def plot(result: DepthBenchResult, path: Path) -> Path:
         ax.grid(alpha=0.3)
     fig.suptitle("error against run time: rigctl presets (red), OpenCV (blue), Pareto front (grey)", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    publish_figure(path, fig, 90)  # whole or absent, never a cut PNG
     plt.close(fig)
     return path

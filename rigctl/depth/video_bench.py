@@ -18,6 +18,7 @@ import numpy as np
 
 from rigctl.depth.metrics import score
 from rigctl.depth.video_metrics import VideoMetrics, VideoScores
+from rigctl.publish import publish_figure
 
 
 @dataclass
@@ -214,6 +215,6 @@ def plot_video(result: VideoBenchResult, path: Path) -> Path:
         row[0].set_xlabel("frame")
         row[1].set_xlabel("frame")
     fig.tight_layout()
-    fig.savefig(path, dpi=80)
+    publish_figure(path, fig, 80)  # whole or absent, never a cut PNG
     plt.close(fig)
     return path

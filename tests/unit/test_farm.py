@@ -195,3 +195,28 @@ def test_the_process_ledger_is_fsynced_before_and_after_its_rename(
     assert ("fsync", source) in events[:i]  # the file's bytes are on the device before its name is
     assert _durable_after_last_rename(events, tmp_path)
     assert [p.name for p in tmp_path.iterdir()] == ["process.json"]
+
+
+def test_plots_are_published_whole_through_a_temporary_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """savefig wrote report plots in place (a kill left a cut PNG); now each is rendered in memory, written
+    under a temporary name, fsynced and renamed."""
+    import cv2
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from rigctl.publish import publish_figure
+
+    fig, ax = plt.subplots(figsize=(2, 1))
+    ax.plot([0, 1], [1, 0])
+    events = _durability_log(monkeypatch)
+    publish_figure(tmp_path / "plot.png", fig, 50)
+    plt.close(fig)
+    renamed = [p for kind, p in events if kind == "rename"]
+    assert len(renamed) == 1 and renamed[0] != str((tmp_path / "plot.png").resolve())
+    assert ("fsync", renamed[0]) in events and _durable_after_last_rename(events, tmp_path)
+    img = cv2.imdecode(np.frombuffer((tmp_path / "plot.png").read_bytes(), np.uint8), cv2.IMREAD_UNCHANGED)
+    assert img is not None and img.shape[:2] == (50, 100)
+    assert [p.name for p in tmp_path.iterdir()] == ["plot.png"]
