@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 from rigctl.timecode import Timecode
+from rigctl.yuv10 import device_frame_bytes, essence_frame_bytes, is_ten_bit
 
 if TYPE_CHECKING:
     import numpy as np
@@ -50,13 +51,31 @@ class CaptureFormat:
 
     @property
     def bytes_per_frame(self) -> int:
+        """A frame as the device delivers it (v210's line padding included)."""
+        if is_ten_bit(self.pixel_format):
+            return device_frame_bytes(self.pixel_format, self.width, self.height)
         return self.width * self.height * BYTES_PER_PIXEL[self.pixel_format]
+
+    @property
+    def stored_bytes_per_frame(self) -> int:
+        """A frame as a take stores it: 10-bit formats packed at 20 bits a pixel, the others as captured."""
+        size = stored_frame_bytes(self.pixel_format, self.width, self.height)
+        assert size is not None
+        return size
 
     def describe(self) -> str:
         return f"{self.width}x{self.height} {self.pixel_format} {self.fps:g} fps"
 
 
 BYTES_PER_PIXEL = {"UYVY": 2, "YUYV": 2, "BGR3": 3, "GREY": 1}
+
+
+def stored_frame_bytes(pixel_format: str, width: int, height: int) -> int | None:
+    """Bytes of one frame of ``pixel_format`` in a take's essence; None for a format rigctl does not read."""
+    if is_ten_bit(pixel_format):
+        return essence_frame_bytes(width, height) if width % 2 == 0 else None
+    per_pixel = BYTES_PER_PIXEL.get(pixel_format)
+    return None if per_pixel is None else width * height * per_pixel
 
 
 @dataclass(slots=True)

@@ -21,7 +21,7 @@ from rigctl.yamlfile import check_spec, describe_validation_error, line_of, load
 
 RIG_SPEC = 1
 CAMERA_NAME = re.compile(r"^r(\d+)c(\d+)$")
-PIXEL_FORMATS = ("UYVY", "YUYV", "BGR3", "GREY")
+PIXEL_FORMATS = ("UYVY", "YUYV", "BGR3", "GREY", "Y210", "v210")  # Y210, v210: 10-bit 4:2:2 (rigctl.yuv10)
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 Millimetres = Annotated[float, Field(gt=0, le=1000, allow_inf_nan=False)]  # a sensor, a lens: under a metre
@@ -47,7 +47,7 @@ class OutputFormat(_Section):
     width_px: Annotated[int, Field(gt=0, le=65536)]
     height_px: Annotated[int, Field(gt=0, le=65536)]
     fps: Annotated[float, Field(ge=1, le=1000, allow_inf_nan=False)]  # a camera's rate, not a time-lapse's
-    pixel_format: Literal["UYVY", "YUYV", "BGR3", "GREY"] = "UYVY"
+    pixel_format: Literal["UYVY", "YUYV", "BGR3", "GREY", "Y210", "v210"] = "UYVY"
 
     @model_validator(mode="after")
     def _pixel_budget(self) -> OutputFormat:
@@ -55,6 +55,8 @@ class OutputFormat(_Section):
             raise ValueError(
                 f"{self.width_px}x{self.height_px} is over the budget of {MAX_FRAME_PIXELS:,} pixels a frame"
             )
+        if self.pixel_format in ("Y210", "v210") and self.width_px % 2:
+            raise ValueError(f"{self.pixel_format} is 4:2:2 (a chroma sample a pixel pair): width_px must be even")
         return self
 
 

@@ -24,11 +24,12 @@ from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from rigctl.simulators import scenes, soft_edges
+from rigctl.simulators import scenes, sensor, soft_edges
 from rigctl.simulators.raycast import RayCamera, RenderResult, Scene, render
 from rigctl.simulators.rays import rays_for
 from rigctl.simulators.settings import SimSettings
@@ -38,7 +39,6 @@ from rigctl.simulators.timing import SIMULATED_ORIGIN_NS, FrameTiming, frame_tim
 from rigctl.board import BoardSpec
 from rigctl.calibration_model import ArrayCalibration, CameraModel
 from rigctl.interfaces import CaptureFormat
-from rigctl.pixfmt import from_rgb
 from rigctl.rectification.geometry import RectifiedGrid, common_plane
 from rigctl.rig import Rig, rig_from_dict
 
@@ -79,7 +79,7 @@ class SimArray:
         self._pictured = False  # the grid's origin was set at the first picture
         self._claimed: set[str] = set()
         self._prime_lock = threading.Lock()
-        self._noise_bank: list[NDArray[np.int16]] | None = None
+        self._noise_bank: list[NDArray[Any]] | None = None
         self._luts: dict[float, NDArray[np.uint8]] = {}
 
     # ---- device bookkeeping ------------------------------------------------------------------------
@@ -209,13 +209,11 @@ class SimArray:
         return cached
 
     @property
-    def _noise(self) -> list[NDArray[np.int16]]:
+    def _noise(self) -> list[NDArray[Any]]:
         with self._prime_lock:  # drawn once, by whichever thread needs it first
             if self._noise_bank is None:
                 s = self.settings
-                rng = np.random.default_rng(np.random.SeedSequence([s.seed, 3]))
-                shape = (self.rig.height_px, self.rig.width_px * 2)
-                self._noise_bank = [np.rint(rng.normal(0, s.noise, shape)).astype(np.int16) for _ in range(NOISE_BANK)]
+                self._noise_bank = sensor.noise_bank(s.seed, s.noise, self.format, NOISE_BANK)
             return self._noise_bank
 
     # ---- scene states -----------------------------------------------------------------------------
@@ -287,7 +285,7 @@ class SimArray:
         if self.settings.edges == "soft":
             res.rgb = soft_edges.render_soft(self, state, name, res, rectified=False).rgb
         rgb = np.asarray(cv2.multiply(res.rgb, self._effects(name)), dtype=np.float32)
-        return from_rgb(np.clip(rgb, 0.0, 1.0, out=rgb), self.format.pixel_format)
+        return sensor.encode(rgb, self.format.pixel_format, self.settings.exposure_stops)
 
     @cached_property
     def _disk_cache(self) -> DiskCache | None:
@@ -300,7 +298,10 @@ class SimArray:
             sys.modules[rays_for.__module__].__file__,
             soft_edges.__file__,
         ]
-        return DiskCache.for_inputs(inputs, [Path(m) for m in sources if m], self.names, self.format.bytes_per_frame)
+        sources.append(sensor.__file__)
+        return DiskCache.for_inputs(
+            inputs, [Path(m) for m in sources if m], self.names, sensor.clean_bytes(self.format)
+        )
 
     def _render_state(self, state: int) -> Frames:
         # drawn once, before the cameras' threads use them (each camera's rays are its own thread's work)
@@ -382,7 +383,7 @@ class SimArray:
         loss = self.settings.signal_loss.get(name)
         return loss is None or not (loss[0] * 1e9 <= t_rel_ns < loss[1] * 1e9)
 
-    def noise_for(self, name: str, sequence: int) -> NDArray[np.int16] | None:
+    def noise_for(self, name: str, sequence: int) -> NDArray[Any] | None:
         if not self.settings.noise:
             return None
         return self._noise[(self.index[name] * 3 + sequence * 5) % NOISE_BANK]

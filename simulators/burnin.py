@@ -49,6 +49,18 @@ def burn(packed: NDArray[np.uint8], width: int, camera: int, seq: int, scene: in
     region[:, 0::2] = 128
 
 
+def burn10(words: NDArray[np.uint16], width: int, camera: int, seq: int, scene: int) -> None:
+    """Write the id into Y210 words (YUYV, 10 bits high) in place: luma 64 = 0, 940 = 1, chroma 512."""
+    b = block_px(width)
+    bits = _bits(camera, seq, scene).reshape(2, 32)
+    luma = np.where(bits, 940 << 6, 64 << 6).astype(np.uint16)
+    block = np.repeat(np.repeat(luma, b, axis=0), b, axis=1)
+    h, w = block.shape
+    region = words[:h, : 2 * w]
+    region[:, 0::2] = block
+    region[:, 1::2] = 512 << 6
+
+
 def read(packed: NDArray[np.uint8], width: int) -> BurntId | None:
     """The id burnt into packed 4:2:2 bytes, or None if the checksum does not match."""
     b = block_px(width)

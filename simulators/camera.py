@@ -19,12 +19,14 @@ from collections.abc import Iterator
 
 import cv2
 import numpy as np
-from rigctl.simulators import burnin
+from numpy.typing import NDArray
+from rigctl.simulators import burnin, sensor
 from rigctl.simulators.array import FrameTiming, SimArray
 
 from rigctl.camera_base import CameraBase, SignalReport
 from rigctl.errors import DeviceError
 from rigctl.interfaces import CaptureFormat, Frame, FrameFlags
+from rigctl.yuv10 import is_ten_bit
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +46,7 @@ class SimCamera(CameraBase):
         self._next_grid = 0  # deterministic: the grid slot after the last frame delivered
         self._last_rel = 0  # deterministic: the last frame's capture time from the origin (the simulated now)
         self.delivered: dict[int, int] = {}  # sequence -> scene frame, for the ground truth
+        self._scratch: NDArray[np.uint16] | None = None  # a v210 camera's Y210 words before packing
 
     # lifecycle -------------------------------------------------------------------------------------
     def _do_open(self) -> None:
@@ -146,9 +149,36 @@ class SimCamera(CameraBase):
         arr = self.array
         state = arr.state_of(timing.scene_frame)
         clean = arr.frames(state)[arr.index[self.name]]
-        buf = np.frombuffer(into, dtype=np.uint8, count=clean.nbytes).reshape(clean.shape)
         gain = arr.gain_for(self.name)
         noise = arr.noise_for(self.name, timing.sequence)
+        burn = (arr.index[self.name], timing.sequence, timing.scene_frame)
+        if is_ten_bit(arr.format.pixel_format):
+            if self._scratch is None:
+                self._scratch = np.empty((arr.format.height, arr.format.width * 2), np.uint16)
+            data = sensor.deliver10(clean, into, arr.format, gain, noise, self._scratch, burn)
+        else:
+            data = self._deliver8(clean, into, gain, noise, burn)
+        capture = t0 + timing.capture_ns
+        self.delivered[timing.sequence] = timing.scene_frame
+        self.delivering = True
+        flags = FrameFlags.TIMESTAMP_MONOTONIC | FrameFlags.TIMESTAMP_SOE
+        if arr.settings.deterministic:
+            self._next_grid, self._last_rel = timing.scene_frame + 1, timing.capture_ns
+            host = capture + self.latency_ns
+        else:
+            host = time.monotonic_ns()
+        return Frame(self.name, timing.sequence, capture, host, flags, data)
+
+    def _deliver8(
+        self,
+        clean: NDArray[np.uint8],
+        into: memoryview,
+        gain: float,
+        noise: NDArray[np.int16] | None,
+        burn: tuple[int, int, int],
+    ) -> memoryview:
+        arr = self.array
+        buf = np.frombuffer(into, dtype=np.uint8, count=clean.nbytes).reshape(clean.shape)
         if gain != 1.0:
             lut = arr.gain_lut(gain)
             cv2.LUT(clean.reshape(clean.shape[0], -1, 4), lut, dst=buf.reshape(clean.shape[0], -1, 4))
@@ -160,18 +190,8 @@ class SimCamera(CameraBase):
         elif src is not buf:
             np.copyto(buf, src)
         if arr.format.pixel_format in ("UYVY", "YUYV"):
-            burnin.burn(buf, arr.format.width, arr.index[self.name], timing.sequence, timing.scene_frame)
-        capture = t0 + timing.capture_ns
-        self.delivered[timing.sequence] = timing.scene_frame
-        self.delivering = True
-        flags = FrameFlags.TIMESTAMP_MONOTONIC | FrameFlags.TIMESTAMP_SOE
-        data = buf.reshape(-1).data
-        if arr.settings.deterministic:
-            self._next_grid, self._last_rel = timing.scene_frame + 1, timing.capture_ns
-            host = capture + self.latency_ns
-        else:
-            host = time.monotonic_ns()
-        return Frame(self.name, timing.sequence, capture, host, flags, data)
+            burnin.burn(buf, arr.format.width, *burn)
+        return buf.reshape(-1).data
 
     def _signal_report(self) -> SignalReport:
         t0 = self.array.stream_start_ns

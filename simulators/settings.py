@@ -67,6 +67,11 @@ class SimSettings(BaseModel):
     distortion_k1: float = Field(-0.04, ge=-0.5, le=0.5, description="mean radial distortion k1")
     distortion_spread: NonNeg = Field(0.01, description="sigma of k1 between cameras")
     noise: NonNeg = Field(1.0, description="sensor noise sigma, 8-bit grey levels")
+    exposure_stops: Annotated[float, Field(ge=-8, le=8, allow_inf_nan=False)] = Field(
+        0.0,
+        description="light reaching the sensors, in stops (+1 doubles it): above 0, highlights beyond nominal "
+        "white reach the codes above it (super-whites, up to 254 in 8 bits and 1019 in 10)",
+    )
     exposure_spread: NonNeg = Field(0.03, description="relative sigma of exposure between cameras")
     colour_spread: NonNeg = Field(0.02, description="relative sigma of per-channel gains")
     vignetting: NonNeg = Field(0.15, description="relative fall-off at the image corners")

@@ -12,7 +12,7 @@ from rigctl.simulators.raycast import render
 
 from rigctl.calibration_model import CameraModel
 from rigctl.errors import ParameterError
-from rigctl.pixfmt import from_rgb, to_rgb
+from rigctl.pixfmt import from_rgb, to_rgb, video_range
 from rigctl.rig import CAMERA_NAME
 
 log = logging.getLogger(__name__)
@@ -44,5 +44,6 @@ def virtual_view(array: SimArray, state: int, col: float, row: float) -> tuple[N
     )
     res = render(array.scene(state), _rays_for(cam, (xs, ys)))
     fmt = array.format
-    rgb = to_rgb(from_rgb(np.clip(res.rgb, 0.0, 1.0), fmt.pixel_format), fmt.pixel_format, fmt.width, fmt.height)
+    lo, hi = video_range(fmt.pixel_format)
+    rgb = to_rgb(from_rgb(np.clip(res.rgb, lo, hi), fmt.pixel_format), fmt.pixel_format, fmt.width, fmt.height)
     return rgb, res.subject

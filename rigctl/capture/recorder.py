@@ -10,6 +10,7 @@ A paced source (``--sim deterministic=true``) is waited for instead: :mod:`rigct
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import logging
 import queue
@@ -31,6 +32,7 @@ from rigctl.take.reserve import create_reserve, release_reserve
 from rigctl.take.staging import Staging
 from rigctl.take.trend import QueueTrend
 from rigctl.take.writer import CameraWriter, DiskFullError
+from rigctl.yuv10 import device_to_essence, is_ten_bit
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +85,7 @@ class Recorder:
         self._writers: dict[str, CameraWriter] = {}
         self._writer_busy: dict[str, Frame | None] = {}
         self._writer_threads: dict[str, threading.Thread] = {}
+        self._packed: dict[str, memoryview] = {}  # 10-bit: each writer's buffer for the take's 20-bit packing
         self._syncer: threading.Thread | None = None
         self._reserves: dict[Path, int] = {}  # destination -> locked .reserve descriptor
         self._lock = threading.Lock()
@@ -131,6 +134,11 @@ class Recorder:
         for name in self.names:
             self._pools[name] = FramePool(self.buffers, self.format.bytes_per_frame)
             self._queues[name] = queue.Queue(maxsize=self.buffers)
+            if is_ten_bit(self.format.pixel_format):
+                self._packed[name] = memoryview(bytearray(self.format.stored_bytes_per_frame))
+        if self._packed:  # compiled (or loaded from Numba's cache) now, not on the first frame of the take
+            first = self.names[0]
+            self._repack(first, self._pools[first].scratch)
         for name in self.names:
             self.cameras[name].start()
         self._capturing.set()
@@ -341,6 +349,8 @@ class Recorder:
                 continue
             self._writer_busy[name] = frame
             try:
+                if self._packed:
+                    frame = dataclasses.replace(frame, data=self._repack(name, frame.data))
                 writer.write(frame)
                 if not st.written:
                     st.first_timecode = frame.timecode
@@ -358,6 +368,11 @@ class Recorder:
                 self._writer_busy[name] = None
                 st.queued -= 1
                 pool.give(slot)
+
+    def _repack(self, name: str, data: memoryview) -> memoryview:
+        """A 10-bit device frame (Y210, v210) in the take's packing, 20 bits a pixel (rigctl.yuv10)."""
+        fmt = self.format
+        return device_to_essence(data, fmt.pixel_format, fmt.width, fmt.height, self._packed[name])
 
     # ---- ending -----------------------------------------------------------------------------------
     def finish(self) -> Manifest | None:

@@ -45,7 +45,7 @@ def preflight_take(
     duration = frames / rig.fps if frames else None
     return check_destinations(
         by_dest,
-        fmt.bytes_per_frame * fmt.fps,
+        fmt.stored_bytes_per_frame * fmt.fps,  # what reaches the disk (10-bit: 20 bits a pixel)
         duration,
         speeds,
         buffer_bytes_per_camera=buffers_per_camera * fmt.bytes_per_frame,

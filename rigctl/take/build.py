@@ -37,6 +37,7 @@ from rigctl.take.manifest import (
     write_manifest,
 )
 from rigctl.timecode import start_timecode
+from rigctl.yuv10 import TEN_BIT_FORMATS, from_device, is_ten_bit
 
 log = logging.getLogger(__name__)
 
@@ -122,7 +123,7 @@ def take_manifest(
             height=fmt.height,
             pixel_format=fmt.pixel_format,
             fps=fmt.fps,
-            bytes_per_frame=fmt.bytes_per_frame,
+            bytes_per_frame=fmt.stored_bytes_per_frame,  # 10-bit: 20 bits a pixel, not the device's layout
         ),
         timing=Timing(
             clock=state.clock,
@@ -169,9 +170,13 @@ def write_sidecars(state: TakeState, sets: list[framesets.FrameSet], devices: di
 def thumbnail(data: memoryview, fmt: CaptureFormat, width: int = 48) -> NDArray[np.uint8] | None:
     """A small luma image of a packed 4:2:2 frame for the shoot UI (a few hundred bytes, copied out of the
     capture buffer before it is reused); None for other formats or a short frame."""
-    if fmt.pixel_format not in ("UYVY", "YUYV") or len(data) < fmt.bytes_per_frame:
+    if fmt.pixel_format not in ("UYVY", "YUYV", *TEN_BIT_FORMATS) or len(data) < fmt.bytes_per_frame:
         return None
     step = max(1, fmt.width // width)
+    if is_ten_bit(fmt.pixel_format):  # only the rows shown are decoded; 8-bit codes for the screen
+        lines = np.frombuffer(data, np.uint8, count=fmt.bytes_per_frame).reshape(fmt.height, -1)[:: 2 * step]
+        codes = from_device(lines, fmt.pixel_format, fmt.width, lines.shape[0])
+        return np.ascontiguousarray(codes[:, 1 :: 2 * step] >> 2).astype(np.uint8)
     packed = np.frombuffer(data, np.uint8, count=fmt.bytes_per_frame).reshape(fmt.height, fmt.width * 2)
     start = 1 if fmt.pixel_format == "UYVY" else 0
     return np.ascontiguousarray(packed[:: 2 * step, start :: 2 * step])

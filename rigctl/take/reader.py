@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.errors import DamagedDataError, TakeError
-from rigctl.interfaces import FrameFlags
+from rigctl.interfaces import BYTES_PER_PIXEL, FrameFlags, stored_frame_bytes
 from rigctl.pixfmt import to_bgr8, to_gray8, to_rgb
 from rigctl.regular import open_regular
 from rigctl.take import framesets, proof
@@ -36,10 +36,10 @@ from rigctl.take.index import RECORD_SIZE, FrameRecord, IndexProblem, read_index
 from rigctl.take.manifest import DamagedFrame, Manifest, read_manifest
 from rigctl.take.reserve import remove_stale_reserves
 from rigctl.timecode import Timecode, TimecodeError, rate_of, start_timecode
+from rigctl.yuv10 import TEN_BIT_FORMATS
 
 log = logging.getLogger(__name__)
 
-BYTES_PER_PIXEL = {"UYVY": 2, "YUYV": 2, "BGR3": 3, "GREY": 1}
 INDEX_SLACK = 4096  # records beyond what the essence holds still read as damage (a cut essence), not refused
 ImageKind = Literal["bgr8", "gray8", "float"]
 KINDS: tuple[ImageKind, ...] = ("bgr8", "gray8", "float")
@@ -65,12 +65,13 @@ class TakeReader:
         fmt = self.manifest.format
         self.width, self.height, self.pixel_format, self.fps = fmt.width, fmt.height, fmt.pixel_format, fmt.fps
         self.bytes_per_frame = fmt.bytes_per_frame
-        per_pixel = BYTES_PER_PIXEL.get(fmt.pixel_format)
-        if per_pixel is None or fmt.bytes_per_frame != fmt.width * fmt.height * per_pixel:
+        stored = stored_frame_bytes(fmt.pixel_format, fmt.width, fmt.height)
+        if stored is None or fmt.bytes_per_frame != stored:
             raise TakeError(
                 f"{self.folder / 'take.yaml'}: format {fmt.width}x{fmt.height} {fmt.pixel_format!r} with "
                 f"bytes_per_frame {fmt.bytes_per_frame} is not a format rigctl reads "
-                f"({', '.join(BYTES_PER_PIXEL)}; width x height x bytes per pixel)"
+                f"({', '.join([*BYTES_PER_PIXEL, *TEN_BIT_FORMATS])}; width x height x bytes per pixel, "
+                "10-bit formats 20 bits a pixel at an even width)"
             )
         mpath = self.folder / "take.yaml"
         self.proof: list[str] = proof.format_problems(self.manifest, mpath)  # what the take fails to prove
