@@ -272,9 +272,15 @@ def decide(
     )
 
 
+def rate_text(bps: float) -> str:
+    """A data rate as people say it: MB/s below a GB/s, GB/s from there."""
+    return f"{bps / 1e9:.2f} GB/s" if bps >= 1e9 else f"{bps / 1e6:.0f} MB/s"
+
+
 @dataclass
 class PreflightReport:
     verdicts: list[Verdict] = field(default_factory=list)
+    rate: str = ""  # the data rate per camera and for the array, said before the verdicts
 
     @property
     def outcome(self) -> str:
@@ -303,7 +309,9 @@ class PreflightReport:
         return min(times) if times else None
 
     def lines(self) -> list[str]:
-        return [f"preflight {v.outcome}: {v.message}" for v in self.verdicts]
+        return ([f"data rate: {self.rate}"] if self.rate else []) + [
+            f"preflight {v.outcome}: {v.message}" for v in self.verdicts
+        ]
 
 
 def check_destinations(

@@ -15,13 +15,14 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from rigctl.capture.preflight import PreflightReport, WriteSpeed, check_destinations
+from rigctl.capture.preflight import PreflightReport, WriteSpeed, check_destinations, rate_text
 from rigctl.capture.recorder import Recorder, TakePlan
 from rigctl.errors import ParameterError, PreflightError
 from rigctl.registry import DeviceSet, open_cameras
 from rigctl.rig import Rig
 from rigctl.take.manifest import Manifest
 from rigctl.take.names import check_take_name
+from rigctl.yuv10 import is_ten_bit
 
 log = logging.getLogger(__name__)
 
@@ -43,14 +44,22 @@ def preflight_take(
     for cam, folder in plan.camera_folders.items():
         by_dest.setdefault(folder.parent.parent, []).append(cam)
     duration = frames / rig.fps if frames else None
-    return check_destinations(
+    camera_bps = fmt.stored_bytes_per_frame * fmt.fps  # what reaches the disk (10-bit: 20 bits a pixel)
+    report = check_destinations(
         by_dest,
-        fmt.stored_bytes_per_frame * fmt.fps,  # what reaches the disk (10-bit: 20 bits a pixel)
+        camera_bps,
         duration,
         speeds,
         buffer_bytes_per_camera=buffers_per_camera * fmt.bytes_per_frame,
         dirty_headroom=dirty_headroom,
     )
+    cameras = len(plan.camera_folders)
+    stored = " stored at 20 bits a pixel" if is_ten_bit(fmt.pixel_format) else ""
+    report.rate = (
+        f"{rate_text(camera_bps)} a camera ({fmt.describe()}{stored}), "
+        f"{rate_text(camera_bps * cameras)} for the array of {cameras}"
+    )
+    return report
 
 
 def enforce(report: PreflightReport, force: bool) -> None:

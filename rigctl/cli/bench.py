@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from rigctl.cli import render
+from rigctl.cli import bench_record, render
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
 from rigctl.errors import ParameterError
@@ -65,6 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_quiet(d)
     d.set_defaults(func=run_depth_bench)
     render.register_bench(what)
+    bench_record.register_bench(what)
     p.set_defaults(func=lambda ns: (p.print_help(), 2)[1])
 
 

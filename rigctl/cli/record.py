@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from rigctl.capture.preflight import PreflightReport
+from rigctl.capture.preflight import PreflightReport, rate_text
 from rigctl.capture.recording import record_take
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
@@ -126,6 +126,12 @@ def format_summary(s: dict) -> str:
         f"take {s['take']} ({s['status']}): {s['frame_sets']} frame sets, {s['complete_sets']} complete, "
         f"{len(cams)} cameras, {s['format']}",
     ]
+    if "data_rate" in s:
+        rate = s["data_rate"]
+        lines.append(
+            f"data rate: {rate_text(rate['camera_bytes_per_s'])} a camera, {rate_text(rate['array_bytes_per_s'])} "
+            f"for the array ({rate['bits_per_pixel']:g} bits a pixel)"
+        )
     skew = s["skew"]
     lines.append(f"skew within frame sets: p50 {skew['p50_us']} us, p99 {skew['p99_us']} us, max {skew['max_us']} us")
     for name, c in cams.items():

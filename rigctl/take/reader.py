@@ -361,6 +361,12 @@ class TakeReader:
             "frame_sets": len(sets),
             "complete_sets": sum(1 for s in sets if s.complete(self.names)),
             "skew": framesets.skew_stats(sets),
+            # what the essence takes a second (10-bit: 20 bits a pixel), per camera and for the array
+            "data_rate": {
+                "camera_bytes_per_s": round(self.bytes_per_frame * self.fps),
+                "array_bytes_per_s": round(self.bytes_per_frame * self.fps * len(self.names)),
+                "bits_per_pixel": self.bytes_per_frame * 8 / (self.width * self.height),
+            },
             "started_utc": self.manifest.started_utc,
             "end": self.manifest.end.model_dump() if self.manifest.end else {},
             "notes": self.manifest.notes,

@@ -5,6 +5,7 @@ where the 8-bit PNG preview clips, in 10 bits and in 8."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import cv2
@@ -12,6 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
+from rigctl.capture.preflight import rate_text
 from rigctl.exr import linear_to_bt709, read_exr
 from rigctl.rig import load_rig
 from rigctl.take.reader import TakeReader
@@ -33,6 +35,12 @@ def _record_and_export(run_cli, tmp_path: Path, pixel_format: str, *sim: str) ->
     args = [a for s in sim for a in ("--sim", s)]
     r = run_cli("record", str(rig), "--take", "t", "--frames", str(FRAMES), *args, "--out", str(tmp_path), timeout=600)
     assert r.returncode == 0, r.stderr
+    # preflight and the report state the data rate a camera and for the array: what reaches the disk
+    bits = 20 if pixel_format in ("Y210", "v210") else 16
+    camera = 960 * 540 * bits / 8 * 25
+    assert f"data rate: {rate_text(camera)} a camera" in r.stderr, r.stderr
+    assert f"{rate_text(9 * camera)} for the array" in r.stderr
+    assert f"data rate: {rate_text(camera)} a camera, {rate_text(9 * camera)} for the array ({bits} bits" in r.stdout
     take = tmp_path / "t"
     check = run_cli("take", "check", str(take), timeout=300)
     assert check.returncode == 0, check.stdout + check.stderr
@@ -106,3 +114,22 @@ def test_a_ten_bit_take_with_the_simulators_defaults(run_cli, tmp_path: Path) ->
     assert np.isfinite(rgb).all()
     # noise alone would put codes off multiples of 4; the ideal takes above prove the rendering is 10-bit
     assert (_luma_codes(rgb)[alpha > 0.99] % 4 != 0).mean() > 0.6
+
+
+def test_bench_record_prints_ten_bit_throughput_beside_eight_bit(run_cli, tmp_path: Path) -> None:
+    args = ["bench", "record", "--size", "192x108", "--frames", "4", "--rounds", "1", "--dir", str(tmp_path)]
+    r = run_cli(*args, "--json", timeout=600)
+    assert r.returncode == 0, r.stderr
+    rows = {row["pixel_format"]: row for row in json.loads(r.stdout)}
+    assert set(rows) == {"UYVY", "Y210", "v210"}
+    for pf, row in rows.items():
+        assert row["fps"] > 0 and row["cpu_per_frame_s"] > 0
+        assert row["stored_bytes_per_frame"] == 192 * 108 * (20 if pf != "UYVY" else 16) // 8
+    assert rows["Y210"]["device_bytes_per_frame"] == 192 * 108 * 4
+    text = run_cli(*args, timeout=600)
+    assert text.returncode == 0, text.stderr
+    lines = text.stdout.splitlines()
+    assert any(line.strip().startswith("UYVY  8-bit:") and "GB/s stored" in line for line in lines), text.stdout
+    assert any(line.strip().startswith("Y210 10-bit:") and "stored at 20 bits a pixel" in line for line in lines)
+    assert any(line.strip().startswith("Y210 / UYVY: frames") for line in lines)
+    assert not list(tmp_path.iterdir())  # its takes are removed
