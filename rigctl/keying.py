@@ -139,11 +139,16 @@ def soft_key(rgb: F32, keyer: Keyer) -> SoftKey:
     from the screen's enough to tell. The subject colour is then unmixed, F = B + (I - B) / a (chroma per pair,
     luma per pixel), leaning on the nearby subject's colour where ``a`` is small, and its spill suppressed: its
     component along the screen's chroma is held to the nearby subject's (the screen's light bounced onto the
-    subject, or what is left of the screen in an under-estimated alpha, is not the subject's colour)."""
-    rgb = np.clip(np.asarray(rgb, np.float32), 0.0, 1.0)
+    subject, or what is left of the screen in an under-estimated alpha, is not the subject's colour).
+
+    Alpha is measured on the nominal range [0, 1]; the colour keeps what was captured beyond it (a 4:2:2
+    camera's super-whites and sub-blacks): the whole subject as it is, unmixed edge colours within the
+    picture's own range."""
+    captured = np.asarray(rgb, np.float32)
+    rgb = np.clip(captured, 0.0, 1.0)
     hard = keyer.matte(rgb)
     if keyer.screen_excess(rgb) <= 0:
-        return SoftKey(np.ones(rgb.shape[:2], np.float32), rgb.copy())
+        return SoftKey(np.ones(rgb.shape[:2], np.float32), captured.copy())
     ycc = np.asarray(rgb @ RGB_TO_YCC.T, np.float32)
     # 4:2:2 decoded: the two pixels of each pair share their chroma (but where decoding clipped)
     w = hard.shape[1]
@@ -166,7 +171,7 @@ def soft_key(rgb: F32, keyer: Keyer) -> SoftKey:
         alpha = np.where(alpha < SURE, 0.0, np.where(alpha > 1 - SURE, 1.0, alpha)).astype(np.float32)
         alpha[cv2.erode(solid.astype(np.uint8), k3) > 0] = 1.0  # well inside the hard key: the subject
         screen = cv2.erode((alpha <= 0).astype(np.uint8), k3).astype(np.float32)
-    fg = _unmix(ycc, back, front, have_front, alpha, pair_alpha if pairs else alpha, u)
+    fg = _unmix(ycc, back, front, have_front, alpha, pair_alpha if pairs else alpha, u, captured)
     return SoftKey(alpha, fg)
 
 
@@ -186,9 +191,12 @@ def _split_pairs(pair_alpha: F32, luma: F32, screen_luma: F32) -> F32:
     return np.clip(out, 0.0, 1.0).astype(np.float32)
 
 
-def _unmix(ycc: F32, back: F32, front: F32, have_front: F32, alpha: F32, chroma_alpha: F32, u: F32) -> F32:
+def _unmix(
+    ycc: F32, back: F32, front: F32, have_front: F32, alpha: F32, chroma_alpha: F32, u: F32, captured: F32
+) -> F32:
     """F = B + (I - B) / a, luma per pixel and chroma with the alpha it was mixed with; toward the nearby
-    subject's colour as alpha goes to 0; spill held to the nearby subject's along the screen's chroma."""
+    subject's colour as alpha goes to 0; spill held to the nearby subject's along the screen's chroma. Within
+    the captured picture's range (at least [0, 1]); ``captured`` itself where the subject is whole."""
     y = back[..., 0] + (ycc[..., 0] - back[..., 0]) / np.maximum(alpha, 1e-3)
     c = back[..., 1:] + (ycc[..., 1:] - back[..., 1:]) / np.maximum(chroma_alpha, 1e-3)[..., None]
     unmixed = np.concatenate([y[..., None], c], axis=2)
@@ -198,7 +206,8 @@ def _unmix(ycc: F32, back: F32, front: F32, have_front: F32, alpha: F32, chroma_
     e_near = np.maximum(np.einsum("hwc,hwc->hw", near[..., 1:], u), 0.0)
     excess = np.maximum(np.einsum("hwc,hwc->hw", f[..., 1:], u) - e_near, 0.0)
     f[..., 1:] -= excess[..., None] * u
-    rgb = np.clip(f @ YCC_TO_RGB.T, 0.0, 1.0).astype(np.float32)
+    lo, hi = min(0.0, float(captured.min())), max(1.0, float(captured.max()))
+    rgb = np.clip(f @ YCC_TO_RGB.T, lo, hi).astype(np.float32)
     solid = alpha >= 1
-    rgb[solid] = np.clip(ycc[solid] @ YCC_TO_RGB.T, 0.0, 1.0)  # the subject as captured where it is whole
+    rgb[solid] = captured[solid]  # the subject as captured where it is whole, super-whites included
     return rgb

@@ -127,3 +127,19 @@ def device_to_essence(src: memoryview, pixel_format: str, width: int, height: in
     else:
         raise ParameterError(f"{pixel_format!r} is not a 10-bit 4:2:2 format ({', '.join(TEN_BIT_FORMATS)})")
     return out[:size]
+
+
+class Repacker:
+    """One camera writer's repacking of its device frames to the take's 20 bits a pixel, into one reused
+    buffer. Made before capture starts: it runs the compiled pass once on a tiny frame, so the kernel is
+    compiled (or loaded from Numba's cache) then, not on the take's first frame."""
+
+    def __init__(self, pixel_format: str, width: int, height: int) -> None:
+        self.pixel_format, self.width, self.height = pixel_format, width, height
+        self.out = memoryview(bytearray(essence_frame_bytes(width, height)))
+        tiny = memoryview(bytearray(device_frame_bytes(pixel_format, 2, 1)))
+        device_to_essence(tiny, pixel_format, 2, 1, memoryview(bytearray(essence_frame_bytes(2, 1))))
+
+    def __call__(self, data: memoryview) -> memoryview:
+        """``data`` (a device frame) repacked; valid until the next call."""
+        return device_to_essence(data, self.pixel_format, self.width, self.height, self.out)

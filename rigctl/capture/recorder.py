@@ -32,7 +32,7 @@ from rigctl.take.reserve import create_reserve, release_reserve
 from rigctl.take.staging import Staging
 from rigctl.take.trend import QueueTrend
 from rigctl.take.writer import CameraWriter, DiskFullError
-from rigctl.yuv10 import device_to_essence, is_ten_bit
+from rigctl.yuv10 import Repacker, is_ten_bit
 
 log = logging.getLogger(__name__)
 
@@ -85,7 +85,7 @@ class Recorder:
         self._writers: dict[str, CameraWriter] = {}
         self._writer_busy: dict[str, Frame | None] = {}
         self._writer_threads: dict[str, threading.Thread] = {}
-        self._packed: dict[str, memoryview] = {}  # 10-bit: each writer's buffer for the take's 20-bit packing
+        self._packers: dict[str, Repacker] = {}  # 10-bit: each writer's repacking to 20 bits a pixel
         self._syncer: threading.Thread | None = None
         self._reserves: dict[Path, int] = {}  # destination -> locked .reserve descriptor
         self._lock = threading.Lock()
@@ -134,11 +134,8 @@ class Recorder:
         for name in self.names:
             self._pools[name] = FramePool(self.buffers, self.format.bytes_per_frame)
             self._queues[name] = queue.Queue(maxsize=self.buffers)
-            if is_ten_bit(self.format.pixel_format):
-                self._packed[name] = memoryview(bytearray(self.format.stored_bytes_per_frame))
-        if self._packed:  # compiled (or loaded from Numba's cache) now, not on the first frame of the take
-            first = self.names[0]
-            self._repack(first, self._pools[first].scratch)
+            if is_ten_bit(self.format.pixel_format):  # its kernel compiled (or loaded) now, not on a frame
+                self._packers[name] = Repacker(self.format.pixel_format, self.format.width, self.format.height)
         for name in self.names:
             self.cameras[name].start()
         self._capturing.set()
@@ -349,8 +346,8 @@ class Recorder:
                 continue
             self._writer_busy[name] = frame
             try:
-                if self._packed:
-                    frame = dataclasses.replace(frame, data=self._repack(name, frame.data))
+                if name in self._packers:
+                    frame = dataclasses.replace(frame, data=self._packers[name](frame.data))
                 writer.write(frame)
                 if not st.written:
                     st.first_timecode = frame.timecode
@@ -368,11 +365,6 @@ class Recorder:
                 self._writer_busy[name] = None
                 st.queued -= 1
                 pool.give(slot)
-
-    def _repack(self, name: str, data: memoryview) -> memoryview:
-        """A 10-bit device frame (Y210, v210) in the take's packing, 20 bits a pixel (rigctl.yuv10)."""
-        fmt = self.format
-        return device_to_essence(data, fmt.pixel_format, fmt.width, fmt.height, self._packed[name])
 
     # ---- ending -----------------------------------------------------------------------------------
     def finish(self) -> Manifest | None:
