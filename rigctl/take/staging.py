@@ -48,17 +48,21 @@ def _try_lock(folder: Path) -> int | None:
     return fd
 
 
-def _other_destinations(staged: Path) -> list[tuple[Path, Path]]:
+def _other_destinations(staged: Path, name: str) -> list[tuple[Path, Path]]:
     """(staging, final) folders of a leftover take's cameras on other destinations, from its manifest (the
     manifest names them by their final, absolute paths)."""
     try:
         manifest = read_manifest(staged)
     except RigctlError:
         return []
+    if manifest.take != name:  # a manifest that is not this leftover's own moves nothing
+        return []
     out = []
     for entry in manifest.cameras.values():
         path = Path(entry.essence)
-        if path.is_absolute():
+        # only this take's camera folder on another destination (``<dest>/<take>/cameras``), as the recorder
+        # writes it: a manifest naming any other folder moves nothing
+        if path.is_absolute() and path.parent.name == "cameras" and path.parent.parent.name == manifest.take:
             final = path.parent.parent
             pair = (staging_folder(final), final)
             if pair not in out and pair[0].is_dir() and not pair[0].is_symlink():
@@ -87,7 +91,7 @@ def recover_leftovers(dest: Path) -> list[Path]:
             continue  # being recorded now
         try:
             final = dest / staged.name[1 : -len(RECORDING_SUFFIX)]
-            others = _other_destinations(staged)
+            others = _other_destinations(staged, final.name)
             frames = _frames_in([staged, *(s for s, _ in others)])
             if frames and not (staged / "take.yaml").is_file():  # cameras of a take whose manifest is elsewhere
                 log.warning(

@@ -274,3 +274,28 @@ def test_a_record_that_keeps_no_frame_leaves_nothing(small_fs: Path) -> None:
 def small_fs_free(folder: Path) -> int:
     st = os.statvfs(folder)
     return st.f_bavail * st.f_frsize
+
+
+def test_a_record_killed_mid_take_over_two_destinations_is_published_whole_on_both(tmp_path: Path) -> None:
+    """Killed while writing frames (SIGKILL at an essence write) with cameras on two destinations: nothing
+    under the name on either; the next recording publishes both folders under the name, every indexed frame
+    readable through the manifest's paths, and records its own take beside it."""
+    other = tmp_path / "other"
+    killed = _record(tmp_path, "t", "--dest", str(other), runner=("write", "60", "KILL"))
+    assert killed.returncode == -9, killed.stderr
+    takes = tmp_path / "takes"
+    assert not (takes / "t").exists() and not (other / "t").exists()
+    assert (other / ".t.rigctl-recording" / "cameras").is_dir()
+    res = _record(tmp_path, "u", "--dest", str(other))
+    assert res.returncode == 0, res.stderr
+    assert len([ln for ln in res.stderr.splitlines() if "are kept as take t" in ln]) == 1, res.stderr
+    assert not list(tmp_path.rglob("*.rigctl-recording"))
+    report = check_take(takes / "t")
+    assert report.ok, report.errors
+    reader = TakeReader(takes / "t")
+    assert reader.status == "recording" and {p.parent.parent for p in map(reader.essence_path, reader.names)} == {
+        takes / "t",
+        other / "t",
+    }
+    assert sum(len(reader.index[n]) for n in reader.names) >= 1
+    assert check_take(takes / "u").ok
