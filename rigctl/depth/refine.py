@@ -17,11 +17,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.depth.cost import INVALID_COST
+from rigctl.depth.cost_kernels import refine_sums
 from rigctl.depth.costvolume import TAU_I, Aggregator, MatchViews
 
 F32 = NDArray[np.float32]
 log = logging.getLogger(__name__)
 
+COMPILED = True  # each step's sums by the compiled kernel (cost_kernels.refine_sums); False: OpenCV and numpy
 DAMPING = 2e-5  # squared baseline gradient (grey 0..1 per px) at which a fit is trusted half: about sensor noise
 
 
@@ -41,28 +43,41 @@ def refine(
     strength = np.zeros_like(d)
     nv = len(views.names)
     for _ in range(iterations):
-        res = np.empty((nv, *d.shape), np.float32)
-        jac = np.empty((nv, *d.shape), np.float32)
-        for i, n in enumerate(views.names):
-            rx, ry = views.rel[n]
-            warped, outside = views.warp(n, d)  # intensity, d/dx, d/dy at the warped points
-            res[i] = np.where(outside, np.float32(INVALID_COST), warped[..., 0] - views.ref[..., 0])
-            jac[i] = np.where(outside, 0.0, -(rx * warped[..., 1] + ry * warped[..., 2]))
-        # view selection: the views whose local residual is smallest (an occluded view has a large one)
-        local = np.stack([cv2.boxFilter(np.minimum(np.abs(r), TAU_I), -1, (5, 5)) for r in res])
-        local[np.abs(res) >= INVALID_COST * 0.5] = INVALID_COST
-        k = min(keep, nv)
-        cut = np.partition(local, k - 1, axis=0)[k - 1] if k < nv else np.full(d.shape, np.inf, np.float32)
-        use = (local <= cut[None]) & (local < INVALID_COST * 0.5)
-        r_c = np.clip(np.where(use, res, 0.0), -4 * TAU_I, 4 * TAU_I)
-        j_u = np.where(use, jac, 0.0)
-        a = agg.smooth((j_u * j_u).sum(0) / np.float32(k))
-        b = agg.smooth((j_u * r_c).sum(0) / np.float32(k))
+        if COMPILED and nv:
+            y0, _, x0, _ = views.box
+            a_raw, b_raw = refine_sums(views.stack, views.ref, views.rel_array, d, (y0, x0), keep, INVALID_COST, TAU_I)
+            a, b = agg.smooth(a_raw), agg.smooth(b_raw)
+        else:
+            a, b = _normal_equations(views, d, keep, agg)
         # damped (Levenberg): where the baseline gradient is weaker than the noise, the pixel barely moves
         step = -b / (a + np.float32(DAMPING))
         d = np.clip(d + np.clip(step, -0.25, 0.25), disp - reach, disp + reach).astype(np.float32)
         strength = a
     return d, strength
+
+
+def _normal_equations(views: MatchViews, d: F32, keep: int, agg: Aggregator) -> tuple[F32, F32]:
+    """The reference path of one step (OpenCV and numpy): the aggregated sums of J^2 and J r over the best
+    ``keep`` views, divided by ``keep``; ``cost_kernels.refine_sums`` computes the sums compiled."""
+    nv = len(views.names)
+    res = np.empty((nv, *d.shape), np.float32)
+    jac = np.empty((nv, *d.shape), np.float32)
+    for i, n in enumerate(views.names):
+        rx, ry = views.rel[n]
+        warped, outside = views.warp(n, d)  # intensity, d/dx, d/dy at the warped points
+        res[i] = np.where(outside, np.float32(INVALID_COST), warped[..., 0] - views.ref[..., 0])
+        jac[i] = np.where(outside, 0.0, -(rx * warped[..., 1] + ry * warped[..., 2]))
+    # view selection: the views whose local residual is smallest (an occluded view has a large one)
+    local = np.stack([cv2.boxFilter(np.minimum(np.abs(r), TAU_I), -1, (5, 5)) for r in res])
+    local[np.abs(res) >= INVALID_COST * 0.5] = INVALID_COST
+    k = min(keep, nv)
+    cut = np.partition(local, k - 1, axis=0)[k - 1] if k < nv else np.full(d.shape, np.inf, np.float32)
+    use = (local <= cut[None]) & (local < INVALID_COST * 0.5)
+    r_c = np.clip(np.where(use, res, 0.0), -4 * TAU_I, 4 * TAU_I)
+    j_u = np.where(use, jac, 0.0)
+    a = agg.smooth((j_u * j_u).sum(0) / np.float32(k))
+    b = agg.smooth((j_u * r_c).sum(0) / np.float32(k))
+    return a, b
 
 
 def clean(disp: F32, tol: float = 1.0) -> tuple[F32, NDArray[np.bool_]]:
