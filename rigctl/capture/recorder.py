@@ -417,13 +417,13 @@ class Recorder:
             self.end_reason = "stopped with a stalled writer"
         # frame sets, then the manifest, sidecars and ground truth (rigctl.take.build.finalise)
         status = "complete" if self.error is None and not stalled and self.end_reason == "frames reached" else "ended"
+        written = any(st.written for st in self.stats.values())
+        self.error = self.staging.settle(written, self.error)  # no frame: nothing kept (the error says so)
+        if not written:
+            return None
         end = End(reason=self.end_reason, message=str(self.error) if self.error else "")
         index_paths = {n: w.index_path for n, w in self._writers.items()}
         disk_full = isinstance(self.error, DiskFullError)
-        if not any(st.written for st in self.stats.values()):  # nothing to keep: the name stays free
-            self.staging.discard()
-            self.error = self.error or TakeError(f"{self.plan.folder}: no frame was recorded; nothing was kept")
-            return None
         manifest = finalise(self._state(), index_paths, status, end, self.devices.truth, disk_full)
         self.staging.publish()  # the take appears under its name whole, or (killed before) stays hidden
         return manifest

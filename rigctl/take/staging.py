@@ -192,6 +192,20 @@ class Staging:
         finally:
             self.release()
 
+    def settle(self, written: bool, error: RigctlError | None) -> RigctlError | None:
+        """At the end of the recording, before its manifest: with no frame ``written``, remove every folder
+        and return the error that says nothing was kept; else ``error`` with the files it names called by the
+        names they are published under (the hidden ones are gone once the take is published)."""
+        if not written:
+            self.discard()
+            return error or TakeError(f"{self.final.folder}: no frame was recorded; nothing was kept")
+        if error is None:
+            return None
+        text = str(error)
+        for staged, final in self.take_folders():
+            text = text.replace(str(staged), str(final))
+        return error if text == str(error) else type(error)(text)
+
     def discard(self) -> None:
         """Remove every hidden folder (a recording that wrote no frame: nothing to keep); only this run's."""
         for (staged, _), _fd in zip(reversed(self.take_folders()), self._fds, strict=False):  # those we made
