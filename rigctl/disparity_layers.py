@@ -37,9 +37,9 @@ from rigctl.exr import read_exr
 log = logging.getLogger(__name__)
 
 F32 = NDArray[np.float32]
-CONVENTION = "rigctl.disparityConvention"  # header attribute: the convention the layers follow
+CONVENTION = "rigctl:disparityConvention"  # header attribute: the convention the layers follow ("rigctl." before)
 NUKE = "nuke"  # its value: disparityL maps onto the right camera, disparityR onto the left
-STEPS = "rigctl.disparitySteps"  # "right left below" in horizontal spacings ("-" where the grid has none)
+STEPS = "rigctl:disparitySteps"  # "right left below" in horizontal spacings ("-" where the grid has none)
 _SAME = 0.25  # offsets closer than this (in spacings) are the same row or column
 
 

@@ -129,6 +129,24 @@ def write_exr(
             ) from None
 
 
+# Every header attribute of ours is named PREFIX + name, the namespace form OpenImageIO uses (oiio:ColorSpace)
+# and our USD stage's attributes share (rigctl:imageSize); the README has the table. Depth EXRs used
+# "rigctl." and rendered views "rigctl_" before: read_exr gives a file's old names under the new ones.
+PREFIX = "rigctl:"
+OLD_PREFIXES = ("rigctl.", "rigctl_")
+
+
+def our_names(header: dict[str, object]) -> dict[str, object]:
+    """``header`` with every attribute of ours under :data:`PREFIX` (an old file's kept under its own name
+    too); an attribute already under the new name wins."""
+    out = dict(header)
+    for key, value in header.items():
+        old = next((p for p in OLD_PREFIXES if key.startswith(p)), None)
+        if old is not None:
+            out.setdefault(PREFIX + key[len(old) :], value)
+    return out
+
+
 # the most any EXR compression expands to (ZIP/deflate tops out near 1032:1, half floats read as float32 x2)
 MAX_EXPANSION = 4096
 
@@ -160,7 +178,7 @@ def read_exr(path: Path) -> tuple[dict[str, NDArray[np.float32]], dict[str, obje
         _check_window(path, head)
         f = OpenEXR.File(str(path))
         channels = {k: np.asarray(v.pixels, dtype=np.float32) for k, v in f.channels().items()}
-        header = dict(f.header())
+        header = our_names(dict(f.header()))
     except (OSError, RuntimeError, ValueError, TypeError) as exc:  # OpenEXR's errors on a damaged file
         raise TakeError(f"{path}: not a readable EXR file: {exc}") from None
     rgba = channels.pop("RGBA", None)

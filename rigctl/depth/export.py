@@ -119,11 +119,11 @@ def write_outputs(
         attrs = {
             **picture_attributes(target.fps, target.timecode, target.colour),
             **camera_attributes(np.array(grid.centre(name)), grid.focal_px, grid.principal, (w, h)),
-            "rigctl.camera": name,
-            "rigctl.focal_px": f"{grid.focal_px:.6f}",
-            "rigctl.spacing_x": f"{grid.spacing:.6f}",
-            "rigctl.offset": f"{ox:.6f} {oy:.6f}",
-            "rigctl.disparity": "pixels of the horizontal spacing; depth.Z holds 1/Z",
+            "rigctl:camera": name,
+            "rigctl:focal_px": f"{grid.focal_px:.6f}",
+            "rigctl:spacing_x": f"{grid.spacing:.6f}",
+            "rigctl:offset": f"{ox:.6f} {oy:.6f}",
+            "rigctl:disparity": "pixels of the horizontal spacing; depth.Z holds 1/Z",
             **disparity_header(st),
         }
         write_exr(target.path(name, ".exr"), channels, attrs, half=("RGB", "A"))

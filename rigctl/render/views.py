@@ -177,8 +177,8 @@ def render_views(
             attrs: dict[str, object] = {
                 **picture_attributes(fps, timecode),
                 **inp.view_camera(frame, frame.position(eye.col, eye.row)),
-                "rigctl_position": f"{eye.col:g},{eye.row:g}",
-                "rigctl_sources": ",".join(res.sources),
+                "rigctl:position": f"{eye.col:g},{eye.row:g}",
+                "rigctl:sources": ",".join(res.sources),
             }
             if not res.rgba8[..., 3].any():
                 log.warning("frame %06d: view %s is empty: no source camera sees anything there", n, eye.stem)

@@ -46,6 +46,14 @@ def assert_bar_with_time_left(screen: str, unit: str, total: int) -> None:
     assert any(int(b[0]) == total for b in bars), bars
 
 
+def assert_one_prefix(exr: Path, ours: set[str]) -> None:
+    """Every attribute of ours in the file's own header is under the one prefix (none of rigctl. or rigctl_)."""
+    import OpenEXR
+
+    names = {k for k in OpenEXR.File(str(exr), header_only=True).header() if k.lower().startswith("rigctl")}
+    assert names == ours, names
+
+
 @pytest.fixture(scope="module")
 def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """An ideal simulated take of four frame sets (with the simulator's other defaults: motion on)."""
@@ -66,7 +74,9 @@ def test_take_export_shows_a_bar_with_time_left_on_a_terminal_and_one_line_elsew
     code, screen = on_a_terminal("take", "export", str(take), "--out", str(tmp_path / "tty"), "--format", "exr")
     assert code == 0, screen
     assert_bar_with_time_left(screen, "frame sets", 4)
-    assert len(list((tmp_path / "tty").glob("*/*.exr"))) == 36
+    exrs = sorted((tmp_path / "tty").glob("*/*.exr"))
+    assert len(exrs) == 36
+    assert_one_prefix(exrs[0], {"rigctl:camera", "rigctl:frame_set"})
     piped = subprocess.run(
         [*rigctl_command(), "take", "export", str(take), "--out", str(tmp_path / "pipe"), "--frames", "0-1"],
         capture_output=True, text=True, timeout=600, stdin=subprocess.DEVNULL,
@@ -85,7 +95,9 @@ def test_render_shows_a_bar_with_time_left_on_a_terminal_and_no_progress_with_qu
     code, screen = on_a_terminal("render", str(take), "--disparity", disparity, *path, "--out", str(tmp_path / "a"))
     assert code == 0, screen
     assert_bar_with_time_left(screen, "views", 6)
-    assert len(list((tmp_path / "a" / "000000").glob("path_*.exr"))) == 6
+    views = sorted((tmp_path / "a" / "000000").glob("path_*.exr"))
+    assert len(views) == 6
+    assert_one_prefix(views[0], {"rigctl:position", "rigctl:sources"})
     quiet = subprocess.run(
         [*rigctl_command(), "render", str(take), "--disparity", disparity, *path, "--out", str(tmp_path / "b"),
          "--quiet"],
