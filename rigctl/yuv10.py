@@ -93,8 +93,11 @@ def to_device(codes: U16, pixel_format: str) -> U8:
     if pixel_format == "v210":
         stride = v210_stride(w)
         words = np.zeros((h, stride // 4), "<u4")
-        k = np.arange(n)
-        np.bitwise_or.at(words, (slice(None), k // 3), (codes.astype("<u4") & 0x3FF) << (10 * (k % 3)).astype("<u4"))
+        m = -(-n // 3) * 3  # samples in whole words
+        samples = np.zeros((h, m), "<u4")
+        samples[:, :n] = codes & 0x3FF
+        t = samples.reshape(h, m // 3, 3)
+        words[:, : m // 3] = t[..., 0] | t[..., 1] << 10 | t[..., 2] << 20
         return words.view(np.uint8)
     raise ParameterError(f"{pixel_format!r} is not a 10-bit 4:2:2 format ({', '.join(TEN_BIT_FORMATS)})")
 

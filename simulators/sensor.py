@@ -80,8 +80,8 @@ def deliver10(
     if noise is not None:
         cv2.add(out, noise[0], dst=out)
         cv2.subtract(out, noise[1], dst=out)
-        cv2.min(out, _HI, dst=out)
-        cv2.max(out, _LO, dst=out)
+        np.minimum(out, _HI, out=out)
+        np.maximum(out, _LO, out=out)
     burnin.burn10(out, fmt.width, *burn)
     if y210:
         return into[: out.nbytes]
