@@ -21,12 +21,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     d = what.add_parser(
         "depth",
         epilog=examples(
-            ("every preset and baseline without the ideal presenter, the plot in bench.png",
-             "rigctl bench depth --quick --plot bench.png"),
-            ("time and peak memory of one 960x540 frame set, one camera",
-             "rigctl bench depth --size 960x540 --cameras r1c1"),
-            ("flicker with temporal stabilisation off and on, 4 frame sets a take",
-             "rigctl bench depth --video --frames 4"),
+            (
+                "every preset and baseline without the ideal presenter, the plot in bench.png",
+                "rigctl bench depth --quick --plot bench.png",
+            ),
+            (
+                "time and peak memory of one 960x540 frame set, one camera",
+                "rigctl bench depth --size 960x540 --cameras r1c1",
+            ),
+            (
+                "flicker with temporal stabilisation off and on, 4 frame sets a take",
+                "rigctl bench depth --video --frames 4",
+            ),
         ),
         help="every depth preset and the OpenCV baselines on the simulated presenter, Middlebury Motorcycle and "
         "the stratified light-field scenes, as a light field and as parallel cameras see them (+60 px)",
@@ -126,7 +132,8 @@ def run_size_bench(ns: argparse.Namespace) -> int:
     r = measure_size(functools.partial(presenter, True), w, h, ns.preset, cams)
     t = r["timings_s"]
     r["fps"], r["workers"] = fps, ns.workers
-    r["summary"] = speed_summary(t["depth"], t["write"], r["stages_s"], r["sgbm"]["seconds"], fps, ns.workers)
+    cpu = (r["cpu_seconds"], r["sgbm"]["cpu_seconds"])
+    r["summary"] = speed_summary(t["depth"], t["write"], r["stages_s"], r["sgbm"]["seconds"], fps, ns.workers, cpu)
     print(json.dumps(r) if ns.json else format_speed(r))
     return 0
 

@@ -30,6 +30,14 @@ def test_ratio_stages_write_share_and_realtime_factor() -> None:
     assert s["realtime_factor"]["10"] == pytest.approx(37.5)
     assert s["hours_per_minute"]["1"] == pytest.approx(375.0 * 60 / 3600)
     assert s["hours_per_minute"]["10"] == pytest.approx(375.0 * 60 / 3600 / 10)
+    assert "ratio_cpu" not in s  # only when CPU seconds are given
+
+
+def test_the_ratio_in_cpu_seconds() -> None:
+    s = speed_summary(12.0, 3.0, {}, 0.5, 25.0, 1, cpu=(27.0, 0.9))
+    assert s["ratio_cpu"] == pytest.approx(30.0) and s["ratio_total"] == pytest.approx(30.0)
+    with pytest.raises(ParameterError):
+        speed_summary(12.0, 3.0, {}, 0.5, 25.0, 1, cpu=(27.0, 0.0))
 
 
 def test_stages_beyond_the_depth_time_leave_no_negative_other() -> None:
@@ -46,7 +54,7 @@ def test_refuses_figures_that_would_divide_by_nothing(sgbm_s: float, fps: float,
 
 def test_the_text_names_the_reference_ratio_and_real_time_factor() -> None:
     times = {"depth": 8.0, "write": 2.0}
-    summary = speed_summary(8.0, 2.0, {"cost": 4.0}, 0.25, 25.0, 4)
+    summary = speed_summary(8.0, 2.0, {"cost": 4.0}, 0.25, 25.0, 4, cpu=(15.0, 0.5))
     r = {
         "size": [1920, 1080],
         "preset": "best",
@@ -64,6 +72,6 @@ def test_the_text_names_the_reference_ratio_and_real_time_factor() -> None:
     }
     text = format_speed(r)
     assert "SGBM 3WAY pair" in text and "128 levels" in text and "0.250 s" in text
-    assert "depth 32.0x" in text and "depth + write 40.0x" in text
+    assert "depth 32.0x" in text and "depth + write 40.0x" in text and "in CPU seconds (depth + write) 30.0x" in text
     assert "write share 20.0 %" in text
     assert "250 s of compute per s of footage on one worker, 62.5 on 4 workers" in text
