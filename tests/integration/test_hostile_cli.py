@@ -258,19 +258,20 @@ def test_killed_take_reserve_is_removed_when_next_read(run_cli, tmp_path: Path) 
         stderr=subprocess.DEVNULL,
         stdin=subprocess.DEVNULL,
     )
-    index = tmp_path / "k" / "cameras" / "r2c2.index"
+    take = tmp_path / ".k.rigctl-recording"  # recorded under its hidden name until its end (take/staging.py)
+    index = take / "cameras" / "r2c2.index"
     for _ in range(1200):  # waits for the state, asserts nothing about time
         if index.exists() and index.stat().st_size >= 4 * 64:
             break
         time.sleep(0.05)
-    reserve = tmp_path / "k" / ".reserve"
+    reserve = take / ".reserve"
     assert reserve.exists()
     # while the recorder runs, its reserve is not stale
-    assert remove_stale_reserves([tmp_path / "k"]) == []
+    assert remove_stale_reserves([take]) == []
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=30)
     assert reserve.exists() and reserve.stat().st_size == 1 << 20
-    res = run_cli("take", "check", str(tmp_path / "k"))
+    res = run_cli("take", "check", str(take))
     assert res.returncode == 0, res.stderr
     assert not reserve.exists()
     # a reserve this process holds is left alone
@@ -287,6 +288,7 @@ def test_writers_close_only_after_the_flush_thread_ends(tmp_path: Path) -> None:
     """'flushing r2c2: Bad file descriptor' at the end of a take: the flush thread was still syncing files the
     ending take had closed. A flush that began before the end must end before any writer closes."""
     import threading
+    import time
 
     from rigctl.capture.recorder import Recorder, TakePlan
     from rigctl.registry import open_cameras
@@ -320,6 +322,10 @@ def test_writers_close_only_after_the_flush_thread_ends(tmp_path: Path) -> None:
     rec.arm()
     rec.start(200)
     assert syncing.wait(30)
+    for _ in range(1200):  # a frame on disk first: a take that kept no frame is not kept at all
+        if any(st.written for st in rec.stats.values()):
+            break
+        time.sleep(0.05)
     rec.stop()
     man = rec.finish()
     assert man is not None and man.status in ("complete", "ended") and "close" in trace
