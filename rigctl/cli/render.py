@@ -86,6 +86,7 @@ def register_bench(what: argparse._SubParsersAction) -> None:
     b.add_argument("--size", type=size, default=(1920, 1080), metavar="WxH", help="default 1920x1080")
     b.add_argument("--repeats", type=int, default=10, help="timed pairs (the median is kept)")
     b.add_argument("--json", action="store_true")
+    add_quiet(b)
     b.set_defaults(func=run_bench)
 
 
@@ -203,7 +204,8 @@ def run_bench(ns: argparse.Namespace) -> int:
     if ns.repeats < 1:
         raise ParameterError(f"--repeats must be at least 1, got {ns.repeats}")
     check_bench_memory(ns.size, _available_memory())
-    result = bench_render(presenter_render(), ns.size, ns.repeats)
+    with Progress("bench render", "stages", ns.quiet) as bar:
+        result = bench_render(presenter_render(), ns.size, ns.repeats, bar.update)
     print(json.dumps(result) if ns.json else format_bench(result))
     return 0
 

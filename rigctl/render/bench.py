@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import statistics
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TypedDict
 
@@ -138,9 +139,22 @@ def first_call(frame: FrameViews) -> tuple[float, bool]:
     return _FIRST[0]
 
 
-def bench_render(data: RenderBenchData, size: tuple[int, int], repeats: int = 10) -> RenderBenchResult:
+def bench_render(
+    data: RenderBenchData,
+    size: tuple[int, int],
+    repeats: int = 10,
+    progress: Callable[[int, int, str], None] | None = None,
+) -> RenderBenchResult:
+    """``progress(stage, 4, what)`` between the stages (never inside a timed one)."""
+
+    def stage(k: int, what: str) -> None:
+        if progress:
+            progress(k, 4, what)
+
     frame = data.frame
+    stage(0, "first call (compiling the kernels)")
     first_s, compiled = first_call(frame)
+    stage(1, "quality: leave-one-out and the simulator's view")
     ren = renderer_for(frame)
     centre = frame.views["r1c1"]
     loo = ren.render(*centre.offset, exclude=("r1c1",))
@@ -150,6 +164,7 @@ def bench_render(data: RenderBenchData, size: tuple[int, int], repeats: int = 10
 
     truth_score = score(novel.rgba[..., :3], data.truth_rgb, Keyer().matte(data.truth_rgb), data.ignore)
     width, height = size
+    stage(2, f"sources at {width}x{height}")
     inputs = scaled(frame, width, height)
     t0 = time.perf_counter()
     sources: list[Source] = [prepare(*s) for s in inputs]  # cold: the process's first frame of this size
@@ -160,7 +175,9 @@ def bench_render(data: RenderBenchData, size: tuple[int, int], repeats: int = 10
     big = Renderer(sources)
     u, v = centre.offset
     half = IPD_M / frame.spacing / 2
+    stage(3, f"{repeats} timed stereo pairs")
     t = time_pair(big, u, v, half, repeats)
+    stage(4, "done")
     pair_ms = statistics.median(t.total_ms)
     i = t.total_ms.index(sorted(t.total_ms)[(len(t.total_ms) - 1) // 2])  # the (lower) median pair
     return {

@@ -5,6 +5,7 @@ source camera, and disparity folders that do not match the take."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -296,6 +297,8 @@ def test_bench_render_reports_its_keys(tmp_path: Path) -> None:
     assert r["ratio_to_paper"] == pytest.approx(r["stereo_pair_ms"] / (1000 / 90), abs=0.006)
     assert r["ratio_to_budget"] == pytest.approx(r["stereo_pair_ms"] / 33.0, abs=0.006)
     assert r["target_ms"] > 0 and r["shade_ms"] > 0 and r["first_call_s"] > 0 and "splat" in r["counts"]
+    # not on a terminal: the progress display's one summary line on stderr, after the stages
+    assert re.search(r"^bench render: 4 of 4 stages in \d+\.\d s", res.stderr, re.M), res.stderr
 
 
 def test_demo_section_has_every_camera_and_a_strip(take: Path, our_depth: Path, tmp_path: Path) -> None:
