@@ -16,6 +16,15 @@ front of the rig: :func:`sensor_fixed` marks the pixels whose views agree better
 estimated disparity, and better than one pixel of disparity either way (a match, not a flat patch that
 agrees at any shift), with the flat parts of the same pattern joined to such pixels (hysteresis). They are
 not part of the scene and get no depth; neither do the specks they leave.
+
+**In front of what the others see.** A point a camera puts at disparity d is seen by every other camera at
+d times its baseline away; there, the other camera's own estimate can be nearer (something occludes the
+point from it) or the same, never farther: a farther surface cannot hide a nearer one. Where most of the
+views that have the point in frame see something farther (or the screen), the camera has spread a nearer
+surface over its neighbour (foreground fattening, 1-3 px beside every occluding edge of a window matcher):
+:func:`occlusion_order` gives such a pixel the median of the farther disparities those views see, or no
+depth when they all see the screen. A renderer warps such a pixel with the nearer surface's disparity and
+puts it beside that surface's outline, on the screen.
 """
 
 from __future__ import annotations
@@ -151,4 +160,47 @@ def sensor_fixed(
     seeded[np.unique(labels[sure])] = True
     seeded[0] = False
     out[y0:y1, x0:x1] = seeded[labels]
+    return out
+
+
+ORDER_TOL = 1.0  # disparity (px of the horizontal spacing) by which another view must see the point farther
+
+
+def occlusion_order(grid: Grid, disparities: dict[str, F32]) -> dict[str, tuple[F32, NDArray[np.bool_]]]:
+    """Per camera: its disparity with the pixels that most other views see farther replaced (the median of
+    what they see, +inf where that is the screen), and which pixels those were. Decided from every camera's
+    disparity as given (none sees another's corrections)."""
+    out: dict[str, tuple[F32, NDArray[np.bool_]]] = {}
+    for a, d in disparities.items():
+        flagged = np.zeros(d.shape, bool)
+        have = np.isfinite(d)
+        ox, oy = grid.offsets[a]
+        others = [b for b in disparities if b != a and grid.offsets[b] != (ox, oy)]
+        if len(others) < 2 or not have.any():
+            out[a] = (d, flagged)
+            continue
+        h, w = d.shape
+        gy, gx = np.mgrid[0:h, 0:w].astype(np.float32)
+        dz = np.where(have, d, 0.0).astype(np.float32)
+        seen = []
+        for b in others:
+            rx, ry = grid.offsets[b][0] - ox, grid.offsets[b][1] - oy
+            db = np.where(np.isfinite(disparities[b]), disparities[b], -np.inf).astype(np.float32)  # screen: far
+            mx, my = gx - dz * np.float32(rx), gy - dz * np.float32(ry)
+            seen.append(cv2.remap(db, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan))
+        stack = np.stack(seen)
+        in_frame = ~np.isnan(stack)
+        farther = in_frame & (stack < dz - ORDER_TOL)
+        n_in, n_far = in_frame.sum(axis=0), farther.sum(axis=0)
+        flagged = have & (n_in >= 2) & (2 * n_far > n_in)
+        if not flagged.any():
+            out[a] = (d, flagged)
+            continue
+        seen_far = np.where(farther[:, flagged] & np.isfinite(stack[:, flagged]), stack[:, flagged], np.nan)
+        some = np.isfinite(seen_far).any(axis=0)
+        value = np.full(seen_far.shape[1], np.inf, np.float32)
+        value[some] = np.nanmedian(seen_far[:, some], axis=0)
+        fixed = d.copy()
+        fixed[flagged] = value
+        out[a] = (fixed, flagged)
     return out

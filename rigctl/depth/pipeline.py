@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from rigctl.depth.edge import occlusion_order
 from rigctl.depth.estimate import DepthResult, cross_check, estimate
 from rigctl.depth.export import Exporter, FileRecord
 from rigctl.depth.grid import Grid, SkippedFrameSet
@@ -101,6 +102,23 @@ def _plain(value: Any) -> Any:
 
 def _rel(grid: Grid, a: str, b: str) -> tuple[float, float]:
     return grid.offsets[b][0] - grid.offsets[a][0], grid.offsets[b][1] - grid.offsets[a][1]
+
+
+def order_all(grid: Grid, out: dict[str, DepthResult]) -> None:
+    """No camera's depth in front of what the others see (:func:`rigctl.depth.edge.occlusion_order`): a pixel
+    that most views see farther takes what they see, or no depth (then no confidence, no flags) on the screen."""
+    t0 = time.perf_counter()
+    ordered = occlusion_order(grid, {cam: res.disparity for cam, res in out.items()})
+    for cam, (disparity, flagged) in ordered.items():
+        res = out[cam]
+        gone = flagged & ~np.isfinite(disparity)
+        res.disparity = disparity
+        res.confidence[gone] = 0.0
+        res.unreliable[gone] = False
+        res.bound_hit[gone] = False
+        res.stats["occlusion_order_pixels"] = int(flagged.sum())
+        res.stats["occlusion_order_removed_pixels"] = int(gone.sum())
+        res.stats["occlusion_order_s"] = (time.perf_counter() - t0) / len(out)
 
 
 def cross_check_all(grid: Grid, out: dict[str, DepthResult]) -> None:
@@ -230,6 +248,8 @@ class TakeProcessor:
         self._last_widenings = frame_widenings
         for cam in self.cameras:
             results[cam] = self.temporal.stabilise(grid, cam, results[cam], self.d_range)
+        if len(results) > 1:
+            order_all(grid, results)
         if self.preset.cross_check and len(results) > 1:
             cross_check_all(grid, results)
         self.temporal.advance(grid, results)

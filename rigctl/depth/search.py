@@ -58,6 +58,9 @@ class EstimateStats(TypedDict, total=False):
     pairs_chosen_share: float
     outliers_replaced: int
     fewer_than_3_views_pixels: int  # estimated pixels whose point fewer than three other views have in frame
+    occlusion_order_pixels: int  # seen farther by most other views: given what they see (edge.occlusion_order)
+    occlusion_order_removed_pixels: int  # of those, the ones every such view saw as screen: no depth
+    occlusion_order_s: float
     cross_check_with: str
     cross_check_failed_pixels: int
     cross_check_s: float

@@ -86,10 +86,11 @@ def y_psnr(y: np.ndarray, reference: np.ndarray, valid: np.ndarray) -> float:
     return float(10 * np.log10(1023**2 / np.mean((y[valid] - reference[valid]) ** 2)))
 
 
-# Issue 31 asks for 2 dB. Measured since best runs the cost volume at every range (issue 30): 38.16 dB with our
-# depth against 40.33 dB with the true depth, a 2.17 dB gap (1.92 dB on the former pairs engine; 11.9 dB before
-# the edge work). The issue stays open on that point; this bound keeps what was gained from slipping back.
-RVS_GAP_DB = 2.5
+# Issue 31 asks for 2 dB. The gap was 2.17 dB (38.16 against 40.33) with best's cost volume: half of its squared
+# error came from 525 pixels beside the outline that RVS painted with the subject where r1c1 shows the screen,
+# warped there by source pixels next to a nearer surface that had taken its disparity (foreground fattening).
+# No camera's depth may now sit in front of what most other views see there (edge.occlusion_order).
+RVS_GAP_DB = 2.0
 
 
 def test_rvs_with_our_depth_comes_close_to_rvs_with_the_true_depth(take: Path, our_depth: Path) -> None:

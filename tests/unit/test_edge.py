@@ -112,3 +112,45 @@ def test_a_pattern_fixed_to_the_sensor_gets_no_depth_when_zero_is_outside_the_ra
     wide = estimate(g, "r1c1", (-2.0, 20.0), PRESETS[preset], keyer=None)
     assert np.isfinite(wide.disparity[:6, :48]).mean() > 0.9
     assert wide.stats["sensor_fixed_pixels"] == 0
+
+
+def _scene_disparities(names: list[str], offsets: dict[str, tuple[float, float]]) -> dict[str, np.ndarray]:
+    """True disparities of a scene seen by a 3x3 lattice: a background surface (the torso) at 4 px with a
+    square hand at 12 px in front of it, both on a screen (+inf), drawn in every camera at its own offset."""
+    h, w = 80, 120
+    out = {}
+    for n in names:
+        ox, oy = offsets[n]
+        d = np.full((h, w), np.inf, np.float32)
+        # a camera to the right sees a point d x dx further left: x_n = x_ref - d dx
+        d[20 - round(4 * oy) : 65 - round(4 * oy), 30 - round(4 * ox) : 95 - round(4 * ox)] = 4.0
+        d[35 - round(12 * oy) : 50 - round(12 * oy), 50 - round(12 * ox) : 70 - round(12 * ox)] = 12.0
+        out[n] = d
+    return out
+
+
+def test_depth_in_front_of_what_the_other_views_see_takes_what_they_see() -> None:
+    """Foreground fattened over the torso and over the screen in one camera (as a window matcher spreads an
+    occluding edge) is put back: the torso's disparity where the others see torso, none where they see screen;
+    everything else, occluded points included, is left alone."""
+    from rigctl.depth.edge import occlusion_order
+
+    names = [f"r{r}c{c}" for r in range(3) for c in range(3)]
+    grid = grid_from_arrays({n: np.zeros((80, 120, 3), np.float32) for n in names}, 1000.0, 0.12, 0.078)
+    truth = _scene_disparities(names, grid.offsets)
+    fat = {n: d.copy() for n, d in truth.items()}
+    ref = fat["r1c1"]
+    hand = ref == 12.0
+    grown = cv2.dilate(hand.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    ref[grown] = 12.0  # two pixels of hand over the torso around it
+    halo = cv2.dilate(np.isfinite(truth["r1c1"]).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    ref[halo & ~np.isfinite(truth["r1c1"])] = 4.0  # a one-pixel halo of torso over the screen
+    out = occlusion_order(grid, fat)
+    fixed, flagged = out["r1c1"]
+    wrong = (grown & ~hand) | (halo & ~np.isfinite(truth["r1c1"]))
+    assert flagged[wrong].mean() > 0.95 and not flagged[~wrong].any()
+    assert np.array_equal(np.isfinite(fixed), np.isfinite(truth["r1c1"]))
+    assert np.abs(fixed[grown & ~hand] - 4.0).max() == 0.0
+    for n in names:  # cameras whose depth is right are untouched, occluded torso beside the hand included
+        if n != "r1c1":
+            assert not out[n][1].any() and np.array_equal(out[n][0], truth[n])
