@@ -84,8 +84,10 @@ def run(ns: argparse.Namespace) -> int:
         print(f"rigctl record: {text}", file=sys.stderr, flush=True)
 
     def show_preflight(report: PreflightReport) -> None:
+        refused = not report.ok and not (ns.force and report.forcible)
         for line in report.lines():
-            if not line.startswith("preflight refuse"):  # a refusal is the command's error line
+            # a refusal is the command's one error line (its need in MB/s included): nothing before it
+            if not line.startswith("preflight refuse") and not (refused and line.startswith("data rate")):
                 say(line)
 
     for dest in (ns.out, *ns.dest):  # refused before a frame is taken, not after the manifest says complete
