@@ -138,9 +138,20 @@ def test_a_drop_on_one_camera_shows_on_its_tile(fast_out: Path) -> None:
     r1c2 = take.manifest.cameras["r1c2"]
     injected = {d for d in drops if r1c2.first_sequence < d < r1c2.last_sequence}
     assert len(injected) >= 3 and injected <= set(r1c2.source_drops)
+    # another camera's drops (a loaded machine drops runs of frames anywhere) hit the injected sequences no
+    # more often than they hit the others: r1c2's pattern leaking to it would hit every injected one and no other
     for name in RIG.camera_names:
-        if name != "r1c2":
-            assert len(injected & set(take.manifest.cameras[name].source_drops)) <= len(injected) // 2, name
+        if name == "r1c2":
+            continue
+        cam = take.manifest.cameras[name]
+        span = set(range(max(cam.first_sequence, r1c2.first_sequence) + 1, min(cam.last_sequence, r1c2.last_sequence)))
+        inj = injected & span
+        own = set(cam.source_drops) & span
+        if not inj:
+            continue
+        hit_injected = len(own & inj) / len(inj)
+        hit_other = len(own - inj) / max(1, len(span - inj))
+        assert hit_injected <= hit_other + 0.25, (name, hit_injected, hit_other)
 
 
 def test_preflight_failure_blocks_recording_and_says_why(fast_out: Path) -> None:
