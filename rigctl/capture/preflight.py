@@ -322,18 +322,20 @@ def check_destinations(
     buffer_bytes_per_camera: int = 0,
     dirty_headroom: int | None = None,
     measure: Callable[[Path], WriteSpeed] = measure_write,
+    free_space: Callable[[Path], int] = lambda folder: shutil.disk_usage(folder).free,
 ) -> PreflightReport:
     """A verdict per destination for the cameras that write to it. ``speeds``: measured earlier (a
     destination measured while cameras stream in this process reads slower: the test writes wait for the
     interpreter between blocks); a destination not in it is measured now with ``measure``. Destinations on
-    one device share the dirty-page headroom; each is given all of it (the model is per destination)."""
+    one device share the dirty-page headroom; each is given all of it (the model is per destination).
+    ``free_space``: the bytes free on a destination (injected by tests, which must not depend on this disk)."""
     report = PreflightReport()
     headroom = dirty_headroom_bytes() if dirty_headroom is None else dirty_headroom
     for folder, cams in folders.items():
         need = bytes_per_second_per_camera * len(cams)
         try:
             speed = speeds[folder] if speeds and folder in speeds else measure(folder)
-            free = shutil.disk_usage(folder).free
+            free = free_space(folder)
         except OSError as exc:
             report.verdicts.append(decide(folder, len(cams), need, duration_s, None, 0, 0, exc.strerror or str(exc)))
             continue

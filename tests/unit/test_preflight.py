@@ -94,7 +94,9 @@ def test_report_outcome_is_the_worst_destination(tmp_path: Path) -> None:
     fast.mkdir()
     slow.mkdir()
     speeds = {fast: speed(900, 900, 900), slow: speed(0.1, 0.1, 0.1)}
-    report = check_destinations({fast: ["a"] * 5, slow: ["b"] * 4}, 1 * MB, None, speeds, dirty_headroom=0)
+    report = check_destinations(
+        {fast: ["a"] * 5, slow: ["b"] * 4}, 1 * MB, None, speeds, dirty_headroom=0, free_space=lambda _: 500 * GB
+    )
     assert [v.outcome for v in report.verdicts] == [GO, REFUSE]
     assert report.outcome == REFUSE and not report.ok and report.forcible
     assert report.problems == [report.verdicts[1].message]
