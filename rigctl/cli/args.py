@@ -5,11 +5,14 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 from rigctl.cli.helptext import HelpFormatter
 from rigctl.exr import COLOURS
 from rigctl.layout import LAYOUTS
+
+if TYPE_CHECKING:
+    from rigctl.depth.options import DepthOptions
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -130,4 +133,21 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
         default=DEFAULT_WARMUP,
         metavar="W",
         help=f"frame sets before a chunk processed, not written, to settle the stabiliser (default {DEFAULT_WARMUP})",
+    )
+
+
+def depth_options(ns: argparse.Namespace) -> DepthOptions:
+    """The depth options rigctl depth and rigctl process read from their shared arguments (the preset, the
+    range, the key, the cameras and :func:`add_pipeline_options`'s): one reading, so the verbs cannot drift."""
+    from rigctl.depth.options import DepthOptions
+
+    return DepthOptions(
+        preset=ns.preset,
+        near_m=ns.near,
+        far_m=ns.far if ns.far is not None else (math.inf if ns.near is not None else None),
+        key=not ns.no_key,
+        cameras=tuple(ns.cameras) if ns.cameras else None,
+        temporal=not ns.no_temporal,
+        chunk=ns.chunk,
+        warmup=ns.warmup,
     )

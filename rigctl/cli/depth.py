@@ -4,15 +4,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 
-from rigctl.cli.args import add_layout, add_pipeline_options, distance, far_distance
+from rigctl.cli.args import add_layout, add_pipeline_options, depth_options, distance, far_distance
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
 from rigctl.cli.take import damaged_exit
 from rigctl.depth.presets import PRESETS
-from rigctl.depth.run import DepthOptions, run_depth
+from rigctl.depth.run import run_depth
 from rigctl.errors import ParameterError
 from rigctl.publish import output_folder, publish_json
 from rigctl.take.export import parse_range
@@ -62,16 +61,7 @@ def run(ns: argparse.Namespace) -> int:
     if ns.frames:
         r = parse_range(ns.frames, 1_000_000)
         frames = list(r)
-    opt = DepthOptions(
-        preset=ns.preset,
-        near_m=ns.near,
-        far_m=ns.far if ns.far is not None else (math.inf if ns.near is not None else None),
-        key=not ns.no_key,
-        cameras=tuple(ns.cameras) if ns.cameras else None,
-        temporal=not ns.no_temporal,
-        chunk=ns.chunk,
-        warmup=ns.warmup,
-    )
+    opt = depth_options(ns)
     if ns.check and ns.cameras is not None and len(set(ns.cameras)) < 2:
         raise ParameterError(
             "--check renders each computed camera from the others: give at least two --cameras, or none for all"

@@ -9,7 +9,7 @@ import socket
 import struct
 from pathlib import Path
 
-from rigctl.cli.args import add_pipeline_options, distance, far_distance
+from rigctl.cli.args import add_pipeline_options, depth_options, distance, far_distance
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
 from rigctl.depth.presets import PRESETS
@@ -128,12 +128,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(ns: argparse.Namespace) -> int:
-    import math
 
     if not ns.debug:  # Dask's own INFO lines (scheduler, nannies, workers inherit it) only with --debug
         os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "warning")
 
-    from rigctl.depth.options import DepthOptions
     from rigctl.farm.run import FarmOptions, Status, process_take, scheduler_url
 
     if ns.scheduler:
@@ -141,16 +139,7 @@ def run(ns: argparse.Namespace) -> int:
     opt = FarmOptions(
         take=ns.take,
         out=ns.out,
-        depth=DepthOptions(
-            preset=ns.preset,
-            near_m=ns.near,
-            far_m=ns.far if ns.far is not None else (math.inf if ns.near is not None else None),
-            key=not ns.no_key,
-            cameras=tuple(ns.cameras) if ns.cameras else None,
-            temporal=not ns.no_temporal,
-            chunk=ns.chunk,
-            warmup=ns.warmup,
-        ),
+        depth=depth_options(ns),
         calibration=ns.calibration,
         frames=list(parse_range(ns.frames, 1_000_000)) if ns.frames else None,
         redo=ns.redo,
