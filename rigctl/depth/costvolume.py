@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.depth.cost import INVALID_COST, TRUNCATE, combine, grey, normalise
-from rigctl.depth.cost_kernels import combined_costs
+from rigctl.depth.cost_kernels import combined_costs, visible_views
 from rigctl.depth.search import EstimateStats
 
 F32 = NDArray[np.float32]
@@ -45,6 +45,7 @@ WIDE_STEP = 0.5
 # matching cost: truncated intensity and gradient differences, weights and truncations of Hosni et al. (2013)
 ALPHA, TAU_I, TAU_G = 0.9, 7 / 255, 2 / 255
 COMPILED = True  # the matching cost by the compiled kernel; False: the OpenCV and numpy reference
+OCCLUDER_PX = 1.0  # a surface nearer by more than this (disparity px) hides what lands behind it in a view
 
 
 class MatchViews:
@@ -127,6 +128,37 @@ class MatchViews:
         for rx, ry in self.rel.values():
             mx, my = self.gx - d * np.float32(rx), self.gy - d * np.float32(ry)
             n += (mx >= 0) & (mx <= self.w - 1) & (my >= 0) & (my <= self.h - 1)
+        return n
+
+    def visible_count(self, d: F32, front: NDArray[np.bool_], tol: float = OCCLUDER_PX) -> NDArray[np.int32]:
+        """How many views see the point at disparity ``d`` (a map): it lies inside the view's frame and no
+        ``front`` pixel of the reference lands on the same place in that view with a disparity more than
+        ``tol`` larger (a nearer surface covers it there: the bands behind a foreground edge). The occluders
+        are what the reference itself sees (its estimated disparity), splatted on the view by the largest
+        disparity (a z-buffer); a pixel is hidden when all four cells around its place are nearer. With
+        ``COMPILED`` off, by the numpy reference."""
+        y0, _, x0, _ = self.box
+        if COMPILED:
+            count = visible_views(d, front, self.rel_array, (y0, x0), (self.h, self.w), tol)
+            return np.asarray(count, np.int32)
+        n = np.zeros(self.shape, np.int32)
+        for rx, ry in self.rel.values():
+            mx, my = self.gx - d * np.float32(rx), self.gy - d * np.float32(ry)
+            inside = (mx >= 0) & (mx <= self.w - 1) & (my >= 0) & (my <= self.h - 1)
+            zbuf = np.full((self.h, self.w), -np.inf, np.float32)
+            sx, sy = mx[front], my[front]
+            reach = (sx > -1) & (sx < self.w) & (sy > -1) & (sy < self.h)
+            sx, sy, sd = sx[reach], sy[reach], d[front][reach]
+            xa, ya = np.floor(sx).astype(np.int64), np.floor(sy).astype(np.int64)
+            for j in (ya, ya + 1):
+                for i in (xa, xa + 1):
+                    ok = (j >= 0) & (j < self.h) & (i >= 0) & (i < self.w)
+                    np.maximum.at(zbuf, (j[ok], i[ok]), sd[ok])
+            xa = np.clip(np.floor(mx).astype(np.int64), 0, self.w - 1)
+            ya = np.clip(np.floor(my).astype(np.int64), 0, self.h - 1)
+            xb, yb = np.minimum(xa + 1, self.w - 1), np.minimum(ya + 1, self.h - 1)
+            nearest = np.minimum(np.minimum(zbuf[ya, xa], zbuf[ya, xb]), np.minimum(zbuf[yb, xa], zbuf[yb, xb]))
+            n += inside & ~(nearest > d + np.float32(tol))
         return n
 
     def costs(self, d: float | F32, win: int, keep: int) -> F32:

@@ -116,3 +116,29 @@ def test_the_compiled_refinement_matches_the_reference(keep: int, monkeypatch: p
     diff = np.abs(out - out_ref)
     assert np.isfinite(out).all() and diff.max() <= 0.01 and (diff > 1e-3).mean() <= 1e-3
     assert np.abs(out - start).max() > 0.01  # the steps moved the map: not a comparison of two no-ops
+
+
+def test_the_compiled_visible_count_matches_the_reference() -> None:
+    """Views that see each pixel's point (inside the frame, not behind a nearer pixel of the reference), on
+    a crop whose disparity has steps up and down, parts keyed out (no occluders there) and points beyond
+    the frame."""
+    grid = surfaces((96, 128))
+    ref = "r1c1"
+    ox, oy = grid.offsets[ref]
+    rel = {n: (grid.offsets[n][0] - ox, grid.offsets[n][1] - oy) for n in grid.images if n != ref}
+    views = cvm.MatchViews(dict(grid.images), ref, rel, (10, 90, 6, 120))
+    rng = np.random.default_rng(3)
+    d = np.full(views.shape, 2.0, np.float32) + rng.uniform(-0.3, 0.3, views.shape).astype(np.float32)
+    d[20:50, 30:70] += 9.0
+    d[55:70, 80:100] -= 1.5
+    d[:, :4] = 40.0  # beyond some views' frames
+    front = np.ones(views.shape, bool)
+    front[60:80, 10:40] = False
+    cvm.COMPILED = False
+    try:
+        want = views.visible_count(d, front)
+    finally:
+        cvm.COMPILED = True
+    got = views.visible_count(d, front)
+    assert np.array_equal(got, want)
+    assert (want < len(rel)).any() and (want == len(rel)).any()
