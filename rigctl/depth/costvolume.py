@@ -122,14 +122,6 @@ class MatchViews:
         out = cv2.remap(self.feat[name], mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         return np.asarray(out, np.float32), np.asarray((mx < 0) | (mx > self.w - 1) | (my < 0) | (my > self.h - 1))
 
-    def seen_count(self, d: F32) -> NDArray[np.int32]:
-        """How many views have the point at disparity ``d`` (a map) inside their frame."""
-        n = np.zeros(self.shape, np.int32)
-        for rx, ry in self.rel.values():
-            mx, my = self.gx - d * np.float32(rx), self.gy - d * np.float32(ry)
-            n += (mx >= 0) & (mx <= self.w - 1) & (my >= 0) & (my <= self.h - 1)
-        return n
-
     def visible_count(self, d: F32, front: NDArray[np.bool_], tol: float = OCCLUDER_PX) -> NDArray[np.int32]:
         """How many views see the point at disparity ``d`` (a map): it lies inside the view's frame and no
         ``front`` pixel of the reference lands on the same place in that view with a disparity more than

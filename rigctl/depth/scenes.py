@@ -166,6 +166,40 @@ def thin(size: tuple[int, int] = (256, 256), seed: int = 0) -> Grid:
     return _grid(layers, size, seed, m, 0.6 / 255)
 
 
+def step(
+    size: tuple[int, int] = (240, 320),
+    far: float = 6.0,
+    near: float | None = 18.0,
+    square: tuple[int, int, int] = (80, 110, 80),
+    seed: int = 0,
+) -> Grid:
+    """A fronto-parallel textured plane at disparity ``far`` and, unless ``near`` is None, a textured square
+    at ``near`` in front of it: ``square`` = (top, left, side) in the reference camera's pixels (its support
+    covers the pixel centres top..top + side - 1, left..left + side - 1). Every other camera sees bands of
+    the plane next to the square hidden, (near - far) times its baseline wide."""
+    rng = np.random.default_rng(seed + 11)
+    m = 32
+    tsize = (size[0] + 2 * m, size[1] + 2 * m)
+    top, left, side = square
+
+    def plane(x: F32, y: F32) -> F32:
+        return np.full(np.shape(x), far, np.float32)
+
+    def front(x: F32, y: F32) -> F32:
+        return np.full(np.shape(x), near, np.float32)
+
+    def inside(x: F32, y: F32) -> F32:
+        lo_x, lo_y = left - 0.5, top - 0.5
+        return np.asarray(
+            np.minimum(np.minimum(x - lo_x, lo_x + side - x), np.minimum(y - lo_y, lo_y + side - y)), np.float32
+        )
+
+    layers = [Layer(plane, texture(rng, tsize, [(0.7, 0.10), (2.5, 0.12), (8.0, 0.12)]))]
+    if near is not None:
+        layers.append(Layer(front, texture(rng, tsize, [(0.8, 0.12), (3.0, 0.12)], 0.6), inside))
+    return _grid(layers, size, seed, m, 0.6 / 255)
+
+
 SCENES: dict[str, Callable[..., Grid]] = {"surfaces": surfaces, "thin": thin}
 
 

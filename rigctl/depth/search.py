@@ -57,7 +57,9 @@ class EstimateStats(TypedDict, total=False):
     select_s: float
     pairs_chosen_share: float
     outliers_replaced: int
-    fewer_than_3_views_pixels: int  # estimated pixels whose point fewer than three other views have in frame
+    # estimated pixels whose point fewer than three other views see: inside their frame and not behind a
+    # nearer surface of the camera's own estimate (the bands at the frame's edges and behind foreground edges)
+    fewer_than_3_views_pixels: int
     occlusion_order_pixels: int  # seen farther by most other views: given what they see (edge.occlusion_order)
     occlusion_order_removed_pixels: int  # of those, the ones every such view saw as screen: no depth
     occlusion_order_s: float

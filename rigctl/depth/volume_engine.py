@@ -67,8 +67,9 @@ def volume_engine(job: SearchJob) -> BoxEstimate:
     d, outliers = clean(np.clip(d, lo - 1.0, hi + 1.0).astype(np.float32))
     stats["refinement_s"] = time.perf_counter() - t1
     stats["outliers_replaced"] = int(outliers.sum())
-    # the bands only some views see (the frame's edges at a wide baseline): how many pixels rest on few views
-    stats["fewer_than_3_views_pixels"] = int((job.region & (views.seen_count(d) < 3)).sum())
+    # the bands only some views see, at the frame's edges and behind every foreground edge (a nearer surface
+    # of the estimate covers the point there): how many pixels rest on few views
+    stats["fewer_than_3_views_pixels"] = int((job.region & (views.visible_count(d, job.region) < 3)).sum())
     stats["refine_s"] = time.perf_counter() - t0
     with np.errstate(divide="ignore", invalid="ignore"):
         uniq = np.where(sw.cost > 1e-6, sw.mean_cost / np.maximum(sw.cost, 1e-6), 4.0)
