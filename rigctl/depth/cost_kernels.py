@@ -22,6 +22,7 @@ from numba import njit, prange
 from numpy.typing import NDArray
 
 F32 = NDArray[np.float32]
+ROWS = 128  # rows per block of the per-view arrays (views x rows x width): a block's, not the crop's memory
 
 
 @njit(parallel=True, cache=True, fastmath=False)
@@ -39,9 +40,13 @@ def _differences(
     tau_g: float,
     ad: F32,
     outside: NDArray[np.bool_],
+    org: NDArray[np.int64],
+    fh: int,
+    fw: int,
 ) -> None:
     """``ad`` (views, h, w): the truncated differences of each view sampled at disparity ``d`` (h, w), summed
-    over ``2 r + 1`` columns; ``outside``: where the sample falls outside the view."""
+    over ``2 r + 1`` columns; ``outside``: where the sample falls outside the view (its frame, ``fh`` x ``fw``).
+    ``feats[v]`` is the part of view v whose top-left pixel is ``org[v]`` (y, x) in its frame."""
     nv, hh, ww = feats.shape[0], feats.shape[1], feats.shape[2]
     h, w = d.shape
     ci, cg = np.float32(c_int), np.float32(c_grad)
@@ -54,14 +59,15 @@ def _differences(
         gy = np.float32(y0 + y)
         for v in range(nv):
             rx, ry = rel[v, 0], rel[v, 1]
+            oy, ox = org[v, 0], org[v, 1]
             # positions, weights and the outside test first (a loop the compiler vectorises), then the samples
             for x in range(w):
                 mx = np.float32(x0 + x) - d[y, x] * rx
                 my = gy - d[y, x] * ry
-                outside[v, y, x] = (mx < 0) | (mx > ww - 1) | (my < 0) | (my > hh - 1)
+                outside[v, y, x] = (mx < 0) | (mx > fw - 1) | (my < 0) | (my > fh - 1)
                 bx, by = np.floor(mx), np.floor(my)
                 fx[x], fy[x] = mx - bx, my - by
-                ix, iy = int(bx), int(by)
+                ix, iy = int(bx) - ox, int(by) - oy
                 xa[x], xb[x] = min(max(ix, 0), ww - 1), min(max(ix + 1, 0), ww - 1)
                 ya[x], yb[x] = min(max(iy, 0), hh - 1), min(max(iy + 1, 0), hh - 1)
             for x in range(w):
@@ -102,9 +108,12 @@ def _differences_at(
     tau_i: float,
     tau_g: float,
     ad: F32,
+    org: NDArray[np.int64],
+    yoff: int,
 ) -> None:
     """``_differences`` at one disparity for every pixel: view v's sample for crop pixel (x, y) lies at
-    (x + shift[v, 0], y + shift[v, 1]) (``warpAffine``'s translation), so the weights are one per view."""
+    (x + shift[v, 0], y + shift[v, 1]) (``warpAffine``'s translation), so the weights are one per view.
+    ``ref`` and ``ad`` hold the crop's rows from ``yoff`` on."""
     nv, hh, ww = feats.shape[0], feats.shape[1], feats.shape[2]
     h, w = ref.shape[0], ref.shape[1]
     ci, cg = np.float32(c_int), np.float32(c_grad)
@@ -115,7 +124,7 @@ def _differences_at(
             sx, sy = shift[v, 0], shift[v, 1]
             bx, by = np.floor(sx), np.floor(sy)
             fx, fy = np.float32(sx - bx), np.float32(sy - by)
-            ox, iy = int(bx), y + int(by)
+            ox, iy = int(bx) - org[v, 1], y + yoff + int(by) - org[v, 0]
             ya, yb = min(max(iy, 0), hh - 1), min(max(iy + 1, 0), hh - 1)
             w00 = (np.float32(1.0) - fy) * (np.float32(1.0) - fx)
             w01 = (np.float32(1.0) - fy) * fx
@@ -168,13 +177,12 @@ def _row_sums(row: F32, r: int, out: F32) -> None:
 
 
 @njit(inline="always")
-def _vertical_sum(dst: NDArray[np.floating], src: F32, v: int, y: int, r: int, r101: bool) -> None:
+def _vertical_sum(dst: NDArray[np.floating], src: F32, v: int, y: int, r: int, r101: bool, h: int, a0: int) -> None:
     # dst[x] = the sum of src[v, y + dy, x] for dy = -r..r, added in that order from 0, rows beyond the edge
-    # reflected as OpenCV's BORDER_REFLECT_101 (r101) or BORDER_REFLECT
-    h = src.shape[1]
+    # (of h rows) reflected as OpenCV's BORDER_REFLECT_101 (r101) or BORDER_REFLECT; src holds rows from a0 on
     dst[:] = 0.0
     for dy in range(-r, r + 1):
-        row = src[v, _reflect101(y + dy, h) if r101 else _reflect(y + dy, h)]
+        row = src[v, (_reflect101(y + dy, h) if r101 else _reflect(y + dy, h)) - a0]
         for x in range(dst.shape[0]):
             dst[x] += row[x]
 
@@ -190,25 +198,29 @@ def _reflect(i: int, n: int) -> int:
 
 
 @njit(parallel=True, cache=True, fastmath=False)
-def _aggregate(ad: F32, outside: NDArray[np.bool_], win: int, keep: int, invalid: float, out: F32) -> None:
-    """``out`` (h, w): per pixel the mean of the ``keep`` smallest box-aggregated view costs, among the views
-    that see the point (INVALID where none does)."""
-    nv, h, w = ad.shape
+def _aggregate(
+    ad: F32, outside: NDArray[np.bool_], win: int, keep: int, invalid: float, out: F32, first: int, h: int, a0: int
+) -> None:
+    """``out`` (rows ``first`` on of h): per pixel the mean of the ``keep`` smallest box-aggregated view
+    costs, among the views that see the point (INVALID where none does). ``ad`` and ``outside`` hold the
+    rows from ``a0`` on, the window's rows around ``out``'s included."""
+    nv, w = ad.shape[0], ad.shape[2]
     r = win // 2
     inv = np.float32(invalid)
     half = np.float32(invalid * 0.5)
     norm = np.float32(1.0 / (win * win))
     k = min(keep, nv)
-    for y in prange(h):
+    for yo in prange(out.shape[0]):
+        y = first + yo
         costs = np.empty((nv, w), np.float32)
         rank = np.empty(w, np.int32)
         total = np.zeros(w, np.float32)
         n = np.zeros(w, np.int32)
         for v in range(nv):
             cv = costs[v]
-            _vertical_sum(cv, ad, v, y, r, False)
+            _vertical_sum(cv, ad, v, y, r, False, h, a0)
             for x in range(w):
-                cv[x] = inv if outside[v, y, x] else cv[x] * norm
+                cv[x] = inv if outside[v, y - a0, x] else cv[x] * norm
         # the keep smallest, branch-free: a view is kept where fewer than keep views rank before it (ties by
         # view order); the seen ones among them are averaged
         for i in range(nv):
@@ -227,7 +239,7 @@ def _aggregate(ad: F32, outside: NDArray[np.bool_], win: int, keep: int, invalid
                 total[x] += ci[x] if use else np.float32(0.0)
                 n[x] += use
         for x in range(w):
-            out[y, x] = total[x] / np.float32(n[x]) if n[x] > 0 else inv
+            out[yo, x] = total[x] / np.float32(n[x]) if n[x] > 0 else inv
 
 
 def combined_costs(
@@ -240,32 +252,47 @@ def combined_costs(
     keep: int,
     weights: tuple[float, float, float, float],
     invalid: float,
+    org: NDArray[np.int64] | None = None,
+    frame: tuple[int, int] | None = None,
 ) -> F32:
     """(h, w) combined cost at the disparity ``d`` (a number or an (h, w) map): ``feats`` (views, H, W, 3) the
     views' intensity and gradients, ``ref`` (h, w, 3) the reference crop whose top-left pixel is ``origin``
     (y, x) in the views, ``rel`` (views, 2) the baselines, ``weights`` the intensity and gradient scale and
     truncation. At a number, samples and the outside test are placed as ``MatchViews.warp`` places them
-    (``warpAffine``'s float32 translation; the test in double precision)."""
-    nv, hh, ww = feats.shape[0], feats.shape[1], feats.shape[2]
+    (``warpAffine``'s float32 translation; the test in double precision). ``feats[v]`` may be a part of view
+    v: its top-left pixel at ``org[v]`` (y, x) in the view's ``frame`` (h, w) (default: the whole view)."""
+    nv = feats.shape[0]
+    hh, ww = frame if frame is not None else (feats.shape[1], feats.shape[2])
+    org = np.zeros((nv, 2), np.int64) if org is None else np.ascontiguousarray(org, np.int64)
     h, w = ref.shape[0], ref.shape[1]
     y0, x0 = origin
-    ad = np.empty((nv, h, w), np.float32)
-    if isinstance(d, float):
-        shift = np.empty((nv, 2), np.float32)
-        outside = np.empty((nv, h, w), bool)
-        for v in range(nv):
-            rx, ry = float(rel[v, 0]), float(rel[v, 1])
-            shift[v] = (x0 - d * rx, y0 - d * ry)
-            xs = np.arange(x0, x0 + w, dtype=np.float32) - d * rx
-            ys = np.arange(y0, y0 + h, dtype=np.float32) - d * ry
-            outside[v] = ((ys < 0) | (ys > hh - 1))[:, None] | ((xs < 0) | (xs > ww - 1))[None, :]
-        _differences_at(feats, ref, shift.astype(np.float64), win // 2, *weights, ad)
-    else:
-        outside = np.empty((nv, h, w), bool)
-        dm = np.ascontiguousarray(d, np.float32)
-        _differences(feats, ref, rel.astype(np.float32), dm, y0, x0, win // 2, *weights, ad, outside)
+    r = win // 2
     out = np.empty((h, w), np.float32)
-    _aggregate(ad, outside, win, keep, invalid, out)
+    shift = np.empty((nv, 2), np.float32)
+    if isinstance(d, float):
+        for v in range(nv):
+            shift[v] = (x0 - d * float(rel[v, 0]), y0 - d * float(rel[v, 1]))
+    dm = None if isinstance(d, float) else np.ascontiguousarray(d, np.float32)
+    rel32 = rel.astype(np.float32)
+    # in blocks of rows (each with the window's rows around it): the per-view differences are a block's, not
+    # the crop's (issue 24: memory), and every row is computed as in one pass
+    for a in range(0, h, ROWS):
+        b = min(h, a + ROWS)
+        a0, b0 = max(0, a - r), min(h, b + r)
+        ad = np.empty((nv, b0 - a0, w), np.float32)
+        outside = np.empty((nv, b0 - a0, w), bool)
+        ref_b = ref[a0:b0]
+        if dm is None:
+            assert isinstance(d, float)
+            for v in range(nv):
+                rx, ry = float(rel[v, 0]), float(rel[v, 1])
+                xs = np.arange(x0, x0 + w, dtype=np.float32) - d * rx
+                ys = np.arange(y0 + a0, y0 + b0, dtype=np.float32) - d * ry
+                outside[v] = ((ys < 0) | (ys > hh - 1))[:, None] | ((xs < 0) | (xs > ww - 1))[None, :]
+            _differences_at(feats, ref_b, shift.astype(np.float64), r, *weights, ad, org, a0)
+        else:
+            _differences(feats, ref_b, rel32, dm[a0:b0], y0 + a0, x0, r, *weights, ad, outside, org, hh, ww)
+        _aggregate(ad, outside, win, keep, invalid, out[a:b], a, h, a0)
     return out
 
 
@@ -310,10 +337,24 @@ def better_half_mean(stack: F32, seen_by: F32 | None = None) -> tuple[F32, F32]:
 
 @njit(parallel=True, cache=True, fastmath=False)
 def _residuals(
-    feats: F32, ref: F32, rel: F32, d: F32, y0: int, x0: int, inv: float, tau_i: float, res: F32, jac: F32, tr: F32
+    feats: F32,
+    ref: F32,
+    rel: F32,
+    d: F32,
+    y0: int,
+    x0: int,
+    inv: float,
+    tau_i: float,
+    res: F32,
+    jac: F32,
+    tr: F32,
+    org: NDArray[np.int64],
+    fh: int,
+    fw: int,
 ) -> None:
-    """Per view and pixel: the intensity residual at disparity ``d`` (INVALID outside the view), its
-    derivative along the baseline (0 outside) and the residual truncated at ``tau_i``."""
+    """Per view and pixel: the intensity residual at disparity ``d`` (INVALID outside the view's frame,
+    ``fh`` x ``fw``), its derivative along the baseline (0 outside) and the residual truncated at ``tau_i``.
+    ``feats[v]``: the part of view v whose top-left pixel is ``org[v]`` (y, x)."""
     nv, hh, ww = feats.shape[0], feats.shape[1], feats.shape[2]
     h, w = d.shape
     big, ti = np.float32(inv), np.float32(tau_i)
@@ -321,15 +362,16 @@ def _residuals(
         gy = np.float32(y0 + y)
         for v in range(nv):
             rx, ry = rel[v, 0], rel[v, 1]
+            oy, ox = org[v, 0], org[v, 1]
             for x in range(w):
                 mx = np.float32(x0 + x) - d[y, x] * rx
                 my = gy - d[y, x] * ry
-                if (mx < 0) | (mx > ww - 1) | (my < 0) | (my > hh - 1):
+                if (mx < 0) | (mx > fw - 1) | (my < 0) | (my > fh - 1):
                     res[v, y, x], jac[v, y, x], tr[v, y, x] = big, np.float32(0.0), ti
                     continue
                 bx, by = np.floor(mx), np.floor(my)
                 ex, ey = mx - bx, my - by
-                ix, iy = int(bx), int(by)
+                ix, iy = int(bx) - ox, int(by) - oy
                 xa, xb = min(max(ix, 0), ww - 1), min(max(ix + 1, 0), ww - 1)
                 ya, yb = min(max(iy, 0), hh - 1), min(max(iy + 1, 0), hh - 1)
                 w00 = (np.float32(1.0) - ey) * (np.float32(1.0) - ex)
@@ -356,15 +398,29 @@ def _reflect101(i: int, n: int) -> int:
 
 
 @njit(parallel=True, cache=True, fastmath=False)
-def _selected_sums(res: F32, jac: F32, tr: F32, keep: int, inv: float, tau_i: float, a_out: F32, b_out: F32) -> None:
+def _selected_sums(
+    res: F32,
+    jac: F32,
+    tr: F32,
+    keep: int,
+    inv: float,
+    tau_i: float,
+    a_out: F32,
+    b_out: F32,
+    first: int,
+    h: int,
+    a0: int,
+) -> None:
     """Per pixel: each view's 5x5 mean truncated residual (its local fit), the ``keep`` views with the
     smallest (all views tied at the cut: a view is used where fewer than ``keep`` fit strictly better), and
-    over them sum(J^2) / keep and sum(J r) / keep, r clipped. Row by row, each loop over the row's pixels."""
-    nv, h, w = res.shape
+    over them sum(J^2) / keep and sum(J r) / keep, r clipped. Row by row, each loop over the row's pixels.
+    ``a_out``, ``b_out``: rows ``first`` on of h; ``res``, ``jac``, ``tr`` rows ``a0`` on (the 5x5's included)."""
+    nv, w = res.shape[0], res.shape[2]
     half = np.float32(inv * 0.5)
     clip = np.float32(4 * tau_i)
     k = min(keep, nv)
-    for y in prange(h):
+    for yo in prange(a_out.shape[0]):
+        y = first + yo
         cols = np.empty((nv, w), np.float64)
         loc = np.empty((nv, w), np.float32)
         rank = np.empty(w, np.int32)
@@ -372,7 +428,7 @@ def _selected_sums(res: F32, jac: F32, tr: F32, keep: int, inv: float, tau_i: fl
         b = np.zeros(w, np.float32)
         for v in range(nv):
             cv = cols[v]
-            _vertical_sum(cv, tr, v, y, 2, True)
+            _vertical_sum(cv, tr, v, y, 2, True, h, a0)
             lv = loc[v]
             for x in range(w):
                 acc = 0.0
@@ -380,7 +436,7 @@ def _selected_sums(res: F32, jac: F32, tr: F32, keep: int, inv: float, tau_i: fl
                     acc += cv[_reflect101(x + dx, w)]
                 lv[x] = np.float32(acc / 25.0)
             for x in range(w):
-                if abs(res[v, y, x]) >= half:
+                if abs(res[v, y - a0, x]) >= half:
                     lv[x] = np.float32(inv)
         for i in range(nv):
             li = loc[i]
@@ -391,32 +447,49 @@ def _selected_sums(res: F32, jac: F32, tr: F32, keep: int, inv: float, tau_i: fl
                     rank[x] += lj[x] < li[x]
             for x in range(w):
                 use = (rank[x] < k) & (li[x] < half)
-                jv = jac[i, y, x] if use else np.float32(0.0)
-                rv = min(max(res[i, y, x], -clip), clip) if use else np.float32(0.0)
+                jv = jac[i, y - a0, x] if use else np.float32(0.0)
+                rv = min(max(res[i, y - a0, x], -clip), clip) if use else np.float32(0.0)
                 a[x] += jv * jv
                 b[x] += jv * rv
         for x in range(w):
-            a_out[y, x] = a[x] / np.float32(k)
-            b_out[y, x] = b[x] / np.float32(k)
+            a_out[yo, x] = a[x] / np.float32(k)
+            b_out[yo, x] = b[x] / np.float32(k)
 
 
 def refine_sums(
-    feats: F32, ref: F32, rel: NDArray[np.float64], d: F32, origin: tuple[int, int], keep: int, inv: float, tau_i: float
+    feats: F32,
+    ref: F32,
+    rel: NDArray[np.float64],
+    d: F32,
+    origin: tuple[int, int],
+    keep: int,
+    inv: float,
+    tau_i: float,
+    org: NDArray[np.int64] | None = None,
+    frame: tuple[int, int] | None = None,
 ) -> tuple[F32, F32]:
     """One Gauss-Newton step's normal equations before their aggregation (``refine.refine``): per pixel the
     sums of J^2 and J r over the ``keep`` views that fit best locally, divided by ``keep``. What the
-    reference path computes with ``cv2.remap``, ``cv2.boxFilter`` and ``np.partition`` over the views."""
+    reference path computes with ``cv2.remap``, ``cv2.boxFilter`` and ``np.partition`` over the views.
+    ``org``, ``frame``: as for :func:`combined_costs`."""
     nv = feats.shape[0]
+    fh, fw = frame if frame is not None else (feats.shape[1], feats.shape[2])
+    org = np.zeros((nv, 2), np.int64) if org is None else np.ascontiguousarray(org, np.int64)
     h, w = d.shape
-    res = np.empty((nv, h, w), np.float32)
-    jac = np.empty((nv, h, w), np.float32)
-    tr = np.empty((nv, h, w), np.float32)
     dm = np.ascontiguousarray(d, np.float32)
-    _residuals(feats, ref, rel.astype(np.float32), dm, origin[0], origin[1], inv, tau_i, res, jac, tr)
-    a = np.empty((h, w), np.float32)
-    b = np.empty((h, w), np.float32)
-    _selected_sums(res, jac, tr, keep, inv, tau_i, a, b)
-    return a, b
+    rel32 = rel.astype(np.float32)
+    a_sum = np.empty((h, w), np.float32)
+    b_sum = np.empty((h, w), np.float32)
+    for a in range(0, h, ROWS):  # in blocks of rows with the 5x5's rows around them, as combined_costs
+        b = min(h, a + ROWS)
+        a0, b0 = max(0, a - 2), min(h, b + 2)
+        res = np.empty((nv, b0 - a0, w), np.float32)
+        jac = np.empty((nv, b0 - a0, w), np.float32)
+        tr = np.empty((nv, b0 - a0, w), np.float32)
+        y0, x0 = origin
+        _residuals(feats, ref[a0:b0], rel32, dm[a0:b0], y0 + a0, x0, inv, tau_i, res, jac, tr, org, fh, fw)
+        _selected_sums(res, jac, tr, keep, inv, tau_i, a_sum[a:b], b_sum[a:b], a, h, a0)
+    return a_sum, b_sum
 
 
 @njit(cache=True, fastmath=False)

@@ -12,7 +12,8 @@
 3. Continuous refinement (``refine.py``): multi-view photometric least squares along the baselines, which has
    no preferred fractional value, so nothing locks to the sampling grid.
 
-Memory is a few images per view: levels are streamed, never stored as a volume.
+Memory is a few images per view, each only the part of the view that the range reaches from the crop (not
+the frame): levels are streamed, never stored as a volume.
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, overload
 
 import cv2
 import numpy as np
@@ -46,55 +48,92 @@ WIDE_STEP = 0.5
 ALPHA, TAU_I, TAU_G = 0.9, 7 / 255, 2 / 255
 COMPILED = True  # the matching cost by the compiled kernel; False: the OpenCV and numpy reference
 OCCLUDER_PX = 1.0  # a surface nearer by more than this (disparity px) hides what lands behind it in a view
+# px around a view's part beyond the bilinear sample's pixels: the cost window's half (row sums of samples at
+# the crop's neighbouring pixels) with room to spare
+PART_MARGIN = 4
+# full-resolution px by which the disparities asked of the views may leave the range: the coarse sweep's
+# levels (a coarse pixel and one more beyond it), the fractional sweep's reach, the semi-global pairs' levels
+# (OpenCV rounds their count up to 16, in the pair's own px) and the refinement's half pixel
+REACH_PAD = 32.0
 
 
 class MatchViews:
-    """Normalised reference crop and normalised views at one scale, with warps by a disparity."""
+    """Normalised reference crop and normalised views at one scale, with warps by a disparity.
+
+    ``reach`` (lo, hi), full-resolution px: the disparities the views will be asked for. Each view then keeps
+    only the part of its frame those disparities reach from the crop (``parts``; all of it without ``reach``),
+    so its memory follows the crop and the range, not the frame; a sample there is the same as in the whole
+    view (the outside test stays the frame's, and the parts keep every frame edge a sample can be clamped to).
+    """
 
     def __init__(
         self,
-        images: dict[str, F32],
+        images: Mapping[str, F32],
         ref: str,
         rel: dict[str, tuple[float, float]],
         box: tuple[int, int, int, int],
         scale: float = 1.0,
         centre: float = 0.0,
+        reach: tuple[float, float] | None = None,
     ) -> None:
         self.scale = scale
         self.box = tuple(round(v * scale) for v in box)
         y0, y1, x0, x1 = self.box
-        self.feat: dict[str, F32] = {}  # per camera: intensity (matched to the reference's), d/dx, d/dy
-        greys = {}
-        for n in [ref, *rel]:
+        self.rel = rel
+        self.names = list(rel)
+
+        def scaled_grey(n: str) -> F32:
             g = grey(images[n])
             if scale != 1.0:
                 g = np.asarray(cv2.resize(g, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA), np.float32)
-            greys[n] = g
-        g_ref = greys[ref]
+            return g
+
+        g_ref = scaled_grey(ref)
         self.h, self.w = g_ref.shape
         _, std = normalise(g_ref)
-        self.texture = std[y0:y1, x0:x1]
-        self.bright = g_ref[y0:y1, x0:x1]
+        self.texture = np.ascontiguousarray(std[y0:y1, x0:x1])
+        del std
+        self.bright = np.ascontiguousarray(g_ref[y0:y1, x0:x1])
         self.guide = np.ascontiguousarray(g_ref[y0:y1, x0:x1])
-        for n, g in greys.items():
+        self.ref = features(g_ref, (y0, y1, x0, x1))
+        # each view's part (all the same size, for the compiled cost): its top-left pixel in the view's frame
+        parts = [self.part(rel[n], reach) for n in self.names]
+        ph = max((b[1] - b[0] for b in parts), default=0)
+        pw = max((b[3] - b[2] for b in parts), default=0)
+        self.org = np.array([(min(b[0], self.h - ph), min(b[2], self.w - pw)) for b in parts], np.int64).reshape(-1, 2)
+        # the views side by side for the compiled cost; ``feat`` holds views of it (no copy)
+        self.stack = np.empty((len(self.names), ph, pw, 3), np.float32)
+        self.feat: dict[str, F32] = {}  # per camera: intensity (matched to the reference's), d/dx, d/dy
+        for i, n in enumerate(self.names):
             # one gain and offset per camera (exposure differences), not a local normalisation: a window
             # statistic mixes a foreground edge with the background it moves over, and moves the edge
-            if n != ref:
-                gain, offset = exposure(g_ref, g, (centre * scale * rel[n][0], centre * scale * rel[n][1]))
-                g = g * np.float32(gain) + np.float32(offset)
-            gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
-            gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
-            self.feat[n] = np.ascontiguousarray(np.dstack([g, gx, gy]), dtype=np.float32)
-        self.ref = np.ascontiguousarray(self.feat[ref][y0:y1, x0:x1])
-        self.rel = rel
-        self.names = list(rel)
-        # the views side by side for the compiled cost (the dict's entries become views of it, no copy kept)
-        self.stack = np.empty((len(self.names), self.h, self.w, 3), np.float32)
-        for i, n in enumerate(self.names):
-            self.stack[i] = self.feat[n]
+            g = scaled_grey(n)
+            gain, offset = exposure(g_ref, g, (centre * scale * rel[n][0], centre * scale * rel[n][1]))
+            g = g * np.float32(gain) + np.float32(offset)
+            oy, ox = int(self.org[i, 0]), int(self.org[i, 1])
+            self.stack[i] = features(g, (oy, oy + ph, ox, ox + pw))
             self.feat[n] = self.stack[i]
+            del g
         self.rel_array = np.array([rel[n] for n in self.names], np.float64).reshape(-1, 2)
         self.gy, self.gx = np.mgrid[y0:y1, x0:x1].astype(np.float32)
+
+    def part(self, rel: tuple[float, float], reach: tuple[float, float] | None) -> tuple[int, int, int, int]:
+        """(y0, y1, x0, x1) of a view at ``rel`` that disparities within ``reach`` (full-resolution px) sample
+        from the crop: the bilinear sample's second pixel and the cost window's reach (PART_MARGIN) included,
+        clipped to the frame; the whole frame without ``reach``."""
+        if reach is None:
+            return 0, self.h, 0, self.w
+        y0, y1, x0, x1 = self.box
+        ds = (reach[0] * self.scale, reach[1] * self.scale)
+        sx = [d * rel[0] for d in ds]
+        sy = [d * rel[1] for d in ds]
+        m = PART_MARGIN
+        return (
+            max(0, math.floor(y0 - max(sy)) - m),
+            min(self.h, math.ceil(y1 - min(sy)) + m),
+            max(0, math.floor(x0 - max(sx)) - m),
+            min(self.w, math.ceil(x1 - min(sx)) + m),
+        )
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -104,9 +143,12 @@ class MatchViews:
         """View ``name`` sampled where the reference's pixels lie at disparity ``d`` (a number or a map), and
         where that falls outside the view."""
         rx, ry = self.rel[name]
+        oy, ox = (int(v) for v in self.org[self.names.index(name)])
         if isinstance(d, float):
             y0, y1, x0, x1 = self.box
             m = np.array([[1, 0, x0 - d * rx], [0, 1, y0 - d * ry]], np.float32)
+            m[0, 2] -= np.float32(ox)  # in the part (exact: an integer off a float32 of at most this size)
+            m[1, 2] -= np.float32(oy)
             out = cv2.warpAffine(
                 self.feat[name],
                 m,
@@ -119,7 +161,9 @@ class MatchViews:
             return np.asarray(out, np.float32), np.asarray(outside)
         mx = self.gx - d * np.float32(rx)
         my = self.gy - d * np.float32(ry)
-        out = cv2.remap(self.feat[name], mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        out = cv2.remap(
+            self.feat[name], mx - np.float32(ox), my - np.float32(oy), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+        )
         return np.asarray(out, np.float32), np.asarray((mx < 0) | (mx > self.w - 1) | (my < 0) | (my > self.h - 1))
 
     def visible_count(self, d: F32, front: NDArray[np.bool_], tol: float = OCCLUDER_PX) -> NDArray[np.int32]:
@@ -161,7 +205,19 @@ class MatchViews:
             return combine(self.view_costs(d, win), keep)
         y0, _, x0, _ = self.box
         weights = ((1 - ALPHA) * TRUNCATE / TAU_I, ALPHA * TRUNCATE / TAU_G, TAU_I, TAU_G)
-        return combined_costs(self.stack, self.ref, self.rel_array, d, (y0, x0), win, keep, weights, INVALID_COST)
+        return combined_costs(
+            self.stack,
+            self.ref,
+            self.rel_array,
+            d,
+            (y0, x0),
+            win,
+            keep,
+            weights,
+            INVALID_COST,
+            self.org,
+            (self.h, self.w),
+        )
 
     def view_costs(self, d: float | F32, win: int) -> F32:
         """(views, h, w): truncated absolute differences of intensity and gradient (Hosni et al.'s cost, scaled
@@ -193,6 +249,19 @@ def exposure(g_ref: F32, g: F32, shift: tuple[float, float]) -> tuple[float, flo
     m_a, s_a, m_b, s_b = float(a.mean()), float(a.std()), float(b.mean()), float(b.std())
     gain = s_a / s_b if s_b > 1e-6 and s_a > 1e-6 else 1.0
     return gain, m_a - gain * m_b
+
+
+def features(g: F32, part: tuple[int, int, int, int]) -> F32:
+    """(h, w, 3): intensity, d/dx and d/dy of ``g`` (a whole image) on ``part`` (y0, y1, x0, x1), the
+    derivatives as the whole image's (the part taken with the one pixel around it that they read)."""
+    y0, y1, x0, x1 = part
+    h, w = g.shape
+    a0, a1, b0, b1 = max(0, y0 - 1), min(h, y1 + 1), max(0, x0 - 1), min(w, x1 + 1)
+    sub = np.ascontiguousarray(g[a0:a1, b0:b1])
+    gx = cv2.Sobel(sub, cv2.CV_32F, 1, 0, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
+    gy = cv2.Sobel(sub, cv2.CV_32F, 0, 1, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
+    sl = (slice(y0 - a0, y1 - a0), slice(x0 - b0, x1 - b0))
+    return np.ascontiguousarray(np.dstack([sub[sl], gx[sl], gy[sl]]), dtype=np.float32)
 
 
 @dataclass(frozen=True)
@@ -235,7 +304,7 @@ class Sweep:
 
 def sweep(
     views: MatchViews,
-    candidates: list[float | F32],
+    candidates: Sequence[float | F32],
     p: VolumeParams,
     win: int,
     radius: int,
@@ -259,15 +328,18 @@ def sweep(
         raw = views.costs(d, win, p.keep)
         t1 = time.perf_counter()
         seen = raw < INVALID_COST * 0.5
-        c = np.where(seen, agg(raw), np.float32(INVALID_COST))
+        c = agg(raw)
+        del raw
+        c[~seen] = np.float32(INVALID_COST)
         t_agg += time.perf_counter() - t1
         t_cost += t1 - t0
-        c_plus = np.where(k_best == k - 1, c, c_plus)  # the level right after the current best
+        # the state updated in place (no per-level copies of it)
+        np.copyto(c_plus, c, where=k_best == k - 1)  # the level right after the current best
         better = c < best
-        k_best = np.where(better, k, k_best)
-        c_minus = np.where(better, prev, c_minus)
-        c_plus = np.where(better, np.inf, c_plus)
-        best = np.minimum(best, c)
+        np.copyto(k_best, k, where=better)
+        np.copyto(c_minus, prev, where=better)
+        c_plus[better] = np.inf
+        np.minimum(best, c, out=best)
         total += np.minimum(c, TRUNCATE)
         seen_any |= seen
         prev = c
@@ -288,7 +360,36 @@ def sweep(
     return Sweep(disp, best, total / np.float32(max(n, 1)), np.asarray(bound), ~seen_any | (best >= INVALID_COST * 0.5))
 
 
-def _pick(candidates: list[float | F32], k: NDArray[np.int32], shape: tuple[int, int]) -> F32:
+class Around(Sequence[F32]):
+    """The fractional sweep's candidates: ``base`` moved by k times ``step`` for k = -n..n, each map made when
+    asked for (issue 24: not 2 n + 1 maps held at once), the same values as a list of them."""
+
+    def __init__(self, base: F32, step: float, n: int) -> None:
+        self.base = base
+        self.offsets = np.array([np.float32(k * step) for k in range(-n, n + 1)], np.float32)
+
+    def __len__(self) -> int:
+        return len(self.offsets)
+
+    @overload
+    def __getitem__(self, i: int) -> F32: ...
+
+    @overload
+    def __getitem__(self, i: slice) -> Sequence[F32]: ...
+
+    def __getitem__(self, i: int | slice) -> F32 | Sequence[F32]:
+        if isinstance(i, slice):
+            return [self[j] for j in range(len(self))[i]]
+        return (self.base + self.offsets[i]).astype(np.float32)
+
+    def pick(self, k: NDArray[np.int32]) -> F32:
+        """Per pixel, candidate k's value."""
+        return (self.base + self.offsets[k]).astype(np.float32)
+
+
+def _pick(candidates: Sequence[float | F32], k: NDArray[np.int32], shape: tuple[int, int]) -> F32:
+    if isinstance(candidates, Around):
+        return candidates.pick(k)
     if all(isinstance(c, float) for c in candidates):
         return np.asarray(np.asarray(candidates, np.float32)[k], np.float32)
     out = np.empty(shape, np.float32)
@@ -323,7 +424,8 @@ def volume_disparity(
     t0 = time.perf_counter()
     s = coarse_scale(hi - lo + 1, (y1 - y0, x1 - x0))
     centre = 0.5 * (lo + hi)
-    cv = MatchViews(images, ref, rel, box, s, centre)
+    reach = (lo - REACH_PAD, hi + REACH_PAD)  # every disparity the views are asked for (REACH_PAD)
+    cv = MatchViews(images, ref, rel, box, s, centre, reach)
     first, last = math.floor(lo * s) - 1, math.ceil(hi * s) + 1
     levels = [float(v) for v in np.arange(first, last + 1, 1.0)]
     levels = levels[: max(1, 4 * max(cv.h, cv.w))]  # a range far beyond the image is capped
@@ -333,7 +435,9 @@ def volume_disparity(
     coarse = sweep(cv, list(levels), p, p.window, max(1, round(p.radius * s)), stats)
     stats["integer_sweep_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    full = cv if s == 1.0 else MatchViews(images, ref, rel, box, 1.0, centre)
+    if s != 1.0:
+        del cv  # the coarse views go before the full-resolution ones are made
+    full = MatchViews(images, ref, rel, box, 1.0, centre, reach) if s != 1.0 else cv
     h, w = full.shape
     d0 = coarse.disparity / np.float32(s)
     if s != 1.0:
@@ -342,7 +446,7 @@ def volume_disparity(
     reach = max(1.0, 0.75 / s)  # how far the truth may lie from the coarse result, full-resolution px
     step = FRACTION if s >= 0.5 else WIDE_STEP
     n_side = math.ceil(reach / step)
-    cands: list[float | F32] = [(d0 + np.float32(k * step)).astype(np.float32) for k in range(-n_side, n_side + 1)]
+    cands = Around(d0, step, n_side)
     stats["fractional_sweep_pixel_levels"] = h * w * len(cands)
     fine = sweep(full, cands, p, p.window, p.radius, stats)
     stats["fractional_candidates"] = len(cands)

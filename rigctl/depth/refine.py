@@ -45,7 +45,18 @@ def refine(
     for _ in range(iterations):
         if COMPILED and nv:
             y0, _, x0, _ = views.box
-            a_raw, b_raw = refine_sums(views.stack, views.ref, views.rel_array, d, (y0, x0), keep, INVALID_COST, TAU_I)
+            a_raw, b_raw = refine_sums(
+                views.stack,
+                views.ref,
+                views.rel_array,
+                d,
+                (y0, x0),
+                keep,
+                INVALID_COST,
+                TAU_I,
+                views.org,
+                (views.h, views.w),
+            )
             a, b = agg.smooth(a_raw), agg.smooth(b_raw)
         else:
             a, b = _normal_equations(views, d, keep, agg)

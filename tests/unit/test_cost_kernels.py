@@ -118,6 +118,75 @@ def test_the_compiled_refinement_matches_the_reference(keep: int, monkeypatch: p
     assert np.abs(out - start).max() > 0.01  # the steps moved the map: not a comparison of two no-ops
 
 
+@pytest.mark.parametrize("scale", [1.0, 0.5])
+def test_views_cut_to_the_range_give_the_whole_views_costs_and_steps_bit_for_bit(scale: float) -> None:
+    """MatchViews with ``reach`` keeps of each view only the part the range reaches from the crop (issue 24:
+    memory that follows the crop, not the frame); the compiled cost, the reference path and the refinement's
+    sums must be the same bits as with the whole views, at disparities across the range and a little beyond.
+    The OpenCV reference path too, but at a constant disparity within 1e-5: ``warpAffine`` rounds the
+    translation's fraction together with its integer part, which the part's origin changes."""
+    import rigctl.depth.refine as rf
+
+    grid = surfaces((96, 160))
+    ref = "r1c1"
+    ox, oy = grid.offsets[ref]
+    rel = {n: (grid.offsets[n][0] - ox, grid.offsets[n][1] - oy) for n in grid.images if n != ref}
+    assert grid.disparity_range is not None
+    lo, hi = grid.disparity_range
+    box = (30, 70, 50, 110)  # a crop away from every edge: the parts are smaller than the frame
+    whole = cvm.MatchViews(dict(grid.images), ref, rel, box, scale, 0.5 * (lo + hi))
+    cut = cvm.MatchViews(dict(grid.images), ref, rel, box, scale, 0.5 * (lo + hi), (lo - 2.0, hi + 2.0))
+    assert cut.stack.shape[1] * cut.stack.shape[2] < 0.8 * whole.stack.shape[1] * whole.stack.shape[2]
+    rng = np.random.default_rng(4)
+    maps = [(rng.uniform(lo - 1.5, hi + 1.5, whole.shape) * scale).astype(np.float32) for _ in range(2)]
+    for d in [float(round(lo * scale)), hi * scale + 0.37, (lo - 1.0) * scale, *maps]:
+        assert np.array_equal(cut.costs(d, 3, 4), whole.costs(d, 3, 4))
+        cvm.COMPILED = False
+        try:
+            a, b = cut.costs(d, 3, 4), whole.costs(d, 3, 4)
+        finally:
+            cvm.COMPILED = True
+        assert np.array_equal(a, b) if isinstance(d, np.ndarray) else np.abs(a - b).max() <= 1e-5
+    y0, _, x0, _ = whole.box
+    for m in maps:
+        want = rf.refine_sums(whole.stack, whole.ref, whole.rel_array, m, (y0, x0), 4, INVALID_COST, rf.TAU_I)
+        got = rf.refine_sums(
+            cut.stack, cut.ref, cut.rel_array, m, (y0, x0), 4, INVALID_COST, rf.TAU_I, cut.org, (cut.h, cut.w)
+        )
+        assert all(np.array_equal(a, b) for a, b in zip(got, want, strict=True))
+    for name in rel:
+        assert all(
+            np.array_equal(a, b) for a, b in zip(cut.warp(name, maps[0]), whole.warp(name, maps[0]), strict=True)
+        )
+
+
+def test_row_blocks_give_the_one_pass_bits(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The compiled cost and the refinement's sums run in blocks of ``ROWS`` rows (issue 24: the per-view
+    arrays are a block's, not the crop's): blocks of 5 rows, with the cost window's and the 5x5's rows around
+    each, give the bits of one block over the whole crop, at a constant disparity and at a map."""
+    import rigctl.depth.cost_kernels as ck
+    import rigctl.depth.refine as rf
+
+    grid = surfaces((96, 128))
+    ref = "r1c1"
+    ox, oy = grid.offsets[ref]
+    rel = {n: (grid.offsets[n][0] - ox, grid.offsets[n][1] - oy) for n in grid.images if n != ref}
+    assert grid.disparity_range is not None
+    lo, hi = grid.disparity_range
+    views = cvm.MatchViews(dict(grid.images), ref, rel, (3, 91, 2, 126), 1.0, 0.5 * (lo + hi))
+    d = np.random.default_rng(5).uniform(lo, hi, views.shape).astype(np.float32)
+
+    def run() -> list[np.ndarray]:
+        y0, _, x0, _ = views.box
+        sums = rf.refine_sums(views.stack, views.ref, views.rel_array, d, (y0, x0), 4, INVALID_COST, rf.TAU_I)
+        return [views.costs(d, 3, 4), views.costs(d, 5, 2), views.costs(float(round(lo)), 3, 4), *sums]
+
+    monkeypatch.setattr(ck, "ROWS", 10_000)
+    whole = run()
+    monkeypatch.setattr(ck, "ROWS", 5)
+    assert all(np.array_equal(a, b) for a, b in zip(run(), whole, strict=True))
+
+
 def test_the_compiled_visible_count_matches_the_reference() -> None:
     """Views that see each pixel's point (inside the frame, not behind a nearer pixel of the reference), on
     a crop whose disparity has steps up and down, parts keyed out (no occluders there) and points beyond
