@@ -5,6 +5,8 @@ occlusion-aware view selection), or the best side of the reference."""
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 from numpy.typing import NDArray
@@ -28,30 +30,74 @@ def normalise(g: F32, win: int = 7) -> tuple[F32, F32]:
     return np.asarray((g - mean) / (std + 0.01), dtype=np.float32), np.asarray(std, dtype=np.float32)
 
 
-class SweepLevel:
-    """Normalised images of the reference crop and of every view, at one scale."""
+PART_MARGIN = 4  # px around a view's part beyond the bilinear sample's pixels (see :func:`view_part`)
 
-    def __init__(self, grid: Grid, ref: str, views: list[str], scale: float, box: tuple[int, int, int, int]) -> None:
+
+def view_part(
+    box: tuple[int, int, int, int],
+    frame: tuple[int, int],
+    rel: tuple[float, float],
+    reach: tuple[float, float] | None,
+    margin: int = PART_MARGIN,
+) -> tuple[int, int, int, int]:
+    """(y0, y1, x0, x1) of a view at baseline ``rel`` (its frame ``frame``, h x w) that disparities within
+    ``reach`` (px of this scale) sample from ``box``: the bilinear sample's second pixel and ``margin`` more,
+    clipped to the frame; the whole frame without ``reach``. A sample there is the same as in the whole view."""
+    h, w = frame
+    if reach is None:
+        return 0, h, 0, w
+    y0, y1, x0, x1 = box
+    sx = [d * rel[0] for d in reach]
+    sy = [d * rel[1] for d in reach]
+    return (
+        max(0, math.floor(y0 - max(sy)) - margin),
+        min(h, math.ceil(y1 - min(sy)) + margin),
+        max(0, math.floor(x0 - max(sx)) - margin),
+        min(w, math.ceil(x1 - min(sx)) + margin),
+    )
+
+
+class SweepLevel:
+    """Normalised images of the reference crop and of every view, at one scale. ``reach`` (lo, hi), px of
+    the full resolution: the disparities it will be asked for; each view then keeps only the part of its
+    normalised image they reach from the crop (``org``: its top-left pixel), not the frame (issue 24)."""
+
+    def __init__(
+        self,
+        grid: Grid,
+        ref: str,
+        views: list[str],
+        scale: float,
+        box: tuple[int, int, int, int],
+        reach: tuple[float, float] | None = None,
+    ) -> None:
         self.scale = scale
         y0, y1, x0, x1 = (round(v * scale) for v in box)
         self.box = (y0, y1, x0, x1)
         self.size = (x1 - x0, y1 - y0)
         self.norm: dict[str, F32] = {}
-        greys = {}
-        for n in [ref, *views]:
-            g = grey(grid.images[n])
-            if scale != 1.0:
-                g = np.asarray(cv2.resize(g, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA), np.float32)
-            greys[n] = g
-            self.norm[n], std = normalise(g)
-            if n == ref:
-                self.texture = std[y0:y1, x0:x1]
-                self.bright = g[y0:y1, x0:x1]
-        self.h, self.w = greys[ref].shape
-        self.ref = self.norm[ref][y0:y1, x0:x1]
+        self.org: dict[str, tuple[int, int]] = {}
         ox, oy = grid.offsets[ref]
         self.rel = {n: (grid.offsets[n][0] - ox, grid.offsets[n][1] - oy) for n in views}
         self.views = views
+        scaled = None if reach is None else (reach[0] * scale, reach[1] * scale)
+        for n in [ref, *views]:  # one camera at a time: its grey and whole normalised image go before the next
+            g = grey(grid.images[n])
+            if scale != 1.0:
+                g = np.asarray(cv2.resize(g, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA), np.float32)
+            norm, std = normalise(g)
+            self.h, self.w = g.shape
+            if n == ref:
+                self.texture = np.ascontiguousarray(std[y0:y1, x0:x1])
+                self.bright = np.ascontiguousarray(g[y0:y1, x0:x1])
+                self.ref = np.ascontiguousarray(norm[y0:y1, x0:x1])
+                continue
+            a0, a1, b0, b1 = view_part(self.box, (self.h, self.w), self.rel[n], scaled)
+            self.org[n] = (a0, b0)
+            self.norm[n] = (
+                norm if (a0, a1, b0, b1) == (0, self.h, 0, self.w) else np.ascontiguousarray(norm[a0:a1, b0:b1])
+            )
+            del g, norm, std
 
     def cost_const(self, d: float, win: int) -> F32:
         """(views, h, w) aggregated cost at one disparity for every pixel."""
@@ -62,6 +108,8 @@ class SweepLevel:
         for i, n in enumerate(self.views):
             rx, ry = self.rel[n]
             M = np.array([[1, 0, x0 - d * rx], [0, 1, y0 - d * ry]], np.float32)
+            M[1, 2] -= np.float32(self.org[n][0])  # in the view's part
+            M[0, 2] -= np.float32(self.org[n][1])
             warped = cv2.warpAffine(
                 self.norm[n],
                 M,
@@ -87,7 +135,8 @@ class SweepLevel:
             rx, ry = self.rel[n]
             mx = gx - D * np.float32(rx)
             my = gy - D * np.float32(ry)
-            warped = cv2.remap(self.norm[n], mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            py, px = (np.float32(v) for v in self.org[n])
+            warped = cv2.remap(self.norm[n], mx - px, my - py, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
             ad = np.minimum(np.abs(warped - self.ref), TRUNCATE)
             agg = cv2.boxFilter(ad, -1, (win, win), borderType=cv2.BORDER_REFLECT)
             outside = (mx < 0) | (mx > self.w - 1) | (my < 0) | (my > self.h - 1)
@@ -112,8 +161,11 @@ class SweepLevel:
         nv = len(self.views)
         out = np.empty((len(candidates), qy.size), np.float32)
         # views in groups of four channels: one scatter and one box filter aggregates four views at once
-        dense = [np.zeros((*where.shape, 4), np.float32) for _ in range(0, nv, 4)]
-        ad = np.zeros((n, 4 * len(dense)), np.float32)  # channels past the last view stay 0
+        # one image for every group of four (issue 24: memory): only the pixels of ``need`` are ever written,
+        # the same ones for every group, so the rest stays 0 as in one image per group
+        dense = np.zeros((*where.shape, 4), np.float32)
+        groups = range(0, nv, 4)
+        ad = np.zeros((n, 4 * len(groups)), np.float32)  # channels past the last view stay 0
         per_view = np.empty((nv, qy.size), np.float32)
         for ci, cand in enumerate(candidates):
             d = np.pad(cand[ys, xs], (0, pad)).reshape(rows, width)
@@ -121,14 +173,15 @@ class SweepLevel:
             for vi, name in enumerate(self.views):
                 rx, ry = self.rel[name]
                 mx, my = gx - d * np.float32(rx), gy - d * np.float32(ry)
-                warped = cv2.remap(self.norm[name], mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+                py, px = (np.float32(v) for v in self.org[name])
+                warped = cv2.remap(self.norm[name], mx - px, my - py, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
                 ad[:, vi] = warped.reshape(-1)[:n]
             np.subtract(ad, ref_vals[:, None], out=ad)
             np.abs(ad, out=ad)
             np.minimum(ad, TRUNCATE, out=ad)
-            for gi, img in enumerate(dense):
-                img[ys, xs] = ad[:, 4 * gi : 4 * gi + 4]
-                agg = cv2.boxFilter(img, -1, (win, win), borderType=cv2.BORDER_REFLECT)[qy, qx]
+            for gi in range(len(groups)):
+                dense[ys, xs] = ad[:, 4 * gi : 4 * gi + 4]
+                agg = cv2.boxFilter(dense, -1, (win, win), borderType=cv2.BORDER_REFLECT)[qy, qx]
                 take = min(4, nv - 4 * gi)
                 per_view[4 * gi : 4 * gi + take] = agg[:, :take].T
             for vi, name in enumerate(self.views):

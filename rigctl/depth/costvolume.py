@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.depth.cost import INVALID_COST, TRUNCATE, combine, grey, normalise
+from rigctl.depth.cost import INVALID_COST, TRUNCATE, combine, grey, normalise, view_part
 from rigctl.depth.cost_kernels import combined_costs, visible_views
 from rigctl.depth.search import EstimateStats
 
@@ -48,12 +48,10 @@ WIDE_STEP = 0.5
 ALPHA, TAU_I, TAU_G = 0.9, 7 / 255, 2 / 255
 COMPILED = True  # the matching cost by the compiled kernel; False: the OpenCV and numpy reference
 OCCLUDER_PX = 1.0  # a surface nearer by more than this (disparity px) hides what lands behind it in a view
-# px around a view's part beyond the bilinear sample's pixels: the cost window's half (row sums of samples at
-# the crop's neighbouring pixels) with room to spare
-PART_MARGIN = 4
 # full-resolution px by which the disparities asked of the views may leave the range: the coarse sweep's
 # levels (a coarse pixel and one more beyond it), the fractional sweep's reach, the semi-global pairs' levels
-# (OpenCV rounds their count up to 16, in the pair's own px) and the refinement's half pixel
+# (OpenCV rounds their count up to 16, in the pair's own px: more for a pair closer than 0.5 spacings, see
+# ``reach_pad``) and the refinement's half pixel
 REACH_PAD = 32.0
 
 
@@ -93,8 +91,8 @@ class MatchViews:
         _, std = normalise(g_ref)
         self.texture = np.ascontiguousarray(std[y0:y1, x0:x1])
         del std
-        self.bright = np.ascontiguousarray(g_ref[y0:y1, x0:x1])
         self.guide = np.ascontiguousarray(g_ref[y0:y1, x0:x1])
+        self.bright = self.guide  # the same pixels (read only)
         self.ref = features(g_ref, (y0, y1, x0, x1))
         # each view's part (all the same size, for the compiled cost): its top-left pixel in the view's frame
         parts = [self.part(rel[n], reach) for n in self.names]
@@ -119,21 +117,10 @@ class MatchViews:
 
     def part(self, rel: tuple[float, float], reach: tuple[float, float] | None) -> tuple[int, int, int, int]:
         """(y0, y1, x0, x1) of a view at ``rel`` that disparities within ``reach`` (full-resolution px) sample
-        from the crop: the bilinear sample's second pixel and the cost window's reach (PART_MARGIN) included,
-        clipped to the frame; the whole frame without ``reach``."""
-        if reach is None:
-            return 0, self.h, 0, self.w
+        from the crop (``cost.view_part``: the cost window's reach is within its margin)."""
+        scaled = None if reach is None else (reach[0] * self.scale, reach[1] * self.scale)
         y0, y1, x0, x1 = self.box
-        ds = (reach[0] * self.scale, reach[1] * self.scale)
-        sx = [d * rel[0] for d in ds]
-        sy = [d * rel[1] for d in ds]
-        m = PART_MARGIN
-        return (
-            max(0, math.floor(y0 - max(sy)) - m),
-            min(self.h, math.ceil(y1 - min(sy)) + m),
-            max(0, math.floor(x0 - max(sx)) - m),
-            min(self.w, math.ceil(x1 - min(sx)) + m),
-        )
+        return view_part((y0, y1, x0, x1), (self.h, self.w), rel, scaled)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -424,7 +411,8 @@ def volume_disparity(
     t0 = time.perf_counter()
     s = coarse_scale(hi - lo + 1, (y1 - y0, x1 - x0))
     centre = 0.5 * (lo + hi)
-    reach = (lo - REACH_PAD, hi + REACH_PAD)  # every disparity the views are asked for (REACH_PAD)
+    pad = reach_pad(rel)
+    reach = (lo - pad, hi + pad)  # every disparity the views are asked for (REACH_PAD)
     cv = MatchViews(images, ref, rel, box, s, centre, reach)
     first, last = math.floor(lo * s) - 1, math.ceil(hi * s) + 1
     levels = [float(v) for v in np.arange(first, last + 1, 1.0)]
@@ -462,6 +450,13 @@ def volume_disparity(
     )
     fine.disparity = np.clip(fine.disparity, lo - 1.0, hi + 1.0).astype(np.float32)
     return fine, full
+
+
+def reach_pad(rel: dict[str, tuple[float, float]]) -> float:
+    """REACH_PAD, or more where a semi-global pair's 16 extra levels (its own px) reach further: a pair whose
+    baseline is shorter than half the horizontal spacing."""
+    steps = [abs(v) for r in rel.values() for v in r if abs(v) > 1e-6]
+    return max(REACH_PAD, 17.0 / min(steps) + 2.0) if steps else REACH_PAD
 
 
 def choose(views: MatchViews, candidates: list[F32], p: VolumeParams) -> NDArray[np.intp]:

@@ -57,8 +57,10 @@ def pairs_engine(job: SearchJob) -> BoxEstimate:
     stats["pairs_pixel_levels"] = sum(work)
 
     t0 = time.perf_counter()
-    fine = SweepLevel(grid, ref, job.moving, 1.0, box)
     candidates = [base] + [np.where(np.isfinite(m), m, base).astype(np.float32) for m in stack]
+    # the views only as far as the candidates reach from the box (issue 24: memory), the same samples
+    reach = (min(float(c.min()) for c in candidates), max(float(c.max()) for c in candidates))
+    fine = SweepLevel(grid, ref, job.moving, 1.0, box, reach)
     conflict = ((np.nan_to_num(spread, nan=0.0) > CONFLICT_PX) | ~have) & region
     costs = fine.costs_where(candidates, conflict, preset.window, job.keep)
     k = np.argmin(costs, axis=0)
@@ -69,9 +71,12 @@ def pairs_engine(job: SearchJob) -> BoxEstimate:
     stats["conflict_share"] = float(conflict.sum() / max(1, region.sum()))
     stats["select_s"] = time.perf_counter() - t0
 
+    count = np.zeros(disp.shape, np.int64)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        agree = (np.abs(stack - disp[None]) <= 1.0).sum(0) / np.float32(len(maps))
+        for m in stack:  # one pair at a time (issue 24: no pairs x pixels temporaries)
+            count += np.abs(m - disp) <= 1.0
+    agree = count / np.float32(len(maps))
     zeros = np.zeros(disp.shape, bool)
     no_view = cost >= INVALID_COST * 0.5
     return BoxEstimate(disp, cost, agree.astype(np.float32), fine.texture, fine.bright, zeros, no_view, ~have & region)
@@ -83,10 +88,9 @@ def fill_from_background(disp: F32, holes: NDArray[np.bool_]) -> F32:
     out = disp.copy()
     h, w = disp.shape
     valid = np.isfinite(disp) & ~holes
-    idx = np.where(valid, np.arange(w)[None, :], -1)
-    left = np.maximum.accumulate(idx, axis=1)
-    idx_r = np.where(valid, np.arange(w)[None, :], w)
-    right = np.minimum.accumulate(idx_r[:, ::-1], axis=1)[:, ::-1]
+    cols = np.arange(w, dtype=np.int32)[None, :]  # 32-bit column numbers (issue 24: memory)
+    left = np.maximum.accumulate(np.where(valid, cols, np.int32(-1)), axis=1)
+    right = np.minimum.accumulate(np.where(valid, cols, np.int32(w))[:, ::-1], axis=1)[:, ::-1]
     rows = np.arange(h)[:, None]
     lv = np.where(left >= 0, disp[rows, np.clip(left, 0, w - 1)], np.inf)
     rv = np.where(right < w, disp[rows, np.clip(right, 0, w - 1)], np.inf)

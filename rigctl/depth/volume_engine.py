@@ -46,19 +46,27 @@ def volume_engine(job: SearchJob) -> BoxEstimate:
         crop.disparity = np.asarray(cv2.medianBlur(np.ascontiguousarray(crop.disparity), 5), np.float32)
         return crop
     stats["engine"] = "cost volume"
-    sw, views = volume_disparity(dict(job.grid.images), job.ref, rel, job.box, job.d_range, params, stats)
+    # the semi-global pairs first: their working set is gone before the views are made (issue 24: memory)
     t0 = time.perf_counter()
+    with_pairs = bool(p.with_pairs and neighbour_count(job) and min(job.grid.shape) >= 16)
+    pairs = pairs_engine(job).disparity if with_pairs else None
+    t_pairs = time.perf_counter() - t0
+    pair_levels = stats.get("levels")
+    sw, views = volume_disparity(dict(job.grid.images), job.ref, rel, job.box, job.d_range, params, stats)
+    if pairs is not None and pair_levels is not None:
+        stats["levels"] = pair_levels  # as reported before the pairs ran first: the widest pair's levels
+    t0 = time.perf_counter() - t_pairs
     d = sw.disparity
     reach: float | F32 = FRACTION  # the refinement stays within the quarter-pixel cell the sweep chose
-    if p.with_pairs and neighbour_count(job) and min(job.grid.shape) >= 16:
+    if pairs is not None:
         # the semi-global pairs hold large weakly textured areas, steep slants and occlusion edges together;
         # where the views agree better with them, they win, and are refined in turn (from their 1/16 px)
-        pairs = pairs_engine(job).disparity
         have = np.isfinite(pairs)
         picked = pick_pairs(views, d, np.where(have, pairs, d).astype(np.float32), params) & have
         d = np.where(picked, pairs, d).astype(np.float32)
         reach = np.where(picked, np.float32(0.5), np.float32(FRACTION)).astype(np.float32)
         stats["pairs_chosen_share"] = float(picked.mean())
+        del pairs, have, picked
     t1 = time.perf_counter()
     stats["candidates_s"] = t1 - t0  # the semi-global pairs as a second candidate, and the choice between them
     if p.lk_iterations:

@@ -187,6 +187,28 @@ def test_row_blocks_give_the_one_pass_bits(monkeypatch: pytest.MonkeyPatch) -> N
     assert all(np.array_equal(a, b) for a, b in zip(run(), whole, strict=True))
 
 
+def test_sweep_level_cut_to_the_reach_gives_the_whole_views_costs() -> None:
+    """The pairs engine's SweepLevel keeps only the part of each view that its candidates reach from the box
+    (issue 24): the costs at the candidates' pixels and over the box are the same bits as with whole views."""
+    from rigctl.depth.cost import SweepLevel
+
+    grid = surfaces((96, 160))
+    ref = "r1c1"
+    views = [n for n in grid.names if n != ref]
+    assert grid.disparity_range is not None
+    lo, hi = grid.disparity_range
+    box = (30, 70, 50, 110)
+    rng = np.random.default_rng(6)
+    cands = [rng.uniform(lo - 1, hi + 1, (40, 60)).astype(np.float32) for _ in range(3)]
+    reach = (min(float(c.min()) for c in cands), max(float(c.max()) for c in cands))
+    whole = SweepLevel(grid, ref, views, 1.0, box)
+    cut = SweepLevel(grid, ref, views, 1.0, box, reach)
+    assert sum(v.size for v in cut.norm.values()) < 0.8 * sum(v.size for v in whole.norm.values())
+    where = rng.random((40, 60)) < 0.3
+    assert np.array_equal(cut.costs_where(cands, where, 3, 4), whole.costs_where(cands, where, 3, 4))
+    assert np.array_equal(cut.cost_map(cands[0], 3), whole.cost_map(cands[0], 3))
+
+
 def test_the_compiled_visible_count_matches_the_reference() -> None:
     """Views that see each pixel's point (inside the frame, not behind a nearer pixel of the reference), on
     a crop whose disparity has steps up and down, parts keyed out (no occluders there) and points beyond
