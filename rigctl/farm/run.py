@@ -183,11 +183,11 @@ def default_memory_limit(take: Path, cameras: int | None) -> int:
 
 
 # Peak resident memory of one frame set, measured with ``rigctl bench depth --size`` (preset best, every camera):
-# a fixed part (interpreter, OpenCV, Dask) and a part per pixel and camera (48 B measured between 960x540 and
-# 1920x1080). The worker limit is this with a margin of 25 %: Dask pauses a worker at 80 % of it and restarts
-# it at 95 %.
+# a fixed part (interpreter, OpenCV, Dask) and a part per pixel and camera (55 B measured between 1920x1080,
+# 1.29 GiB, and 3840x2160, 4.17 GiB, with the cost volume at every range: issue 24). The worker limit is this
+# with a margin of 25 %: Dask pauses a worker at 80 % of it (above the measured peak) and restarts it at 95 %.
 BASE_BYTES = 600e6
-BYTES_PER_CAMERA_PIXEL = 50.0
+BYTES_PER_CAMERA_PIXEL = 56.0
 MARGIN = 1.25
 
 
