@@ -412,8 +412,8 @@ def volume_disparity(
     s = coarse_scale(hi - lo + 1, (y1 - y0, x1 - x0))
     centre = 0.5 * (lo + hi)
     pad = reach_pad(rel)
-    reach = (lo - pad, hi + pad)  # every disparity the views are asked for (REACH_PAD)
-    cv = MatchViews(images, ref, rel, box, s, centre, reach)
+    asked = (lo - pad, hi + pad)  # every disparity the views are asked for (REACH_PAD)
+    cv = MatchViews(images, ref, rel, box, s, centre, asked)
     first, last = math.floor(lo * s) - 1, math.ceil(hi * s) + 1
     levels = [float(v) for v in np.arange(first, last + 1, 1.0)]
     levels = levels[: max(1, 4 * max(cv.h, cv.w))]  # a range far beyond the image is capped
@@ -425,7 +425,7 @@ def volume_disparity(
     t0 = time.perf_counter()
     if s != 1.0:
         del cv  # the coarse views go before the full-resolution ones are made
-    full = MatchViews(images, ref, rel, box, 1.0, centre, reach) if s != 1.0 else cv
+    full = MatchViews(images, ref, rel, box, 1.0, centre, asked) if s != 1.0 else cv
     h, w = full.shape
     d0 = coarse.disparity / np.float32(s)
     if s != 1.0:
