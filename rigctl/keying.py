@@ -67,10 +67,11 @@ class Keyer:
             a[small[labels]] = 0.0
         return a
 
-    def soft(self, rgb: F32) -> SoftKey:
+    def soft(self, rgb: F32, hard: F32 | None = None) -> SoftKey:
         """The subject's coverage of every pixel (alpha, fractional on the edge) and its colour unmixed from
-        the screen behind it (:func:`soft_key`); all ones and the picture itself without a screen."""
-        return soft_key(rgb, self)
+        the screen behind it (:func:`soft_key`); all ones and the picture itself without a screen. ``hard``:
+        this keyer's :meth:`matte` of the same picture when it was already computed (depth keys each camera)."""
+        return soft_key(rgb, self, hard)
 
     @staticmethod
     def despill(rgb: F32, matte: F32) -> F32:
@@ -113,22 +114,26 @@ def _local_mean(values: F32, weight: F32, sigmas: tuple[float, ...]) -> tuple[F3
     out = np.zeros(values.shape, np.float32)
     done = np.zeros(weight.shape, bool)
     h, w = weight.shape
+    c = values.shape[2]
+    # the weighted values and the weight side by side, built once for every sigma
+    weighted = np.empty((h, w, c + 1), np.float32)
+    np.multiply(values, weight[..., None], out=weighted[..., :c])
+    weighted[..., c] = weight
     for sigma in sigmas:
-        both = np.concatenate([values * weight[..., None], weight[..., None]], axis=2)
         scale = max(1, int(sigma // 4))  # a wide blur at a coarser scale: the same field, a fraction of the time
         if scale > 1:
-            small = cv2.resize(both, (max(1, w // scale), max(1, h // scale)), interpolation=cv2.INTER_AREA)
+            small = cv2.resize(weighted, (max(1, w // scale), max(1, h // scale)), interpolation=cv2.INTER_AREA)
             both = cv2.resize(cv2.GaussianBlur(small, (0, 0), sigma / scale), (w, h), interpolation=cv2.INTER_LINEAR)
         else:
-            both = cv2.GaussianBlur(both, (0, 0), sigma)
+            both = cv2.GaussianBlur(weighted, (0, 0), sigma)
         num, den = both[..., :-1], both[..., -1]
         take = ~done & (den > 0.02)
-        out[take] = num[take] / den[take][:, None]
+        np.divide(num, den[..., None], out=out, where=take[..., None])  # in place: no gathered copies
         done |= take
     return out, done.astype(np.float32)
 
 
-def soft_key(rgb: F32, keyer: Keyer) -> SoftKey:
+def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None) -> SoftKey:
     """Alpha and the unmixed subject colour on a green screen.
 
     The screen's colour is estimated at every pixel from the screen around it (a smooth field: uneven light is
@@ -143,11 +148,16 @@ def soft_key(rgb: F32, keyer: Keyer) -> SoftKey:
 
     Alpha is measured on the nominal range [0, 1]; the colour keeps what was captured beyond it (a 4:2:2
     camera's super-whites and sub-blacks): the whole subject as it is, unmixed edge colours within the
-    picture's own range."""
+    picture's own range.
+
+    ``hard``: ``keyer.matte`` of the picture clipped to [0, 1], when the caller has it (then it is not computed
+    again). It is below 1 somewhere exactly when the keyer found a screen (the screen's own pixels key to 0),
+    so it also says whether there is one."""
     captured = np.asarray(rgb, np.float32)
     rgb = np.clip(captured, 0.0, 1.0)
-    hard = keyer.matte(rgb)
-    if keyer.screen_excess(rgb) <= 0:
+    if hard is None:
+        hard = keyer.matte(rgb)
+    if not bool((hard < 1).any()):
         return SoftKey(np.ones(rgb.shape[:2], np.float32), captured.copy())
     ycc = np.asarray(rgb @ RGB_TO_YCC.T, np.float32)
     # 4:2:2 decoded: the two pixels of each pair share their chroma (but where decoding clipped)
@@ -157,9 +167,9 @@ def soft_key(rgb: F32, keyer: Keyer) -> SoftKey:
     solid = cv2.erode((hard >= 1).astype(np.uint8), k3).astype(np.float32)
     screen = cv2.erode((hard <= 0).astype(np.uint8), k3).astype(np.float32)
     alpha = hard
+    front, have_front = _local_mean(ycc, solid, (3.0, 12.0))  # the nearby subject: the same in both passes
     for _ in range(2):  # the second pass measures the screen without the faint strands the first one found
         back, _ = _local_mean(ycc, screen, (4.0, 16.0, 64.0))
-        front, have_front = _local_mean(ycc, solid, (3.0, 12.0))
         chroma_b = back[..., 1:]
         level = np.maximum(np.linalg.norm(chroma_b, axis=2), 1e-3)
         u = chroma_b / level[..., None]  # the screen's chroma direction

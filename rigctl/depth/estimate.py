@@ -37,6 +37,9 @@ class DepthResult:
     matte: F32
     filled: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 0), bool))
     stats: EstimateStats = field(default_factory=lambda: EstimateStats())
+    # the keyer whose matte of the camera's picture ``matte`` is (the export's soft key starts from it rather
+    # than keying the picture again); None when the caller gave the matte or nothing was keyed
+    keyed_by: Keyer | None = None
 
 
 def choose_views(grid: Grid, ref: str, mode: str) -> list[str]:
@@ -77,6 +80,7 @@ def estimate(
     h, w = grid.shape
     stats = EstimateStats(camera=ref, preset=preset.name)
     t0 = time.perf_counter()
+    keyed_by = keyer if matte is None else None
     if matte is None:
         matte = keyer.matte(grid.images[ref]) if keyer is not None else np.ones((h, w), np.float32)
     # depth where the subject covers at least half the pixel (``edge.py``): not on the screen beside it
@@ -91,6 +95,7 @@ def estimate(
         matte,
         np.zeros((h, w), bool),
         stats,
+        keyed_by,
     )
     views = choose_views(grid, ref, preset.views)
     moving = [
@@ -143,7 +148,7 @@ def estimate(
     if crop.filled is not None:
         filled[y0:y1, x0:x1] = valid & crop.filled
         stats["filled_from_background_pixels"] = int(filled.sum())
-    return DepthResult(out, conf, unreliable, bound_hit, matte, filled, stats)
+    return DepthResult(out, conf, unreliable, bound_hit, matte, filled, stats, keyed_by)
 
 
 def _drop_sensor_fixed(

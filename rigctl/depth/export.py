@@ -24,7 +24,7 @@ from rigctl.disparity_layers import header as disparity_header
 from rigctl.disparity_layers import layers, steps
 from rigctl.exr import picture, picture_attributes, write_exr
 from rigctl.exrcam import camera_attributes
-from rigctl.keying import Keyer
+from rigctl.keying import Keyer, SoftKey
 from rigctl.layout import inside, output_path
 from rigctl.pfm import write_pfm
 from rigctl.publish import move_into, publish_png
@@ -95,6 +95,18 @@ class Target:
         return output_path(self.out, "flat" if self.flat else self.layout, self.frame, camera, ext)
 
 
+KEYER = Keyer()  # the soft key of every EXR picture
+
+
+def soft_key(image: F32, res: DepthResult) -> SoftKey:
+    """The picture's soft key, from the hard matte depth already computed when it is :data:`KEYER`'s of the
+    same picture (within [0, 1], so clipping it first, as the soft key does, changes nothing); the same key as
+    ``KEYER.soft(image)``, without keying the picture a second time."""
+    same = res.keyed_by == KEYER and res.matte.shape == image.shape[:2]
+    hard = res.matte if same and float(image.min()) >= 0.0 and float(image.max()) <= 1.0 else None
+    return KEYER.soft(image, hard)
+
+
 def write_outputs(
     target: Target, name: str, grid: Grid, res: DepthResult, d_range: tuple[float, float], formats: tuple[str, ...]
 ) -> None:
@@ -108,7 +120,7 @@ def write_outputs(
         inv_z = np.where(np.isfinite(z) & (z > 0), 1.0 / z, 0.0).astype(np.float32)
         # the picture scene-linear, A the subject's coverage (the soft key) and RGB its unmixed colour
         # premultiplied by it, as NUKE and Unreal read it; unkeyed (no screen, or --no-key) opaque
-        key = Keyer().soft(grid.images[name]) if bool((res.matte < 1).any()) else None
+        key = soft_key(grid.images[name], res) if bool((res.matte < 1).any()) else None
         rgb, alpha = (key.foreground, key.alpha) if key is not None else (grid.images[name], res.matte)
         channels: dict[str, F32] = {**picture(rgb, alpha, target.colour), "depth.Z": inv_z}
         channels["confidence.Y"] = res.confidence

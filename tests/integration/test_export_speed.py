@@ -1,0 +1,137 @@
+"""Issue 24's faster write path gives the outputs the reference path gives: the soft key started from the
+hard matte depth computed (not keyed again) and the soft key's local means built once per field are bit-exact
+against the slower forms they replaced."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+import rigctl.depth.export as export
+from rigctl.depth.estimate import DepthResult
+from rigctl.depth.export import Target, write_outputs
+from rigctl.depth.grid import Grid
+from rigctl.depth.options import DepthOptions
+from rigctl.depth.pipeline import TakeProcessor
+from rigctl.depth.sources import OneGrid
+from rigctl.exr import read_exr
+from rigctl.keying import Keyer, _local_mean
+
+CAMS = ("r0c0", "r0c1", "r0c2")
+H, W = 96, 128
+
+
+def _picture(shift: float, frame: int) -> np.ndarray:
+    """A green screen (smooth, a little noise) with a textured subject whose edges are soft, ``shift`` px left."""
+    rng = np.random.default_rng(frame)
+    img = np.empty((H, W, 3), np.float32)
+    img[...] = (0.12, 0.62, 0.16)
+    img += rng.normal(0, 0.004, img.shape).astype(np.float32)
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    x0 = 44 - shift + 2 * frame
+    cover = np.clip(np.minimum(xx - x0, x0 + 40 - xx) / 2 + 0.5, 0, 1) * np.clip(np.minimum(yy - 20, 76 - yy), 0, 1)
+    texture = 0.45 + 0.25 * np.sin(xx * 0.9 + shift * 0.9) * np.cos(yy * 0.7)
+    subject = np.stack([texture, 0.6 * texture, 0.5 * texture + 0.1], axis=2).astype(np.float32)
+    out = cover[..., None] * subject + (1 - cover[..., None]) * img
+    return np.clip(out, 0, 1).astype(np.float32)
+
+
+def _grid(frame: int = 0) -> Grid:
+    d = 4.0
+    images = {c: _picture(d * i, frame) for i, c in enumerate(CAMS)}
+    offsets = {c: (float(i), 0.0) for i, c in enumerate(CAMS)}
+    return Grid(list(CAMS), images, offsets, focal_px=100.0, spacing=0.1, meta={"frame": frame})
+
+
+OPT = DepthOptions(preset="fast", disparity_range=(0.0, 10.0), warmup=0)
+
+
+@pytest.fixture(scope="module")
+def computed() -> tuple[Grid, dict[str, DepthResult]]:
+    grid = _grid()
+    results = TakeProcessor(OneGrid(grid), OPT).depth(grid)
+    assert all(bool((r.matte < 1).any()) and bool((r.matte > 0).any()) for r in results.values())  # keyed
+    return grid, results
+
+
+def _reference_local_mean(values: np.ndarray, weight: np.ndarray, sigmas: tuple[float, ...]) -> tuple:
+    """The soft key's local mean as it was before issue 24's write work (the products rebuilt per sigma and
+    the division through gathered copies): the reference the in-place form must match bit for bit."""
+    out = np.zeros(values.shape, np.float32)
+    done = np.zeros(weight.shape, bool)
+    h, w = weight.shape
+    for sigma in sigmas:
+        both = np.concatenate([values * weight[..., None], weight[..., None]], axis=2)
+        scale = max(1, int(sigma // 4))
+        if scale > 1:
+            small = cv2.resize(both, (max(1, w // scale), max(1, h // scale)), interpolation=cv2.INTER_AREA)
+            both = cv2.resize(cv2.GaussianBlur(small, (0, 0), sigma / scale), (w, h), interpolation=cv2.INTER_LINEAR)
+        else:
+            both = cv2.GaussianBlur(both, (0, 0), sigma)
+        num, den = both[..., :-1], both[..., -1]
+        take = ~done & (den > 0.02)
+        out[take] = num[take] / den[take][:, None]
+        done |= take
+    return out, done.astype(np.float32)
+
+
+def test_the_local_mean_matches_the_reference_bit_for_bit() -> None:
+    rng = np.random.default_rng(3)
+    values = rng.random((90, 130, 3), dtype=np.float32)
+    weight = (rng.random((90, 130)) > 0.97).astype(np.float32)  # sparse: the later sigmas fill the holes
+    weight[:, :40] = 0.0  # a wide hole only the widest sigma reaches
+    for sigmas in ((4.0, 16.0, 64.0), (3.0, 12.0)):
+        got, got_done = _local_mean(values, weight, sigmas)
+        want, want_done = _reference_local_mean(values, weight, sigmas)
+        assert 0 < want_done.mean() < 1 or sigmas[-1] == 64.0
+        assert np.array_equal(got, want) and np.array_equal(got_done, want_done)
+
+
+def test_the_soft_key_from_depths_matte_is_the_soft_key_of_the_picture(
+    computed: tuple[Grid, dict[str, DepthResult]], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    grid, results = computed
+    reference = {c: Keyer().soft(grid.images[c]) for c in CAMS}
+    calls = []
+    original = Keyer.matte
+    monkeypatch.setattr(Keyer, "matte", lambda self, rgb: calls.append(1) or original(self, rgb))
+    for cam in CAMS:
+        assert results[cam].keyed_by == Keyer()
+        key = export.soft_key(grid.images[cam], results[cam])
+        assert np.array_equal(key.alpha, reference[cam].alpha)
+        assert np.array_equal(key.foreground, reference[cam].foreground)
+        assert 0 < float(key.alpha.mean()) < 1 and bool(((key.alpha > 0) & (key.alpha < 1)).any())  # soft edges
+    assert calls == []  # depth's matte was used, the picture not keyed again
+    # a picture beyond [0, 1] (super-whites) is keyed as the soft key does, clipped: depth's matte is not reused
+    bright = np.asarray(grid.images[CAMS[0]]) * np.float32(1.6)
+    assert float(bright.max()) > 1
+    key = export.soft_key(bright, results[CAMS[0]])
+    assert calls == [1]
+    assert np.array_equal(key.alpha, Keyer().soft(bright).alpha)
+
+
+def _decoded(path: Path) -> tuple[dict, dict]:
+    channels, header = read_exr(path)
+    return channels, header
+
+
+def test_the_depth_exr_is_the_one_the_reference_path_writes(
+    computed: tuple[Grid, dict[str, DepthResult]], tmp_path: Path
+) -> None:
+    """The same outputs with depth's matte reused and with the picture keyed again (a result that does not
+    say which keyer made its matte): decoded channels, header attributes and the bytes themselves."""
+    grid, results = computed
+    for cam in CAMS:
+        fast, slow = Target(tmp_path / "fast", "frames", 0, 25.0), Target(tmp_path / "slow", "frames", 0, 25.0)
+        write_outputs(fast, cam, grid, results[cam], (0.0, 10.0), ("exr",))
+        unknown = DepthResult(**{**results[cam].__dict__, "keyed_by": None})
+        write_outputs(slow, cam, grid, unknown, (0.0, 10.0), ("exr",))
+        a, b = fast.path(cam, ".exr"), slow.path(cam, ".exr")
+        (ca, ha), (cb, hb) = _decoded(a), _decoded(b)
+        assert ca.keys() == cb.keys() and all(np.array_equal(ca[k], cb[k], equal_nan=True) for k in ca)
+        assert 0 < float(ca["A"].mean()) < 1
+        assert {k: str(v) for k, v in ha.items()} == {k: str(v) for k, v in hb.items()}
+        assert a.read_bytes() == b.read_bytes()
