@@ -133,7 +133,9 @@ def run_size_bench(ns: argparse.Namespace) -> int:
     t = r["timings_s"]
     r["fps"], r["workers"] = fps, ns.workers
     cpu = (r["cpu_seconds"], r["sgbm"]["cpu_seconds"])
-    r["summary"] = speed_summary(t["depth"], t["write"], r["stages_s"], r["sgbm"]["seconds"], fps, ns.workers, cpu)
+    r["summary"] = speed_summary(
+        t["depth"], t["write"], r["stages_s"], r["sgbm"]["seconds"], fps, ns.workers, cpu, t["write_cpu"]
+    )
     print(json.dumps(r) if ns.json else format_speed(r))
     return 0
 

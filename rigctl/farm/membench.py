@@ -109,13 +109,17 @@ def speed_summary(
     fps: float,
     workers: int,
     cpu: tuple[float, float] | None = None,
+    write_cpu_s: float | None = None,
 ) -> dict[str, Any]:
     """The figures of issue 24 from measured times: the ratio of the frame set's depth (and of depth and
     writing) to one SGBM pair, the stages (what the depth spent outside the named ones is ``other``), the
     write share, and the real-time factor: compute seconds per second of footage at ``fps``, for one worker
     and for ``workers`` (chunks are independent: the farm divides it), and the hours a minute of footage takes.
     ``cpu``: the frame set's and the pair's CPU seconds (every thread), whose ratio a busy machine disturbs
-    less than the elapsed times' (``ratio_cpu``, depth and write together)."""
+    less than the elapsed times' (``ratio_cpu``, depth and write together). ``write_s`` is the write's elapsed
+    time the run waited for (all of it when nothing overlaps it, as in this one-frame-set bench);
+    ``write_cpu_s``, with ``cpu``, gives the write's share of the frame set's CPU seconds
+    (``write_cpu_share``)."""
     if sgbm_s <= 0 or fps <= 0 or workers < 1:
         raise ParameterError(f"speed summary needs sgbm_s > 0, fps > 0, workers >= 1 (got {sgbm_s}, {fps}, {workers})")
     total = depth_s + write_s
@@ -128,6 +132,11 @@ def speed_summary(
         if cpu[1] <= 0:
             raise ParameterError(f"speed summary needs the pair's CPU seconds > 0, got {cpu[1]}")
         extra["ratio_cpu"] = cpu[0] / cpu[1]
+        if write_cpu_s is not None:
+            if not 0 <= write_cpu_s <= cpu[0]:
+                raise ParameterError(f"the write's {write_cpu_s} CPU seconds are not within the frame set's {cpu[0]}")
+            extra["write_cpu_s"] = write_cpu_s
+            extra["write_cpu_share"] = write_cpu_s / cpu[0] if cpu[0] > 0 else 0.0
     return {
         **extra,
         "ratio_depth": depth_s / sgbm_s,
@@ -154,7 +163,13 @@ def format_speed(r: dict[str, Any]) -> str:
             f"{sg['seconds']:.3f} s",
             f"ratio to the SGBM pair: depth {sm['ratio_depth']:.1f}x, depth + write {sm['ratio_total']:.1f}x"
             + (f"; in CPU seconds (depth + write) {sm['ratio_cpu']:.1f}x" if "ratio_cpu" in sm else ""),
-            f"stages (s, summed over cameras): {stages}; write share {100 * sm['write_share']:.1f} %",
+            f"stages (s, summed over cameras): {stages}; write share {100 * sm['write_share']:.1f} %"
+            + (
+                f" of the elapsed time (not overlapped: one frame set); {sm['write_cpu_s']:.2f} CPU s, "
+                f"{100 * sm['write_cpu_share']:.1f} % of the CPU seconds"
+                if "write_cpu_share" in sm
+                else ""
+            ),
             f"pixel-levels evaluated: {work}",
             f"peak memory {r['peak_rss_bytes'] / 2**30:.2f} GiB (input images {r['input_bytes'] / 2**30:.2f} GiB, "
             f"{r['peak_rss_while_building_input_bytes'] / 2**30:.2f} GiB while the input was built)",
@@ -198,7 +213,11 @@ def _measure(make: Callable[[], Any], width: int, height: int, preset: str, came
         "cameras": list(stats.cameras),
         "seconds": seconds,
         "cpu_seconds": cpu_seconds,
-        "timings_s": {"depth": stats.timings_s.depth, "write": stats.timings_s.write},
+        "timings_s": {
+            "depth": stats.timings_s.depth,
+            "write": stats.timings_s.write,
+            "write_cpu": stats.timings_s.write_cpu,
+        },
         "stages_s": stages,
         "pixel_levels": work,
         "sgbm": sgbm,

@@ -54,7 +54,7 @@ def test_refuses_figures_that_would_divide_by_nothing(sgbm_s: float, fps: float,
 
 def test_the_text_names_the_reference_ratio_and_real_time_factor() -> None:
     times = {"depth": 8.0, "write": 2.0}
-    summary = speed_summary(8.0, 2.0, {"cost": 4.0}, 0.25, 25.0, 4, cpu=(15.0, 0.5))
+    summary = speed_summary(8.0, 2.0, {"cost": 4.0}, 0.25, 25.0, 4, cpu=(15.0, 0.5), write_cpu_s=1.5)
     r = {
         "size": [1920, 1080],
         "preset": "best",
@@ -73,5 +73,17 @@ def test_the_text_names_the_reference_ratio_and_real_time_factor() -> None:
     text = format_speed(r)
     assert "SGBM 3WAY pair" in text and "128 levels" in text and "0.250 s" in text
     assert "depth 32.0x" in text and "depth + write 40.0x" in text and "in CPU seconds (depth + write) 30.0x" in text
-    assert "write share 20.0 %" in text
+    assert "write share 20.0 % of the elapsed time (not overlapped: one frame set)" in text
+    assert "write share 20.0 %" in text and "1.50 CPU s, 10.0 % of the CPU seconds" in text
     assert "250 s of compute per s of footage on one worker, 62.5 on 4 workers" in text
+
+
+def test_the_writes_cpu_seconds_and_their_share_of_the_frame_sets() -> None:
+    s = speed_summary(12.0, 3.0, {}, 0.5, 25.0, 1, cpu=(20.0, 0.5), write_cpu_s=2.5)
+    assert s["write_cpu_s"] == pytest.approx(2.5)
+    assert s["write_cpu_share"] == pytest.approx(0.125)  # of the frame set's 20 CPU seconds, not of the pair's
+    assert s["write_share"] == pytest.approx(0.2)  # the elapsed share stays the elapsed one
+    assert "write_cpu_share" not in speed_summary(12.0, 3.0, {}, 0.5, 25.0, 1, cpu=(20.0, 0.5))
+    for bad in (-0.1, 20.5):  # a write cannot take more CPU than the frame set it belongs to
+        with pytest.raises(ParameterError):
+            speed_summary(12.0, 3.0, {}, 0.5, 25.0, 1, cpu=(20.0, 0.5), write_cpu_s=bad)
