@@ -48,10 +48,8 @@ class Timings(BaseModel):
 
     load: float = 0.0
     depth: float = 0.0
-    write: float = 0.0  # elapsed, on the thread that wrote (in the background when overlapped)
-    write_cpu: float = 0.0  # CPU seconds of that thread
-    # overlapped with the next frame set's depth: how long the run waited for this write (the part not hidden)
-    write_waited: float | None = None
+    write: float = 0.0
+    write_cpu: float = 0.0  # CPU seconds of the process while it wrote
 
 
 class FrameReport(BaseModel):
