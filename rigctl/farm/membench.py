@@ -117,9 +117,9 @@ def speed_summary(
     and for ``workers`` (chunks are independent: the farm divides it), and the hours a minute of footage takes.
     ``cpu``: the frame set's and the pair's CPU seconds (every thread), whose ratio a busy machine disturbs
     less than the elapsed times' (``ratio_cpu``, depth and write together). ``write_s`` is the write's elapsed
-    time the run waited for (all of it when nothing overlaps it, as in this one-frame-set bench);
-    ``write_cpu_s``, with ``cpu``, gives the write's share of the frame set's CPU seconds
-    (``write_cpu_share``)."""
+    time, all of which a run waits for (nothing overlaps the write); ``write_cpu_s``, with ``cpu``, gives the
+    write's share of the frame set's CPU seconds (``write_cpu_share``), which the load of other work on the
+    cores disturbs less."""
     if sgbm_s <= 0 or fps <= 0 or workers < 1:
         raise ParameterError(f"speed summary needs sgbm_s > 0, fps > 0, workers >= 1 (got {sgbm_s}, {fps}, {workers})")
     total = depth_s + write_s
@@ -165,7 +165,7 @@ def format_speed(r: dict[str, Any]) -> str:
             + (f"; in CPU seconds (depth + write) {sm['ratio_cpu']:.1f}x" if "ratio_cpu" in sm else ""),
             f"stages (s, summed over cameras): {stages}; write share {100 * sm['write_share']:.1f} %"
             + (
-                f" of the elapsed time (not overlapped: one frame set); {sm['write_cpu_s']:.2f} CPU s, "
+                f" of the elapsed time (nothing overlaps the write); {sm['write_cpu_s']:.2f} CPU s, "
                 f"{100 * sm['write_cpu_share']:.1f} % of the CPU seconds"
                 if "write_cpu_share" in sm
                 else ""

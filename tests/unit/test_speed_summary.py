@@ -73,7 +73,7 @@ def test_the_text_names_the_reference_ratio_and_real_time_factor() -> None:
     text = format_speed(r)
     assert "SGBM 3WAY pair" in text and "128 levels" in text and "0.250 s" in text
     assert "depth 32.0x" in text and "depth + write 40.0x" in text and "in CPU seconds (depth + write) 30.0x" in text
-    assert "write share 20.0 % of the elapsed time (not overlapped: one frame set)" in text
+    assert "write share 20.0 % of the elapsed time (nothing overlaps the write)" in text
     assert "write share 20.0 %" in text and "1.50 CPU s, 10.0 % of the CPU seconds" in text
     assert "250 s of compute per s of footage on one worker, 62.5 on 4 workers" in text
 
