@@ -182,12 +182,15 @@ def default_memory_limit(take: Path, cameras: int | None) -> int:
     return worker_memory_bytes(reader.width, reader.height, cameras or len(reader.names))
 
 
-# Peak resident memory of one frame set, measured with ``rigctl bench depth --size`` (preset best, every camera):
-# a fixed part (interpreter, OpenCV, Dask) and a part per pixel and camera (55 B measured between 1920x1080,
-# 1.29 GiB, and 3840x2160, 4.17 GiB, with the cost volume at every range: issue 24). The worker limit is this
-# with a margin of 25 %: Dask pauses a worker at 80 % of it (above the measured peak) and restarts it at 95 %.
+# Peak resident memory of a worker, measured with ``rigctl bench depth --size`` (preset best, every camera): a
+# fixed part (interpreter, OpenCV, Dask) and a part per pixel and camera: 56 B for one frame set (measured
+# between 1920x1080, 1.29 GiB, and 3840x2160, 4.17 GiB, with the cost volume at every range: issue 24), and
+# 18 B more in a chunk, where the temporal stabiliser holds the previous frame set's pictures and results
+# (a chunk of three 1920x1080 frame sets peaked at 1.66 GiB against 1.33 GiB for one, in one script on one
+# day). The worker limit is this with a margin of 25 %: Dask pauses a worker at 80 % of it (above the
+# measured peaks) and restarts it at 95 %.
 BASE_BYTES = 600e6
-BYTES_PER_CAMERA_PIXEL = 56.0
+BYTES_PER_CAMERA_PIXEL = 74.0
 MARGIN = 1.25
 
 
