@@ -7,6 +7,7 @@ import os
 import re
 import socket
 import struct
+import sys
 from pathlib import Path
 
 from rigctl.cli.args import add_pipeline_options, depth_options, distance, far_distance
@@ -169,6 +170,6 @@ def run(ns: argparse.Namespace) -> int:
             f"{summary.computed} frame sets computed in {summary.chunks} chunks, {summary.failed} failed, "
             f"{summary.skipped_done} already done; {summary.frames_per_second:.2f} frames/s; ledger {summary.ledger}"
         )
-        for name, err in summary.failed_frames.items():
-            print(f"  frame {name} failed: {err}")
+        for name, err in summary.failed_frames.items():  # what went wrong goes where errors go
+            print(f"rigctl process: frame {name} failed: {err}", file=sys.stderr)
     return 1 if summary.failed else 0

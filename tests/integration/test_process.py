@@ -129,7 +129,7 @@ def test_a_failed_frame_is_reported_and_the_others_complete(take: Path, tmp_path
     res = run_rigctl("process", str(take), "--out", str(tmp_path), "--workers", "2", "--frames", "0-2", *FAST)
     assert res.returncode == 1
     # the frame's one line names the file in the way and why it was not written over
-    assert re.search(r"frame 000001 failed: \S*depth/000001: is not a folder", res.stdout), res.stdout
+    assert re.search(r"frame 000001 failed: \S*depth/000001: is not a folder", res.stderr), res.stderr
     # said once, at the end (not again by the worker for each round of the range search)
     assert (res.stdout + res.stderr).count("depth/000001: is not a folder") == 1, res.stdout + res.stderr
     ledger = json.loads((tmp_path / "process.json").read_text())["frames"]
