@@ -132,7 +132,7 @@ def _differences_at(
             w11 = fy * fx
             for x in range(w):
                 xa, xb = min(max(x + ox, 0), ww - 1), min(max(x + ox + 1, 0), ww - 1)
-                s0, s1, s2 = _sample3(feats, v, ya, yb, xa, xb, w00, w01, w10, w11)
+                s0, s1, s2 = sample3(feats, v, ya, yb, xa, xb, w00, w01, w10, w11)
                 a = min(abs(s0 - ref[y, x, 0]), ti) * ci
                 a += min(abs(s1 - ref[y, x, 1]) + abs(s2 - ref[y, x, 2]), tg) * cg
                 row[x] = a
@@ -140,7 +140,7 @@ def _differences_at(
 
 
 @njit(inline="always")
-def _sample3(
+def sample3(
     feats: F32,
     v: int,
     ya: int,
@@ -177,12 +177,12 @@ def _row_sums(row: F32, r: int, out: F32) -> None:
 
 
 @njit(inline="always")
-def _vertical_sum(dst: NDArray[np.floating], src: F32, v: int, y: int, r: int, r101: bool, h: int, a0: int) -> None:
+def vertical_sum(dst: NDArray[np.floating], src: F32, v: int, y: int, r: int, r101: bool, h: int, a0: int) -> None:
     # dst[x] = the sum of src[v, y + dy, x] for dy = -r..r, added in that order from 0, rows beyond the edge
     # (of h rows) reflected as OpenCV's BORDER_REFLECT_101 (r101) or BORDER_REFLECT; src holds rows from a0 on
     dst[:] = 0.0
     for dy in range(-r, r + 1):
-        row = src[v, (_reflect101(y + dy, h) if r101 else _reflect(y + dy, h)) - a0]
+        row = src[v, (reflect101(y + dy, h) if r101 else _reflect(y + dy, h)) - a0]
         for x in range(dst.shape[0]):
             dst[x] += row[x]
 
@@ -194,6 +194,18 @@ def _reflect(i: int, n: int) -> int:
         return -i - 1
     if i >= n:
         return 2 * n - i - 1
+    return i
+
+
+@njit(inline="always")
+def reflect101(i: int, n: int) -> int:
+    # OpenCV's default border (gfedcb|abcdefgh|gfedcba)
+    if n == 1:
+        return 0
+    if i < 0:
+        return -i
+    if i >= n:
+        return 2 * n - 2 - i
     return i
 
 
@@ -218,7 +230,7 @@ def _aggregate(
         n = np.zeros(w, np.int32)
         for v in range(nv):
             cv = costs[v]
-            _vertical_sum(cv, ad, v, y, r, False, h, a0)
+            vertical_sum(cv, ad, v, y, r, False, h, a0)
             for x in range(w):
                 cv[x] = inv if outside[v, y - a0, x] else cv[x] * norm
         # the keep smallest, branch-free: a view is kept where fewer than keep views rank before it (ties by
@@ -333,163 +345,6 @@ def better_half_mean(stack: F32, seen_by: F32 | None = None) -> tuple[F32, F32]:
     seen = np.ascontiguousarray(seen_by if seen_by is not None else np.zeros((h, w), np.float32), np.float32)
     _better_half(np.ascontiguousarray(stack, np.float32), seen, limit, mean, count)
     return mean, count
-
-
-@njit(parallel=True, cache=True, fastmath=False)
-def _residuals(
-    feats: F32,
-    ref: F32,
-    rel: F32,
-    d: F32,
-    y0: int,
-    x0: int,
-    inv: float,
-    tau_i: float,
-    res: F32,
-    jac: F32,
-    tr: F32,
-    org: NDArray[np.int64],
-    fh: int,
-    fw: int,
-) -> None:
-    """Per view and pixel: the intensity residual at disparity ``d`` (INVALID outside the view's frame,
-    ``fh`` x ``fw``), its derivative along the baseline (0 outside) and the residual truncated at ``tau_i``.
-    ``feats[v]``: the part of view v whose top-left pixel is ``org[v]`` (y, x)."""
-    nv, hh, ww = feats.shape[0], feats.shape[1], feats.shape[2]
-    h, w = d.shape
-    big, ti = np.float32(inv), np.float32(tau_i)
-    for y in prange(h):
-        gy = np.float32(y0 + y)
-        for v in range(nv):
-            rx, ry = rel[v, 0], rel[v, 1]
-            oy, ox = org[v, 0], org[v, 1]
-            for x in range(w):
-                mx = np.float32(x0 + x) - d[y, x] * rx
-                my = gy - d[y, x] * ry
-                if (mx < 0) | (mx > fw - 1) | (my < 0) | (my > fh - 1):
-                    res[v, y, x], jac[v, y, x], tr[v, y, x] = big, np.float32(0.0), ti
-                    continue
-                bx, by = np.floor(mx), np.floor(my)
-                ex, ey = mx - bx, my - by
-                ix, iy = int(bx) - ox, int(by) - oy
-                xa, xb = min(max(ix, 0), ww - 1), min(max(ix + 1, 0), ww - 1)
-                ya, yb = min(max(iy, 0), hh - 1), min(max(iy + 1, 0), hh - 1)
-                w00 = (np.float32(1.0) - ey) * (np.float32(1.0) - ex)
-                w01 = (np.float32(1.0) - ey) * ex
-                w10 = ey * (np.float32(1.0) - ex)
-                w11 = ey * ex
-                s0, s1, s2 = _sample3(feats, v, ya, yb, xa, xb, w00, w01, w10, w11)
-                r = s0 - ref[y, x, 0]
-                res[v, y, x] = r
-                jac[v, y, x] = -(rx * s1 + ry * s2)
-                tr[v, y, x] = min(abs(r), ti)
-
-
-@njit(inline="always")
-def _reflect101(i: int, n: int) -> int:
-    # OpenCV's default border (gfedcb|abcdefgh|gfedcba)
-    if n == 1:
-        return 0
-    if i < 0:
-        return -i
-    if i >= n:
-        return 2 * n - 2 - i
-    return i
-
-
-@njit(parallel=True, cache=True, fastmath=False)
-def _selected_sums(
-    res: F32,
-    jac: F32,
-    tr: F32,
-    keep: int,
-    inv: float,
-    tau_i: float,
-    a_out: F32,
-    b_out: F32,
-    first: int,
-    h: int,
-    a0: int,
-) -> None:
-    """Per pixel: each view's 5x5 mean truncated residual (its local fit), the ``keep`` views with the
-    smallest (all views tied at the cut: a view is used where fewer than ``keep`` fit strictly better), and
-    over them sum(J^2) / keep and sum(J r) / keep, r clipped. Row by row, each loop over the row's pixels.
-    ``a_out``, ``b_out``: rows ``first`` on of h; ``res``, ``jac``, ``tr`` rows ``a0`` on (the 5x5's included)."""
-    nv, w = res.shape[0], res.shape[2]
-    half = np.float32(inv * 0.5)
-    clip = np.float32(4 * tau_i)
-    k = min(keep, nv)
-    for yo in prange(a_out.shape[0]):
-        y = first + yo
-        cols = np.empty((nv, w), np.float64)
-        loc = np.empty((nv, w), np.float32)
-        rank = np.empty(w, np.int32)
-        a = np.zeros(w, np.float32)
-        b = np.zeros(w, np.float32)
-        for v in range(nv):
-            cv = cols[v]
-            _vertical_sum(cv, tr, v, y, 2, True, h, a0)
-            lv = loc[v]
-            for x in range(w):
-                acc = 0.0
-                for dx in range(-2, 3):
-                    acc += cv[_reflect101(x + dx, w)]
-                lv[x] = np.float32(acc / 25.0)
-            for x in range(w):
-                if abs(res[v, y - a0, x]) >= half:
-                    lv[x] = np.float32(inv)
-        for i in range(nv):
-            li = loc[i]
-            rank[:] = 0
-            for j in range(nv):
-                lj = loc[j]
-                for x in range(w):
-                    rank[x] += lj[x] < li[x]
-            for x in range(w):
-                use = (rank[x] < k) & (li[x] < half)
-                jv = jac[i, y - a0, x] if use else np.float32(0.0)
-                rv = min(max(res[i, y - a0, x], -clip), clip) if use else np.float32(0.0)
-                a[x] += jv * jv
-                b[x] += jv * rv
-        for x in range(w):
-            a_out[yo, x] = a[x] / np.float32(k)
-            b_out[yo, x] = b[x] / np.float32(k)
-
-
-def refine_sums(
-    feats: F32,
-    ref: F32,
-    rel: NDArray[np.float64],
-    d: F32,
-    origin: tuple[int, int],
-    keep: int,
-    inv: float,
-    tau_i: float,
-    org: NDArray[np.int64] | None = None,
-    frame: tuple[int, int] | None = None,
-) -> tuple[F32, F32]:
-    """One Gauss-Newton step's normal equations before their aggregation (``refine.refine``): per pixel the
-    sums of J^2 and J r over the ``keep`` views that fit best locally, divided by ``keep``. What the
-    reference path computes with ``cv2.remap``, ``cv2.boxFilter`` and ``np.partition`` over the views.
-    ``org``, ``frame``: as for :func:`combined_costs`."""
-    nv = feats.shape[0]
-    fh, fw = frame if frame is not None else (feats.shape[1], feats.shape[2])
-    org = np.zeros((nv, 2), np.int64) if org is None else np.ascontiguousarray(org, np.int64)
-    h, w = d.shape
-    dm = np.ascontiguousarray(d, np.float32)
-    rel32 = rel.astype(np.float32)
-    a_sum = np.empty((h, w), np.float32)
-    b_sum = np.empty((h, w), np.float32)
-    for a in range(0, h, ROWS):  # in blocks of rows with the 5x5's rows around them, as combined_costs
-        b = min(h, a + ROWS)
-        a0, b0 = max(0, a - 2), min(h, b + 2)
-        res = np.empty((nv, b0 - a0, w), np.float32)
-        jac = np.empty((nv, b0 - a0, w), np.float32)
-        tr = np.empty((nv, b0 - a0, w), np.float32)
-        y0, x0 = origin
-        _residuals(feats, ref[a0:b0], rel32, dm[a0:b0], y0 + a0, x0, inv, tau_i, res, jac, tr, org, fh, fw)
-        _selected_sums(res, jac, tr, keep, inv, tau_i, a_sum[a:b], b_sum[a:b], a, h, a0)
-    return a_sum, b_sum
 
 
 @njit(cache=True, fastmath=False)

@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.depth.cost import INVALID_COST, TRUNCATE, combine, grey, normalise, view_part
+from rigctl.depth.cost import INVALID_COST, TRUNCATE, combine, exposure, features, grey, normalise, view_part
 from rigctl.depth.cost_kernels import combined_costs, visible_views
 from rigctl.depth.search import EstimateStats
 
@@ -219,36 +219,6 @@ class MatchViews:
             agg[outside] = INVALID_COST
             out[i] = agg
         return out
-
-
-def exposure(g_ref: F32, g: F32, shift: tuple[float, float]) -> tuple[float, float]:
-    """Gain and offset that match view ``g`` to the reference, from the part of the scene both show: the
-    view moved by ``shift`` (the disparity range's centre times its baseline). Whole-image statistics would
-    compare different content whenever the disparity is large (parallel cameras), and so depend on where
-    the range lies. Identity when the two share too little."""
-    h, w = g_ref.shape
-    dx, dy = round(shift[0]), round(shift[1])
-    if abs(dx) > w - 8 or abs(dy) > h - 8:
-        return 1.0, 0.0
-    # reference pixel (x, y) shows what the view shows at (x - dx, y - dy)
-    a = g_ref[max(0, dy) : h + min(0, dy), max(0, dx) : w + min(0, dx)]
-    b = g[max(0, -dy) : h + min(0, -dy), max(0, -dx) : w + min(0, -dx)]
-    m_a, s_a, m_b, s_b = float(a.mean()), float(a.std()), float(b.mean()), float(b.std())
-    gain = s_a / s_b if s_b > 1e-6 and s_a > 1e-6 else 1.0
-    return gain, m_a - gain * m_b
-
-
-def features(g: F32, part: tuple[int, int, int, int]) -> F32:
-    """(h, w, 3): intensity, d/dx and d/dy of ``g`` (a whole image) on ``part`` (y0, y1, x0, x1), the
-    derivatives as the whole image's (the part taken with the one pixel around it that they read)."""
-    y0, y1, x0, x1 = part
-    h, w = g.shape
-    a0, a1, b0, b1 = max(0, y0 - 1), min(h, y1 + 1), max(0, x0 - 1), min(w, x1 + 1)
-    sub = np.ascontiguousarray(g[a0:a1, b0:b1])
-    gx = cv2.Sobel(sub, cv2.CV_32F, 1, 0, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
-    gy = cv2.Sobel(sub, cv2.CV_32F, 0, 1, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
-    sl = (slice(y0 - a0, y1 - a0), slice(x0 - b0, x1 - b0))
-    return np.ascontiguousarray(np.dstack([sub[sl], gx[sl], gy[sl]]), dtype=np.float32)
 
 
 @dataclass(frozen=True)

@@ -17,13 +17,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.depth.cost import INVALID_COST
-from rigctl.depth.cost_kernels import refine_sums
 from rigctl.depth.costvolume import TAU_I, Aggregator, MatchViews
+from rigctl.depth.refine_kernels import refine_sums
 
 F32 = NDArray[np.float32]
 log = logging.getLogger(__name__)
 
-COMPILED = True  # each step's sums by the compiled kernel (cost_kernels.refine_sums); False: OpenCV and numpy
+COMPILED = True  # each step's sums by the compiled kernel (refine_kernels.refine_sums); False: OpenCV and numpy
 DAMPING = 2e-5  # squared baseline gradient (grey 0..1 per px) at which a fit is trusted half: about sensor noise
 
 
@@ -69,7 +69,7 @@ def refine(
 
 def _normal_equations(views: MatchViews, d: F32, keep: int, agg: Aggregator) -> tuple[F32, F32]:
     """The reference path of one step (OpenCV and numpy): the aggregated sums of J^2 and J r over the best
-    ``keep`` views, divided by ``keep``; ``cost_kernels.refine_sums`` computes the sums compiled."""
+    ``keep`` views, divided by ``keep``; ``refine_kernels.refine_sums`` computes the sums compiled."""
     nv = len(views.names)
     res = np.empty((nv, *d.shape), np.float32)
     jac = np.empty((nv, *d.shape), np.float32)

@@ -83,7 +83,7 @@ def test_the_compiled_better_half_matches_the_numpy_reference_bit_for_bit(limit:
 
 @pytest.mark.parametrize("keep", [4, 8, 2])
 def test_the_compiled_refinement_matches_the_reference(keep: int, monkeypatch: pytest.MonkeyPatch) -> None:
-    """``refine.refine``'s normal equations by ``cost_kernels.refine_sums`` against the OpenCV and numpy
+    """``refine.refine``'s normal equations by ``refine_kernels.refine_sums`` against the OpenCV and numpy
     path, on the textured scene with a noisy start that reaches outside the views at the crop's edge.
 
     Tolerance: each step's aggregated sums within 1e-5 of their largest value (the 5x5 means are summed in
