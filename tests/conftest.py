@@ -6,6 +6,7 @@ import os
 import shutil
 import subprocess
 import sys
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -67,3 +68,29 @@ def run_cli(tmp_path: Path):
         )
 
     return run
+
+
+@pytest.fixture(scope="module")
+def module_tmp(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Callable[[str], Path]]:
+    """``mktemp`` for a module's shared fixtures, whose folders go when the module's last test is done.
+
+    Takes, depth and renders run to gigabytes; kept to the end of the session (as ``tmp_path_factory`` keeps
+    them) they filled a CI machine's disk part-way through the suite. Per-test folders go when their test
+    passes (``tmp_path_retention_policy = "failed"`` in pyproject.toml)."""
+    made: list[Path] = []
+
+    def mktemp(name: str) -> Path:
+        made.append(tmp_path_factory.mktemp(name))
+        return made[-1]
+
+    yield mktemp
+    for path in made:
+        shutil.rmtree(path, ignore_errors=True)
+
+
+def pytest_report_header(config: pytest.Config) -> str:
+    """The free space where the tests write, so that a run which fills the disk says so at the top."""
+    import tempfile
+
+    where = Path(tempfile.gettempdir())
+    return f"free space in {where}: {shutil.disk_usage(where).free / 1e9:.1f} GB"

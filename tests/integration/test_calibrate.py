@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -78,9 +79,9 @@ def test_board_in_millimetres_gives_the_same_result(tmp_path: Path) -> None:
 
 # ---- a simulated 3x3 array ------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def charuco_take(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def charuco_take(module_tmp: Callable[[str], Path]) -> Path:
     """120 board poses: enough for every camera's rotation to 0.01 degree (40 leave it at about 0.014)."""
-    return record(tmp_path_factory.mktemp("calib"), "board", 120)
+    return record(module_tmp("calib"), "board", 120)
 
 
 def detection_noise_floor(take: Path, report: dict) -> float:  # type: ignore[type-arg]

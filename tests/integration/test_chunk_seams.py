@@ -8,6 +8,7 @@ best: the change at the chunks' first frame sets against the change between the 
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -32,9 +33,9 @@ SEAM_RATIO = 2.5
 
 
 @pytest.fixture(scope="module")
-def still_take(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def still_take(module_tmp: Callable[[str], Path]) -> Path:
     """40 frame sets of the presenter standing still (160x90, seed 5), rectified with its true calibration."""
-    root = tmp_path_factory.mktemp("seams")
+    root = module_tmp("seams")
     rig = (REPO / "rigs" / "sim-3x3.yaml").read_text()
     (root / "tiny.yaml").write_text(
         rig.replace("width_px: 960", "width_px: 160").replace("height_px: 540", "height_px: 90")

@@ -52,9 +52,9 @@ def png_claiming(path: Path, width: int, height: int, filler: int = 1 << 20) -> 
 
 
 @pytest.fixture(scope="module")
-def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+def inputs(module_tmp: Callable[[str], Path]) -> dict[str, Path]:
     """The tiny take, its rectified take, its depth, MIV content and a grid folder, then hostile copies."""
-    root = tmp_path_factory.mktemp("bounds")
+    root = module_tmp("bounds")
     take, rect = make_tiny(root)
     (rect / "truth" / "settings.yaml").unlink(missing_ok=True)
     assert rigctl("depth", str(rect), "--out", str(root / "disp"), "--preset", "fast").returncode == 0

@@ -5,6 +5,7 @@ and the demo."""
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -128,8 +129,8 @@ def test_motorcycle_two_view_no_worse_than_sgbm_3way_on_bad_2() -> None:
 
 
 @pytest.fixture(scope="module")
-def ideal_take(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("depth")
+def ideal_take(module_tmp: Callable[[str], Path]) -> Path:
+    out = module_tmp("depth")
     res = run_rigctl(
         "record", "--take", "ideal", "--frames", "1", "--out", str(out), "--sim", "ideal=true", "--sim", "motion=false"
     )

@@ -6,6 +6,7 @@ rectify`` on a tiny simulated take recorded with ``--sim deterministic=true``) p
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -20,8 +21,8 @@ CAMS = ("r1c1", "r0c2")
 
 
 @pytest.fixture(scope="module")
-def depth(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    root = tmp_path_factory.mktemp("depth-exr")
+def depth(module_tmp: Callable[[str], Path]) -> tuple[Path, Path]:
+    root = module_tmp("depth-exr")
     _, rect = make_tiny(root, frames=1)
     out = root / "depth"
     res = run_rigctl("depth", str(rect), "--out", str(out), "--preset", "fast", "--cameras", *CAMS)

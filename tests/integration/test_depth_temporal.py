@@ -8,6 +8,7 @@ one range for the whole take); the same estimates are then scored as they are (s
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -102,16 +103,16 @@ def bad1(ds: list[F32], truth: list[F32]) -> float:
     return float(np.mean([score(d, t, np.isfinite(t))["bad_1.0"] for d, t in zip(ds, truth, strict=True)]))
 
 
-@pytest.fixture(scope="session")
-def static_take(tmp_path_factory: pytest.TempPathFactory) -> TakeDepth:
-    root = tmp_path_factory.mktemp("temporal-static")
+@pytest.fixture(scope="module")
+def static_take(module_tmp: Callable[[str], Path]) -> TakeDepth:
+    root = module_tmp("temporal-static")
     return depth_over_take(record(root, "still", 20, "motion=false", "seed=5", "deterministic=true"))
 
 
-@pytest.fixture(scope="session")
-def moving_take(tmp_path_factory: pytest.TempPathFactory) -> TakeDepth:
+@pytest.fixture(scope="module")
+def moving_take(module_tmp: Callable[[str], Path]) -> TakeDepth:
     # the presenter's motion from the first frame (no ramp): a new pose every 4 frames at 25 fps
-    root = tmp_path_factory.mktemp("temporal-moving")
+    root = module_tmp("temporal-moving")
     return depth_over_take(record(root, "moving", 12, "seed=5", "motion_ramp_s=0", "deterministic=true"))
 
 

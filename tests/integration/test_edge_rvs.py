@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -28,8 +29,8 @@ TARGET = "r1c1"
 
 
 @pytest.fixture(scope="module")
-def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("edge")
+def take(module_tmp: Callable[[str], Path]) -> Path:
+    out = module_tmp("edge")
     res = run_rigctl(
         "record", "--take", "ideal", "--frames", "1", "--out", str(out),
         "--sim", "ideal=true", "--sim", "seed=3", "--sim", "motion=false", "--sim", "deterministic=true",

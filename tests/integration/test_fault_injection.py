@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -23,8 +24,8 @@ RUNNER = Path(__file__).resolve().parents[1] / "fault_runner.py"
 
 
 @pytest.fixture(scope="module")
-def tiny(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    root = tmp_path_factory.mktemp("fault")
+def tiny(module_tmp: Callable[[str], Path]) -> dict[str, Path]:
+    root = module_tmp("fault")
     take, rect = make_tiny(root)
     (rect / "truth" / "settings.yaml").unlink()  # no simulator comparisons: render stays quick
     res = rigctl("depth", str(rect), "--out", str(root / "disp"), "--preset", "fast")

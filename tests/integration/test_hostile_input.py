@@ -9,6 +9,7 @@ import json
 import os
 import shutil
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -23,9 +24,9 @@ from rigctl.errors import EXIT_BAD_INPUT, EXIT_DAMAGED
 
 
 @pytest.fixture(scope="module")
-def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def tiny(module_tmp: Callable[[str], Path]) -> Path:
     """A real take of the simulated 3x3 rig at 192x108, three frame sets, and its rectified take."""
-    root = tmp_path_factory.mktemp("tiny")
+    root = module_tmp("tiny")
     rig = dict(SIM_RIG, format={**SIM_RIG["format"], "width_px": 192, "height_px": 108})
     write_yaml(root / "tiny.yaml", rig)
     res = subprocess.run(

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -31,9 +32,9 @@ AT = (1.5, 1.0)  # between r1c1 and r1c2
 
 
 @pytest.fixture(scope="module")
-def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def take(module_tmp: Callable[[str], Path]) -> Path:
     """An ideal simulated take: the simulator's view between cameras is exactly what it should show."""
-    out = tmp_path_factory.mktemp("miv")
+    out = module_tmp("miv")
     res = run_rigctl(
         "record", "--take", "ideal", "--frames", "2", "--out", str(out),
         "--sim", "ideal=true", "--sim", "motion=false", "--force",

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -26,8 +27,8 @@ CAMS = (*ROW, "r2c1")
 
 
 @pytest.fixture(scope="module")
-def depth(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    root = tmp_path_factory.mktemp("nuke")
+def depth(module_tmp: Callable[[str], Path]) -> tuple[Path, Path]:
+    root = module_tmp("nuke")
     res = run_rigctl(
         "record", "--take", "ideal", "--frames", "1", "--out", str(root), "--sim", "ideal=true",
         "--sim", "deterministic=true", "--force",

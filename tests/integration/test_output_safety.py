@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -27,8 +28,8 @@ VICTIM = "../../../../../../tmp/rigctl-victim-{}/victim"
 
 
 @pytest.fixture(scope="module")
-def tiny(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    return make_tiny(tmp_path_factory.mktemp("tiny"))
+def tiny(module_tmp: Callable[[str], Path]) -> tuple[Path, Path]:
+    return make_tiny(module_tmp("tiny"))
 
 
 def nothing_in(folder: Path) -> bool:

@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -31,10 +32,10 @@ FRAMES = 6
 
 
 @pytest.fixture(scope="module")
-def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def take(module_tmp: Callable[[str], Path]) -> Path:
     """An ideal simulated take (already rectified) at 480x270, six frame sets, every one of them whatever the
     machine's load (deterministic capture)."""
-    out = tmp_path_factory.mktemp("farm")
+    out = module_tmp("farm")
     rig = (REPO / "rigs" / "sim-3x3.yaml").read_text()
     rig = rig.replace("width_px: 960", "width_px: 480").replace("height_px: 540", "height_px: 270")
     (out / "small.yaml").write_text(rig)
@@ -47,9 +48,9 @@ def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def single_process(take: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+def single_process(take: Path, module_tmp: Callable[[str], Path]) -> Path:
     """What ``rigctl depth`` writes for the same frames in one process: the reference for byte identity."""
-    out = tmp_path_factory.mktemp("single")
+    out = module_tmp("single")
     res = run_rigctl("depth", str(take), "--out", str(out), *FAST)
     assert res.returncode == 0, res.stderr
     return out

@@ -8,6 +8,7 @@ import os
 import pty
 import re
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -55,9 +56,9 @@ def assert_one_prefix(exr: Path, ours: set[str]) -> None:
 
 
 @pytest.fixture(scope="module")
-def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def take(module_tmp: Callable[[str], Path]) -> Path:
     """An ideal simulated take of four frame sets (with the simulator's other defaults: motion on)."""
-    out = tmp_path_factory.mktemp("takes")
+    out = module_tmp("takes")
     res = subprocess.run(
         [*rigctl_command(), "record", "sim-3x3", "--take", "ideal", "--frames", "4", "--sim", "ideal=true",
          "--sim", "deterministic=true", "--out", str(out), "--quiet"],

@@ -35,7 +35,7 @@ def dropped_in_take(folder: Path) -> tuple[int, list[int]]:
 
 
 @pytest.fixture(scope="module")
-def dropped_take(tmp_path_factory):  # type: ignore[no-untyped-def]
+def dropped_take(module_tmp):  # type: ignore[no-untyped-def]
     """A 9-camera take with drops at known sequence numbers on r0c1, recorded in deterministic capture: a live
     source on a busy machine adds drops of its own (the reader falls behind), and these tests are about the
     recorder's accounting of the injected ones. The tests still work out from the take's own index which
@@ -43,7 +43,7 @@ def dropped_take(tmp_path_factory):  # type: ignore[no-untyped-def]
     slow-reader contract test.)"""
     from tests_support import run_rigctl  # type: ignore[import-not-found]
 
-    out = tmp_path_factory.mktemp("takes")
+    out = module_tmp("takes")
     res = run_rigctl(
         "record",
         "--take",

@@ -4,6 +4,7 @@ disparity as the contract defines it, tables come from the cache the second time
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -20,10 +21,10 @@ SIM = ["motion=false", "noise=0", "exposure_spread=0", "colour_spread=0", "vigne
 
 
 @pytest.fixture(scope="module")
-def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def take(module_tmp: Callable[[str], Path]) -> Path:
     from tests_support import run_rigctl
 
-    out = tmp_path_factory.mktemp("takes")
+    out = module_tmp("takes")
     args = ["record", "--take", "t", "--frames", "2", "--out", str(out)]
     res = run_rigctl(*args, *[a for s in SIM for a in ("--sim", s)])
     assert res.returncode == 0, res.stderr

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -16,8 +17,8 @@ from tests_support import run_rigctl
 
 
 @pytest.fixture(scope="module")
-def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("render")
+def take(module_tmp: Callable[[str], Path]) -> Path:
+    out = module_tmp("render")
     res = run_rigctl(
         "record",
         "--take",

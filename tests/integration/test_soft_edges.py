@@ -6,6 +6,7 @@ closer to the truth's than the captured (mixed) colour is."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -22,10 +23,10 @@ CAMERA = "r1c1"
 
 
 @pytest.fixture(scope="module", params=[False, True], ids=["still", "moving"])
-def take(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Path:
+def take(request: pytest.FixtureRequest, module_tmp: Callable[[str], Path]) -> Path:
     """One frame set of the ideal seed-3 presenter with soft edges: still, or moving (the simulator's default:
     its first frame is the first pose, blurred over the exposure)."""
-    out = tmp_path_factory.mktemp("soft")
+    out = module_tmp("soft")
     res = run_rigctl(
         "record", "--take", "soft", "--frames", "1", "--out", str(out),
         "--sim", "ideal=true", "--sim", "seed=3", "--sim", f"motion={str(request.param).lower()}",

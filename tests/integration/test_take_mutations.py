@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import shutil
 import tracemalloc
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +51,18 @@ RECORD_VALUES = {
 }
 
 
+@pytest.fixture
+def scratch(tmp_path: Path) -> Path:
+    """One test's folder, reused by each of its examples (a copy per example filled the disk)."""
+    return tmp_path
+
+
+def copy(take: Path, scratch: Path) -> Path:
+    """A fresh copy of the take for one example, in place of the last example's."""
+    shutil.rmtree(scratch / "t", ignore_errors=True)
+    return Path(shutil.copytree(take, scratch / "t"))
+
+
 class Recorded(tuple):  # type: ignore[type-arg]
     """(take, frames): shown briefly when hypothesis reports an example."""
 
@@ -58,9 +71,9 @@ class Recorded(tuple):  # type: ignore[type-arg]
 
 
 @pytest.fixture(scope="module")
-def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[tuple[str, int], bytes]]:
+def recorded(module_tmp: Callable[[str], Path]) -> tuple[Path, dict[tuple[str, int], bytes]]:
     """The take, and every frame it holds by camera and essence offset, as recorded."""
-    take, _ = make_tiny(tmp_path_factory.mktemp("mut"))
+    take, _ = make_tiny(module_tmp("mut"))
     with TakeReader(take) as r:
         frames = {
             (n, int(r.index[n][i]["offset"])): r.frame_bytes(n, i).tobytes()
@@ -107,8 +120,8 @@ def mutate(data: Any, path: list[int], value: Any) -> Any:
 
 @PROPERTY
 @given(path=st.lists(st.integers(0, 40), min_size=1, max_size=4), value=VALUES)
-def test_a_manifest_value_changed(recorded, tmp_path_factory, path: list[int], value: Any) -> None:  # type: ignore[no-untyped-def]
-    take = Path(shutil.copytree(recorded[0], tmp_path_factory.mktemp("m") / "t"))
+def test_a_manifest_value_changed(recorded, scratch, path: list[int], value: Any) -> None:  # type: ignore[no-untyped-def]
+    take = copy(recorded[0], scratch)
     data = yaml.safe_load((take / "take.yaml").read_text())
     (take / "take.yaml").write_text(yaml.safe_dump(mutate(data, path, value), sort_keys=False))
     verdict(take, recorded[1])
@@ -121,8 +134,8 @@ def test_a_manifest_value_changed(recorded, tmp_path_factory, path: list[int], v
     field=st.sampled_from(sorted(RECORD_VALUES)),
     data=st.data(),
 )
-def test_an_index_record_rewritten_with_a_valid_crc(recorded, tmp_path_factory, cam, record, field, data) -> None:  # type: ignore[no-untyped-def]
-    take = Path(shutil.copytree(recorded[0], tmp_path_factory.mktemp("i") / "t"))
+def test_an_index_record_rewritten_with_a_valid_crc(recorded, scratch, cam, record, field, data) -> None:  # type: ignore[no-untyped-def]
+    take = copy(recorded[0], scratch)
     value = data.draw(RECORD_VALUES[field])
     assert field in FIELDS
 
@@ -140,8 +153,8 @@ def test_an_index_record_rewritten_with_a_valid_crc(recorded, tmp_path_factory, 
     kind=st.sampled_from(["fifo", "folder", "dev_zero", "empty", "cut", "missing"]),
     cam=st.sampled_from(CAMS),
 )
-def test_a_file_of_another_kind(recorded, tmp_path_factory, which: str, kind: str, cam: str) -> None:  # type: ignore[no-untyped-def]
-    take = Path(shutil.copytree(recorded[0], tmp_path_factory.mktemp("k") / "t"))
+def test_a_file_of_another_kind(recorded, scratch, which: str, kind: str, cam: str) -> None:  # type: ignore[no-untyped-def]
+    take = copy(recorded[0], scratch)
     path = take / "take.yaml" if which == "take.yaml" else camera_file(take, cam, which)
     size = path.stat().st_size
     if kind == "cut":

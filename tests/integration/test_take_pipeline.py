@@ -8,6 +8,7 @@ from __future__ import annotations
 import ast
 import itertools
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -29,11 +30,11 @@ FRAMES = 6
 
 
 @pytest.fixture(scope="module")
-def moving_ideal(tmp_path_factory: pytest.TempPathFactory) -> Any:
+def moving_ideal(module_tmp: Callable[[str], Path]) -> Any:
     """An ideal presenter take at 480x270 whose presenter moves every frame set (seed 3, as in issue 23)."""
     rig = (REPO / "rigs" / "sim-3x3.yaml").read_text()
     rig = rig.replace("width_px: 960", "width_px: 480").replace("height_px: 540", "height_px: 270")
-    path = tmp_path_factory.mktemp("rig") / "small.yaml"
+    path = module_tmp("rig") / "small.yaml"
     path.write_text(rig)
     return presenter_video(True, FRAMES, ideal=True, seed=3, rig_name=str(path))
 

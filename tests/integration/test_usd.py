@@ -4,6 +4,7 @@ the stage's own camera frusta against our projection."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -16,8 +17,8 @@ from rigctl.interop.usd import rectified_calibration
 
 
 @pytest.fixture(scope="module")
-def takes(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("usd")
+def takes(module_tmp: Callable[[str], Path]) -> Path:
+    out = module_tmp("usd")
     for name, extra in (("real", []), ("ideal", ["--sim", "ideal=true"])):
         res = run_rigctl("record", "--take", name, "--frames", "1", "--out", str(out), "--force",
                          "--sim", "motion=false", *extra)  # fmt: skip

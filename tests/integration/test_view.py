@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import itertools
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import cv2
@@ -39,9 +39,9 @@ def record(out: Path, frames: int, *sim: str) -> Path:
 
 
 @pytest.fixture(scope="module")
-def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def take(module_tmp: Callable[[str], Path]) -> Path:
     """One still frame set (rigctl render scores views against the simulator's only on still takes)."""
-    return record(tmp_path_factory.mktemp("view"), 1, "motion=false")
+    return record(module_tmp("view"), 1, "motion=false")
 
 
 @pytest.fixture(scope="module")
@@ -198,9 +198,9 @@ def test_moving_the_eye_moves_the_hands_more_than_the_torso(take: Path, shots: d
 
 
 @pytest.fixture(scope="module")
-def moving(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def moving(module_tmp: Callable[[str], Path]) -> Path:
     """25 frame sets of the presenter in motion from the first frame."""
-    return record(tmp_path_factory.mktemp("view-moving"), FRAMES, "motion_ramp_s=0")
+    return record(module_tmp("view-moving"), FRAMES, "motion_ramp_s=0")
 
 
 def test_a_bundle_holds_one_frame_sets_colour_and_disparity(moving: Path) -> None:

@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -16,8 +17,8 @@ from rigctl.take.manifest import read_manifest
 
 
 @pytest.fixture(scope="module")
-def views(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    out = tmp_path_factory.mktemp("view-exr")
+def views(module_tmp: Callable[[str], Path]) -> tuple[Path, Path]:
+    out = module_tmp("view-exr")
     res = run_rigctl("record", "--take", "t", "--frames", "1", "--out", str(out), "--sim", "ideal=true",
                      "--sim", "motion=false", "--force")  # fmt: skip
     assert res.returncode == 0, res.stderr

@@ -7,7 +7,7 @@ import http.client
 import signal
 import socket
 import subprocess
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -17,8 +17,8 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
-def take(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("view-server")
+def take(module_tmp: Callable[[str], Path]) -> Path:
+    out = module_tmp("view-server")
     rig = (REPO / "rigs" / "sim-3x3.yaml").read_text()
     rig = rig.replace("width_px: 960", "width_px: 160").replace("height_px: 540", "height_px: 90")
     (out / "tiny.yaml").write_text(rig)

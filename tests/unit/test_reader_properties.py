@@ -117,7 +117,7 @@ def test_alias_bombs_of_any_shape_are_refused_in_bounded_memory(tmp_path: Path, 
 
 
 @pytest.fixture(scope="module")
-def calibration_text(tmp_path_factory: pytest.TempPathFactory) -> str:
+def calibration_text(module_tmp: Callable[[str], Path]) -> str:
     cams = {}
     for r in range(2):
         for c in range(2):
@@ -195,8 +195,8 @@ def read_whole_take(folder: Path) -> None:
 
 @PROPERTY
 @given(where=PATHS, value=VALUES)
-def test_take_yaml_one_value_changed(tmp_path_factory: pytest.TempPathFactory, where: list[int], value: Any) -> None:
-    folder = tmp_path_factory.mktemp("take")
+def test_take_yaml_one_value_changed(module_tmp: Callable[[str], Path], where: list[int], value: Any) -> None:
+    folder = module_tmp("take")
     manifest = small_take(folder)
     (folder / "take.yaml").write_text(yaml.safe_dump(mutate_yaml(manifest, where, value)))
     bounded(lambda: read_whole_take(folder))
@@ -204,8 +204,8 @@ def test_take_yaml_one_value_changed(tmp_path_factory: pytest.TempPathFactory, w
 
 @PROPERTY
 @given(text=st.text(max_size=300))
-def test_take_yaml_any_text(tmp_path_factory: pytest.TempPathFactory, text: str) -> None:
-    folder = tmp_path_factory.mktemp("take")
+def test_take_yaml_any_text(module_tmp: Callable[[str], Path], text: str) -> None:
+    folder = module_tmp("take")
     small_take(folder)
     (folder / "take.yaml").write_text(text, encoding="utf-8")
     bounded(lambda: read_whole_take(folder))
@@ -233,10 +233,10 @@ def test_index_any_bytes(tmp_path: Path, data: bytes) -> None:
     )
 )
 def test_take_with_any_well_formed_index_record(
-    tmp_path_factory: pytest.TempPathFactory, fields: tuple[int, ...]
+    module_tmp: Callable[[str], Path], fields: tuple[int, ...]
 ) -> None:
     """A record whose own checksum is right but whose values are anything: offsets, sizes, flags."""
-    folder = tmp_path_factory.mktemp("take")
+    folder = module_tmp("take")
     small_take(folder, frames=1)
     seq, cap, off, size, crc, fset, tc, flags = fields
     buf = bytearray(RECORD_SIZE)
@@ -265,8 +265,8 @@ def test_pfm_any_header(tmp_path: Path, header: bytes, pixels: bytes) -> None:
 
 
 @pytest.fixture(scope="module")
-def exr_bytes(tmp_path_factory: pytest.TempPathFactory) -> bytes:
-    path = tmp_path_factory.mktemp("exr") / "x.exr"
+def exr_bytes(module_tmp: Callable[[str], Path]) -> bytes:
+    path = module_tmp("exr") / "x.exr"
     write_exr(path, {"RGB": np.full((4, 5, 3), 0.5, np.float32)}, {"rigctl:camera": "r0c0"})
     # the written file reads back
     channels, _ = read_exr(path)
@@ -293,12 +293,12 @@ def test_exr_cut_short(tmp_path: Path, exr_bytes: bytes, cut: int) -> None:
 
 @PROPERTY
 @given(timecodes=st.lists(st.integers(0, 2**32 - 1), min_size=1, max_size=4))
-def test_take_with_any_timecodes(tmp_path_factory: pytest.TempPathFactory, timecodes: list[int]) -> None:
+def test_take_with_any_timecodes(module_tmp: Callable[[str], Path], timecodes: list[int]) -> None:
     """Frame sets by timecode hold one slot per timecode between the first and the last: any timecodes a
     damaged or hostile index holds are read in bounded memory."""
     from rigctl.interfaces import FrameFlags
 
-    folder = tmp_path_factory.mktemp("take")
+    folder = module_tmp("take")
     small_take(folder, frames=len(timecodes))
     records = b""
     for i, tc in enumerate(timecodes):
