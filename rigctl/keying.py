@@ -67,11 +67,12 @@ class Keyer:
             a[small[labels]] = 0.0
         return a
 
-    def soft(self, rgb: F32, hard: F32 | None = None) -> SoftKey:
+    def soft(self, rgb: F32, hard: F32 | None = None, everywhere: bool = False) -> SoftKey:
         """The subject's coverage of every pixel (alpha, fractional on the edge) and its colour unmixed from
         the screen behind it (:func:`soft_key`); all ones and the picture itself without a screen. ``hard``:
-        this keyer's :meth:`matte` of the same picture when it was already computed (depth keys each camera)."""
-        return soft_key(rgb, self, hard)
+        this keyer's :meth:`matte` of the same picture when it was already computed (depth keys each camera);
+        ``everywhere``: the reference solved on every pixel, not only the edge band."""
+        return soft_key(rgb, self, hard, everywhere)
 
     @staticmethod
     def despill(rgb: F32, matte: F32) -> F32:
@@ -99,6 +100,7 @@ RGB_TO_YCC = np.array(
 YCC_TO_RGB = np.linalg.inv(RGB_TO_YCC).astype(np.float32)
 SURE = 0.02  # alpha within this of 0 or 1 is 0 or 1 (sensor noise on the screen and on the subject)
 MIN_LUMA_LEVER = 0.02  # below this luma between a pair and the screen, both pixels of the pair share alpha
+SPECK = 0.8  # a green excess below this share of the screen's may be a speck of the subject (10x its noise)
 SMALL_ALPHA = 0.1  # below this the unmixed colour leans on the nearby subject's (dividing by alpha is noise)
 
 
@@ -106,34 +108,153 @@ SMALL_ALPHA = 0.1  # below this the unmixed colour leans on the nearby subject's
 class SoftKey:
     alpha: F32  # H x W, the share of each pixel the subject covers
     foreground: F32  # H x W x 3, the subject's own colour (unmixed from the screen, spill suppressed)
+    solved: int = 0  # how many pixels the key was solved on (the edge band); the rest are 0 or 1
+
+
+BAND_PX = 16  # at 1920 px wide: how far past the subject (the hard key's, and partial cover) the key looks
+STEP_PX = 2  # and past its faintest cover (a speck of screen noise is not followed further than this)
+
+
+class _LocalMean:
+    """Normalised convolution: the weighted local mean of ``values`` (H x W x C) at the first of ``sigmas``
+    that has weight nearby, else the next. A blur is made only when some pixel asked for needs it, the fine
+    ones over the frame (OpenCV's are fast) and the wide ones at a coarser scale, read at the pixels asked for
+    (:meth:`at`) as OpenCV's bilinear enlargement would give them, without enlarging the frame."""
+
+    def __init__(self, values: F32, weight: F32, sigmas: tuple[float, ...]) -> None:
+        """``values``: H x W x C+1, the last channel ones (:func:`_with_ones`, shared by every mean)."""
+        self.shape = weight.shape
+        self.sigmas = sigmas
+        # the weighted values and the weight side by side, built once for every sigma
+        self.weighted = np.empty(values.shape, np.float32)
+        np.multiply(values, weight[..., None], out=self.weighted)
+        self.fields: dict[int, F32] = {}
+
+    def field(self, k: int) -> F32:
+        """The blurred weighted values at ``sigmas[k]``: over the frame, or at 1 / scale of it."""
+        if k not in self.fields:
+            sigma, (h, w) = self.sigmas[k], self.shape
+            scale = max(1, int(sigma // 4))  # a wide blur at a coarser scale: the same field, a fraction of the time
+            if scale > 1:
+                size = (max(1, w // scale), max(1, h // scale))
+                small = cv2.resize(self.weighted, size, interpolation=cv2.INTER_AREA)
+                self.fields[k] = cv2.GaussianBlur(small, (0, 0), sigma / scale)
+            else:
+                self.fields[k] = cv2.GaussianBlur(self.weighted, (0, 0), sigma)
+        return self.fields[k]
+
+    def sample(self, k: int, idx: NDArray[np.intp]) -> F32:
+        """Field ``k`` at the frame's flat pixel indices ``idx`` (N x C+1)."""
+        field = self.field(k)
+        h, w = self.shape
+        if field.shape[:2] == (h, w):
+            return field.reshape(-1, field.shape[2])[idx]
+        hs, ws = field.shape[:2]
+        y, x = np.divmod(idx, w)
+        x0, fx = _linear(x, ws, w)
+        y0, fy = _linear(y, hs, h)
+        dx = (x0 < ws - 1).astype(np.intp)
+        row0 = y0 * ws + x0
+        row1 = row0 + ws * (y0 < hs - 1)
+        flat = field.reshape(-1, field.shape[2])
+        fx, fy = fx[:, None], fy[:, None]
+        top = flat[row0] * (1 - fx) + flat[row0 + dx] * fx
+        bottom = flat[row1] * (1 - fx) + flat[row1 + dx] * fx
+        return np.asarray(top * (1 - fy) + bottom * fy, np.float32)
+
+    def at(self, idx: NDArray[np.intp]) -> tuple[F32, F32]:
+        """The means at the flat pixel indices ``idx`` (N x C), and where there was any weight (N, 0/1)."""
+        c = self.weighted.shape[2] - 1
+        out = np.zeros((len(idx), c), np.float32)
+        done = np.zeros(len(idx), bool)
+        for k in range(len(self.sigmas)):
+            rest = np.flatnonzero(~done)
+            if not len(rest):
+                break
+            at = self.sample(k, idx[rest])
+            take = at[:, -1] > 0.02
+            out[rest[take]] = at[take, :-1] / at[take, -1:]
+            done[rest[take]] = True
+        return out, done.astype(np.float32)
+
+
+def _linear(dst: NDArray[np.intp], small: int, size: int) -> tuple[NDArray[np.intp], F32]:
+    """Where OpenCV's bilinear resize of ``small`` pixels to ``size`` reads destination pixel ``dst``: the
+    left source pixel and the weight of the right one (half-pixel centres, clamped at both ends)."""
+    src = (dst + 0.5) * (small / size) - 0.5
+    left = np.floor(src).astype(np.intp)
+    frac = (src - left).astype(np.float32)
+    frac[left < 0] = 0.0
+    frac[left >= small - 1] = 0.0
+    return np.clip(left, 0, small - 1), frac
+
+
+def _with_ones(values: F32) -> F32:
+    """H x W x C values with a channel of ones after them (what :class:`_LocalMean` weighs)."""
+    out = np.ones((*values.shape[:2], values.shape[2] + 1), np.float32)
+    out[..., :-1] = values
+    return out
 
 
 def _local_mean(values: F32, weight: F32, sigmas: tuple[float, ...]) -> tuple[F32, F32]:
-    """Normalised convolution: the weighted local mean of ``values`` (H x W x C) at the first of ``sigmas``
-    that has weight nearby, else the next; and where none had any (a 0/1 map)."""
-    out = np.zeros(values.shape, np.float32)
-    done = np.zeros(weight.shape, bool)
+    """:class:`_LocalMean` at every pixel (H x W x C, H x W)."""
     h, w = weight.shape
-    c = values.shape[2]
-    # the weighted values and the weight side by side, built once for every sigma
-    weighted = np.empty((h, w, c + 1), np.float32)
-    np.multiply(values, weight[..., None], out=weighted[..., :c])
-    weighted[..., c] = weight
-    for sigma in sigmas:
-        scale = max(1, int(sigma // 4))  # a wide blur at a coarser scale: the same field, a fraction of the time
-        if scale > 1:
-            small = cv2.resize(weighted, (max(1, w // scale), max(1, h // scale)), interpolation=cv2.INTER_AREA)
-            both = cv2.resize(cv2.GaussianBlur(small, (0, 0), sigma / scale), (w, h), interpolation=cv2.INTER_LINEAR)
-        else:
-            both = cv2.GaussianBlur(weighted, (0, 0), sigma)
-        num, den = both[..., :-1], both[..., -1]
-        take = ~done & (den > 0.02)
-        np.divide(num, den[..., None], out=out, where=take[..., None])  # in place: no gathered copies
-        done |= take
-    return out, done.astype(np.float32)
+    out, done = _LocalMean(_with_ones(values), weight, sigmas).at(np.arange(h * w))
+    return out.reshape(h, w, -1), done.reshape(h, w)
 
 
-def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None) -> SoftKey:
+@dataclass
+class _Pass:
+    """One pass of the key at the solved pixels (all N long): alpha, the pairs' alpha, and what unmixing
+    needs (the screen's colour and chroma direction, the nearby subject's colour and whether there was one)."""
+
+    alpha: F32
+    pair_alpha: F32
+    back: F32
+    u: F32
+    front: F32
+    have_front: F32
+
+
+def _solve(ycc: F32, idx: NDArray[np.intp], front_mean: _LocalMean, back_mean: _LocalMean, pairs: bool) -> _Pass:
+    """The key's alpha at ``idx`` (every 4:2:2 pair whole, in frame order) for one estimate of the screen."""
+    pix = ycc.reshape(-1, 3)[idx]
+    front, have_front = front_mean.at(idx)
+    back, _ = back_mean.at(idx)
+    chroma_b = back[:, 1:]
+    level = np.maximum(np.linalg.norm(chroma_b, axis=1), 1e-3)
+    u = chroma_b / level[:, None]  # the screen's chroma direction
+    e_i = np.einsum("nc,nc->n", pix[:, 1:], u)
+    e_f = np.where(have_front > 0, np.einsum("nc,nc->n", front[:, 1:], u), 0.0)
+    e_f = np.minimum(e_f, 0.5 * level)
+    pair_alpha = np.clip((level - e_i) / (level - e_f), 0.0, 1.0).astype(np.float32)
+    # the solved pixels in frame order hold every pair whole, so a pair is two neighbours here too
+    alpha = _split_pairs(pair_alpha, pix[:, 0], back[:, 0]) if pairs else pair_alpha
+    alpha = np.where(alpha < SURE, 0.0, np.where(alpha > 1 - SURE, 1.0, alpha)).astype(np.float32)
+    return _Pass(alpha, pair_alpha if pairs else alpha, back, u, front, have_front)
+
+
+def _near(mask: NDArray[np.bool_], r: int, pairs: bool) -> NDArray[np.bool_]:
+    """Pixels within ``r`` of ``mask`` (along both axes: a square, the fast dilation), with both pixels of
+    every 4:2:2 pair."""
+    near = cv2.dilate(mask.astype(np.uint8), np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0 if r else mask.copy()
+    if pairs:
+        both = near[:, 0::2] | near[:, 1::2]
+        near[:, 0::2], near[:, 1::2] = both, both
+    return np.asarray(near)
+
+
+def _cover(rgb: F32, hard: F32) -> NDArray[np.bool_]:
+    """Where the subject may be: the hard key's subject, and every pixel whose green excess is clearly below the
+    screen's (its median over the hard key's screen): the specks the hard key drops as noise, which include
+    strands cut off from the subject (by the frame's edge, or flying free)."""
+    s = rgb[..., 1] - np.maximum(rgb[..., 0], rgb[..., 2])
+    sample = s[::4, ::4][hard[::4, ::4] <= 0]
+    level = float(np.median(sample)) if sample.size else 0.0
+    return np.asarray((hard > 0) | (s < SPECK * level)) if level > 0 else np.asarray(hard > 0)
+
+
+def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None, everywhere: bool = False) -> SoftKey:
     """Alpha and the unmixed subject colour on a green screen.
 
     The screen's colour is estimated at every pixel from the screen around it (a smooth field: uneven light is
@@ -150,6 +271,14 @@ def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None) -> SoftKey:
     camera's super-whites and sub-blacks): the whole subject as it is, unmixed edge colours within the
     picture's own range.
 
+    The key is solved on the subject's edge band only (a few % of a presenter's frame): the pixels within
+    :data:`BAND_PX` (scaled with the width) of the hard key's subject or of a speck less green than the
+    screen (:func:`_cover`), grown by as much around every pixel the key finds more than :data:`SMALL_ALPHA`
+    of it in, and by :data:`STEP_PX` around any it finds some in (strands the hard key missed, followed out
+    to their tips). Well inside the subject the key is 1 and the colour as captured; on the screen beyond the band 0
+    (and the colour as captured, which alpha hides): a speck of screen noise away from the subject is screen.
+    ``everywhere``: solve every pixel (the reference the band is tested against).
+
     ``hard``: ``keyer.matte`` of the picture clipped to [0, 1], when the caller has it (then it is not computed
     again). It is below 1 somewhere exactly when the keyer found a screen (the screen's own pixels key to 0),
     so it also says whether there is one."""
@@ -161,63 +290,79 @@ def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None) -> SoftKey:
         return SoftKey(np.ones(rgb.shape[:2], np.float32), captured.copy())
     ycc = np.asarray(rgb @ RGB_TO_YCC.T, np.float32)
     # 4:2:2 decoded: the two pixels of each pair share their chroma (but where decoding clipped)
-    w = hard.shape[1]
+    h, w = hard.shape
     pairs = w % 2 == 0 and float(np.mean(np.abs(ycc[:, 0::2, 1:] - ycc[:, 1::2, 1:]) < 2e-3)) > 0.95
     k3 = np.ones((3, 3), np.uint8)
     solid = cv2.erode((hard >= 1).astype(np.uint8), k3).astype(np.float32)
     screen = cv2.erode((hard <= 0).astype(np.uint8), k3).astype(np.float32)
-    alpha = hard
-    front, have_front = _local_mean(ycc, solid, (3.0, 12.0))  # the nearby subject: the same in both passes
-    for _ in range(2):  # the second pass measures the screen without the faint strands the first one found
-        back, _ = _local_mean(ycc, screen, (4.0, 16.0, 64.0))
-        chroma_b = back[..., 1:]
-        level = np.maximum(np.linalg.norm(chroma_b, axis=2), 1e-3)
-        u = chroma_b / level[..., None]  # the screen's chroma direction
-        e_i = np.einsum("hwc,hwc->hw", ycc[..., 1:], u)
-        e_f = np.where(have_front > 0, np.einsum("hwc,hwc->hw", front[..., 1:], u), 0.0)
-        e_f = np.minimum(e_f, 0.5 * level)
-        pair_alpha = np.clip((level - e_i) / (level - e_f), 0.0, 1.0).astype(np.float32)
-        alpha = _split_pairs(pair_alpha, ycc[..., 0], back[..., 0]) if pairs else pair_alpha
-        alpha = np.where(alpha < SURE, 0.0, np.where(alpha > 1 - SURE, 1.0, alpha)).astype(np.float32)
-        alpha[cv2.erode(solid.astype(np.uint8), k3) > 0] = 1.0  # well inside the hard key: the subject
-        screen = cv2.erode((alpha <= 0).astype(np.uint8), k3).astype(np.float32)
-    fg = _unmix(ycc, back, front, have_front, alpha, pair_alpha if pairs else alpha, u, captured)
-    return SoftKey(alpha, fg)
+    inner = (cv2.erode(solid.astype(np.uint8), k3) > 0).reshape(-1)  # well inside the hard key: the subject
+    ycc1 = _with_ones(ycc)
+    front = _LocalMean(ycc1, solid, (3.0, 12.0))  # the nearby subject: the same in both passes
+    back = _LocalMean(ycc1, screen, (4.0, 16.0, 64.0))
+    full = inner.astype(np.float32)  # the key over the frame: 1 inside, 0 on the screen
+
+    def solve(idx: NDArray[np.intp], back: _LocalMean) -> _Pass:
+        done = _solve(ycc, idx, front, back, pairs)
+        done.alpha[inner[idx]] = 1.0  # solved as part of a pair, but inside the subject
+        full[idx] = done.alpha
+        return done
+
+    r = max(4, round(BAND_PX * w / 1920))
+    outside = _near(~inner.reshape(h, w), 0, pairs)  # and both pixels of a pair one of which is outside
+    band = np.ones((h, w), bool) if everywhere else _near(_cover(rgb, hard), r, pairs) & outside
+    idx = np.flatnonzero(band)
+    solve(idx, back)
+    while not everywhere:  # the first pass follows strands out past the band
+        found = full.reshape(h, w)
+        more = _near((found > SMALL_ALPHA) & band, r, pairs) | _near((found > 0) & band, STEP_PX, pairs)
+        more &= ~band & outside
+        if not more.any():
+            break
+        band |= more
+        solve(np.flatnonzero(more), back)
+    idx = np.flatnonzero(band)
+    # the second pass measures the screen without the faint strands the first one found
+    del back  # its fields (the second pass's take their place)
+    done = solve(idx, _LocalMean(ycc1, cv2.erode((full.reshape(h, w) <= 0).astype(np.uint8), k3), (4.0, 16.0, 64.0)))
+    lo, hi = min(0.0, float(captured.min())), max(1.0, float(captured.max()))
+    fg = captured.copy()
+    at = fg.reshape(-1, fg.shape[2])
+    at[idx] = _unmix(ycc.reshape(-1, 3)[idx], done, at[idx], (lo, hi))
+    return SoftKey(full.reshape(h, w), fg, len(idx))
 
 
 def _split_pairs(pair_alpha: F32, luma: F32, screen_luma: F32) -> F32:
-    """Per-pixel alpha from a pair's mean alpha and each pixel's luma: with the pair's mix Ybar = abar Y_F +
-    (1 - abar) Y_B, a1 - a2 = abar (Y1 - Y2) / (Ybar - Y_B); where Ybar is too close to the screen's luma to
-    tell, both keep the pair's."""
-    y1, y2 = luma[:, 0::2], luma[:, 1::2]
-    abar = pair_alpha[:, 0::2]
-    lever = 0.5 * (y1 + y2) - 0.5 * (screen_luma[:, 0::2] + screen_luma[:, 1::2])
+    """Per-pixel alpha from a pair's mean alpha and each pixel's luma (pairs along the last axis): with the
+    pair's mix Ybar = abar Y_F + (1 - abar) Y_B, a1 - a2 = abar (Y1 - Y2) / (Ybar - Y_B); where Ybar is too
+    close to the screen's luma to tell, both keep the pair's."""
+    y1, y2 = luma[..., 0::2], luma[..., 1::2]
+    abar = pair_alpha[..., 0::2]
+    lever = 0.5 * (y1 + y2) - 0.5 * (screen_luma[..., 0::2] + screen_luma[..., 1::2])
     usable = np.abs(lever) >= MIN_LUMA_LEVER
     half = np.where(usable, abar * (y1 - y2) / np.where(usable, 2 * lever, 1.0), 0.0)
     # within [0, 1] with the pair's sum kept where it can be
     half = np.clip(half, np.maximum(abar - 1, -abar), np.minimum(1 - abar, abar))
     out = np.empty_like(pair_alpha)
-    out[:, 0::2], out[:, 1::2] = abar + half, abar - half
+    out[..., 0::2], out[..., 1::2] = abar + half, abar - half
     return np.clip(out, 0.0, 1.0).astype(np.float32)
 
 
-def _unmix(
-    ycc: F32, back: F32, front: F32, have_front: F32, alpha: F32, chroma_alpha: F32, u: F32, captured: F32
-) -> F32:
+def _unmix(ycc: F32, key: _Pass, captured: F32, limits: tuple[float, float]) -> F32:
     """F = B + (I - B) / a, luma per pixel and chroma with the alpha it was mixed with; toward the nearby
     subject's colour as alpha goes to 0; spill held to the nearby subject's along the screen's chroma. Within
-    the captured picture's range (at least [0, 1]); ``captured`` itself where the subject is whole."""
-    y = back[..., 0] + (ycc[..., 0] - back[..., 0]) / np.maximum(alpha, 1e-3)
-    c = back[..., 1:] + (ycc[..., 1:] - back[..., 1:]) / np.maximum(chroma_alpha, 1e-3)[..., None]
-    unmixed = np.concatenate([y[..., None], c], axis=2)
-    near = np.where(have_front[..., None] > 0, front, unmixed)
-    t = np.clip(np.minimum(alpha, chroma_alpha) / SMALL_ALPHA, 0.0, 1.0)[..., None]
+    ``limits`` (the captured picture's range, at least [0, 1]); ``captured`` itself where the subject is whole.
+    Every array is per solved pixel (N x 3, N)."""
+    back, front, u, alpha = key.back, key.front, key.u, key.alpha
+    y = back[:, 0] + (ycc[:, 0] - back[:, 0]) / np.maximum(alpha, 1e-3)
+    c = back[:, 1:] + (ycc[:, 1:] - back[:, 1:]) / np.maximum(key.pair_alpha, 1e-3)[:, None]
+    unmixed = np.concatenate([y[:, None], c], axis=1)
+    near = np.where(key.have_front[:, None] > 0, front, unmixed)
+    t = np.clip(np.minimum(alpha, key.pair_alpha) / SMALL_ALPHA, 0.0, 1.0)[:, None]
     f = t * unmixed + (1 - t) * near
-    e_near = np.maximum(np.einsum("hwc,hwc->hw", near[..., 1:], u), 0.0)
-    excess = np.maximum(np.einsum("hwc,hwc->hw", f[..., 1:], u) - e_near, 0.0)
-    f[..., 1:] -= excess[..., None] * u
-    lo, hi = min(0.0, float(captured.min())), max(1.0, float(captured.max()))
-    rgb = np.clip(f @ YCC_TO_RGB.T, lo, hi).astype(np.float32)
+    e_near = np.maximum(np.einsum("nc,nc->n", near[:, 1:], u), 0.0)
+    excess = np.maximum(np.einsum("nc,nc->n", f[:, 1:], u) - e_near, 0.0)
+    f[:, 1:] -= excess[:, None] * u
+    rgb = np.clip(f @ YCC_TO_RGB.T, *limits).astype(np.float32)
     solid = alpha >= 1
     rgb[solid] = captured[solid]  # the subject as captured where it is whole, super-whites included
     return rgb

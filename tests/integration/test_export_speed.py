@@ -1,6 +1,7 @@
 """Issue 24's faster write path gives the outputs the reference path gives: the soft key started from the
-hard matte depth computed (not keyed again) and the soft key's local means built once per field are bit-exact
-against the slower forms they replaced."""
+hard matte depth computed (not keyed again) is bit-exact, the soft key's local means are within float32
+rounding of the slower form they replaced, and the key solved on the edge band is the key solved everywhere
+but for the screen's noise."""
 
 from __future__ import annotations
 
@@ -78,16 +79,23 @@ def _reference_local_mean(values: np.ndarray, weight: np.ndarray, sigmas: tuple[
     return out, done.astype(np.float32)
 
 
-def test_the_local_mean_matches_the_reference_bit_for_bit() -> None:
+def test_the_local_mean_matches_the_reference() -> None:
+    """Bit for bit where the blur is over the frame; within float32 rounding (a few units in the last place,
+    1e-6 here) where the wide blurs are read from the coarse scale at each pixel rather than enlarged to the
+    frame: OpenCV enlarges in its own order of operations. Where there was weight at all, exactly."""
     rng = np.random.default_rng(3)
-    values = rng.random((90, 130, 3), dtype=np.float32)
-    weight = (rng.random((90, 130)) > 0.97).astype(np.float32)  # sparse: the later sigmas fill the holes
-    weight[:, :40] = 0.0  # a wide hole only the widest sigma reaches
-    for sigmas in ((4.0, 16.0, 64.0), (3.0, 12.0)):
-        got, got_done = _local_mean(values, weight, sigmas)
-        want, want_done = _reference_local_mean(values, weight, sigmas)
-        assert 0 < want_done.mean() < 1 or sigmas[-1] == 64.0
-        assert np.array_equal(got, want) and np.array_equal(got_done, want_done)
+    for shape in ((90, 130), (91, 133)):  # and a size the coarse scales do not divide
+        values = rng.random((*shape, 3), dtype=np.float32)
+        weight = (rng.random(shape) > 0.97).astype(np.float32)  # sparse: the later sigmas fill the holes
+        weight[:, :40] = 0.0  # a wide hole only the widest sigma reaches
+        for sigmas in ((4.0, 16.0, 64.0), (3.0, 12.0)):
+            got, got_done = _local_mean(values, weight, sigmas)
+            want, want_done = _reference_local_mean(values, weight, sigmas)
+            assert 0 < want_done.mean() < 1 or sigmas[-1] == 64.0
+            assert np.array_equal(got_done, want_done)
+            assert np.abs(got - want).max() <= 1e-6
+            fine = _reference_local_mean(values, weight, sigmas[:1])[1] > 0  # the first sigma: over the frame
+            assert np.array_equal(got[fine], want[fine])
 
 
 def test_the_soft_key_from_depths_matte_is_the_soft_key_of_the_picture(
@@ -144,3 +152,21 @@ def test_a_frame_sets_report_times_its_write_elapsed_and_in_cpu_seconds(tmp_path
     t = done.report.timings_s
     assert t.depth > 0 and t.write > 0 and t.write_cpu > 0
     assert sorted(done.files) == sorted(f"{c}.{e}" for c in CAMS for e in ("exr", "pfm", "png"))
+
+
+def test_screen_noise_away_from_the_subject_stays_screen() -> None:
+    """The key solved everywhere finds specks of the subject in the screen's noise (alpha a little over the
+    noise floor, false foreground); solved on the edge band the screen away from the subject is 0, and
+    near it the key is the same within the shift those specks make in the screen's estimate."""
+    keyer = Keyer()
+    for frame in range(3):
+        img = _picture(4.0 * frame, frame)
+        band, everywhere = keyer.soft(img), keyer.soft(img, everywhere=True)
+        hard = keyer.matte(img)
+        distance = cv2.distanceTransform((hard <= 0).astype(np.uint8), cv2.DIST_L2, 5)
+        far = distance > 8
+        assert int((everywhere.alpha[far] > 0).sum()) > 50 and everywhere.alpha[far].max() < 0.1
+        assert not band.alpha[far].any()
+        diff = np.abs(band.alpha - everywhere.alpha)
+        assert diff[distance <= 2].max() < 1e-3 and diff.max() < 0.1  # the edge, and specks beside it
+        assert band.solved < 0.5 * everywhere.solved

@@ -90,3 +90,27 @@ def test_the_soft_key_halves_the_hard_keys_alpha_error_and_unmixes_the_colour(ta
     assert unmixed_error < mixed_error
     assert np.isfinite(key.alpha).all() and np.isfinite(key.foreground).all()
     assert key.alpha.min() >= 0 and key.alpha.max() <= 1
+
+
+def test_the_key_solved_on_the_edge_band_is_the_key_solved_everywhere(take: Path) -> None:
+    """Issue 24: the soft key is solved on the subject's edge band, strands followed out to their tips, not on
+    every pixel. On every camera of the soft-edged take it is the key solved everywhere but for a few pixels
+    (strand tips cut off by the frame's edge, too faint to tell from the screen, and the screen estimate they
+    shift), on a small share of the frame, and no further from the truth."""
+    truth = _truth(take, "alpha")
+    grid = TakeGrid(take).grid(0)
+    keyer = Keyer()
+    for cam, rgb in grid.images.items():
+        band, everywhere = keyer.soft(rgb), keyer.soft(rgb, everywhere=True)
+        assert everywhere.solved == rgb.shape[0] * rgb.shape[1]
+        assert band.solved < 0.1 * everywhere.solved, (cam, band.solved)  # about 5 % here
+        edge = ((everywhere.alpha > 0) & (everywhere.alpha < 1)) | ((band.alpha > 0) & (band.alpha < 1))
+        off = np.abs(band.alpha - everywhere.alpha) > 0.01
+        # at most 0.42 % here; without following strands out 1.0 %, without the specks as seeds 2.8 %
+        assert off.sum() <= 0.008 * edge.sum(), (cam, int(off.sum()), int(edge.sum()))
+        # where the subject is at all (its colour is hidden elsewhere), the same colour where the key is
+        seen = (band.alpha > 0.1) & ~off
+        assert np.abs(band.foreground - everywhere.foreground)[seen].max() < 1e-3, cam
+        if cam == CAMERA:
+            a, b = matte_scores(band.alpha, truth), matte_scores(everywhere.alpha, truth)
+            assert a["sad_k"] <= 1.01 * b["sad_k"] and a["mse"] <= 1.01 * b["mse"], (a, b)
