@@ -10,6 +10,7 @@ import dataclasses
 import hashlib
 import shutil
 import uuid
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -111,34 +112,50 @@ def write_outputs(
     target: Target, name: str, grid: Grid, res: DepthResult, d_range: tuple[float, float], formats: tuple[str, ...]
 ) -> None:
     d = res.disparity
-    if "pfm" in formats:
-        write_pfm(target.path(name, ".pfm"), d)
-    if "png" in formats:
-        publish_png(target.path(name, ".png"), colour_preview(d, d_range))
-    if "exr" in formats:
-        z = grid.depth(d)
-        inv_z = np.where(np.isfinite(z) & (z > 0), 1.0 / z, 0.0).astype(np.float32)
-        # the picture scene-linear, A the subject's coverage (the soft key) and RGB its unmixed colour
-        # premultiplied by it, as NUKE and Unreal read it; unkeyed (no screen, or --no-key) opaque
-        key = soft_key(grid.images[name], res) if bool((res.matte < 1).any()) else None
-        rgb, alpha = (key.foreground, key.alpha) if key is not None else (grid.images[name], res.matte)
-        channels: dict[str, F32] = {**picture(rgb, alpha, target.colour), "depth.Z": inv_z}
-        channels["confidence.Y"] = res.confidence
-        st = steps(grid.offsets, name)
-        channels.update(layers(d, st))
-        ox, oy = grid.offsets[name]
-        h, w = grid.shape
-        attrs = {
-            **picture_attributes(target.fps, target.timecode, target.colour),
-            **camera_attributes(np.array(grid.centre(name)), grid.focal_px, grid.principal, (w, h)),
-            "rigctl:camera": name,
-            "rigctl:focal_px": f"{grid.focal_px:.6f}",
-            "rigctl:spacing_x": f"{grid.spacing:.6f}",
-            "rigctl:offset": f"{ox:.6f} {oy:.6f}",
-            "rigctl:disparity": "pixels of the horizontal spacing; depth.Z holds 1/Z",
-            **disparity_header(st),
-        }
-        write_exr(target.path(name, ".exr"), channels, attrs, half=("RGB", "A"))
+    keyed = "exr" in formats and bool((res.matte < 1).any())
+    # the EXR picture's soft key, the write's dearest part, in a second thread while the PFM, the PNG and the
+    # depth layers are made and written (numpy and OpenCV let go of the GIL; the memory is what it was)
+    with ThreadPoolExecutor(1, thread_name_prefix="soft-key") as beside:
+        pending = beside.submit(soft_key, grid.images[name], res) if keyed else None
+        if "pfm" in formats:
+            write_pfm(target.path(name, ".pfm"), d)
+        if "png" in formats:
+            publish_png(target.path(name, ".png"), colour_preview(d, d_range))
+        if "exr" in formats:
+            depth = depth_channels(grid, name, res)
+            key = pending.result() if pending is not None else None
+            write_depth_exr(target, name, grid, res, key, depth)
+
+
+def depth_channels(grid: Grid, name: str, res: DepthResult) -> dict[str, F32]:
+    """The EXR's channels but the picture: 1/Z, confidence and the disparity layers."""
+    z = grid.depth(res.disparity)
+    inv_z = np.where(np.isfinite(z) & (z > 0), 1.0 / z, 0.0).astype(np.float32)
+    return {"depth.Z": inv_z, "confidence.Y": res.confidence, **layers(res.disparity, steps(grid.offsets, name))}
+
+
+def write_depth_exr(
+    target: Target, name: str, grid: Grid, res: DepthResult, key: SoftKey | None, depth: dict[str, F32]
+) -> None:
+    """The camera's EXR: the picture (scene-linear, A the subject's coverage from the soft ``key`` and RGB its
+    unmixed colour premultiplied by it, as NUKE and Unreal read it; unkeyed, no screen or --no-key, opaque)
+    and the ``depth`` channels, with the take's time and the rectified camera."""
+    rgb, alpha = (key.foreground, key.alpha) if key is not None else (grid.images[name], res.matte)
+    channels: dict[str, F32] = {**picture(rgb, alpha, target.colour), **depth}
+    st = steps(grid.offsets, name)
+    ox, oy = grid.offsets[name]
+    h, w = grid.shape
+    attrs = {
+        **picture_attributes(target.fps, target.timecode, target.colour),
+        **camera_attributes(np.array(grid.centre(name)), grid.focal_px, grid.principal, (w, h)),
+        "rigctl:camera": name,
+        "rigctl:focal_px": f"{grid.focal_px:.6f}",
+        "rigctl:spacing_x": f"{grid.spacing:.6f}",
+        "rigctl:offset": f"{ox:.6f} {oy:.6f}",
+        "rigctl:disparity": "pixels of the horizontal spacing; depth.Z holds 1/Z",
+        **disparity_header(st),
+    }
+    write_exr(target.path(name, ".exr"), channels, attrs, half=("RGB", "A"))
 
 
 def publish(tmp: Path, final: Path) -> dict[str, FileRecord]:

@@ -170,3 +170,43 @@ def test_screen_noise_away_from_the_subject_stays_screen() -> None:
         diff = np.abs(band.alpha - everywhere.alpha)
         assert diff[distance <= 2].max() < 1e-3 and diff.max() < 0.1  # the edge, and specks beside it
         assert band.solved < 0.5 * everywhere.solved
+
+
+def test_the_threaded_write_writes_what_one_thread_writes(
+    computed: tuple[Grid, dict[str, DepthResult]], tmp_path: Path
+) -> None:
+    """The soft key made beside the PFM and PNG, and the EXR compressed on OpenEXR's thread pool, give the
+    bytes the same steps give one after the other on one thread."""
+    import OpenEXR
+
+    grid, results = computed
+    for cam in CAMS:
+        threaded = Target(tmp_path / "threaded", "frames", 0, 25.0)
+        write_outputs(threaded, cam, grid, results[cam], (0.0, 10.0), ("exr", "pfm", "png"))
+        pool = OpenEXR.global_thread_count()
+        assert pool >= 1  # the first EXR written set it
+        OpenEXR.set_global_thread_count(0)  # the writer's own thread compresses
+        try:
+            one = Target(tmp_path / "one", "frames", 0, 25.0)
+            key = export.soft_key(grid.images[cam], results[cam])
+            export.write_depth_exr(one, cam, grid, results[cam], key, export.depth_channels(grid, cam, results[cam]))
+        finally:
+            OpenEXR.set_global_thread_count(pool)
+        assert threaded.path(cam, ".exr").read_bytes() == one.path(cam, ".exr").read_bytes()
+        assert threaded.path(cam, ".pfm").is_file() and threaded.path(cam, ".png").is_file()
+
+
+def test_a_soft_key_that_fails_fails_the_write(
+    computed: tuple[Grid, dict[str, DepthResult]], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An error in the key's thread is the write's error, and no EXR is left at its name."""
+    grid, results = computed
+
+    def broken(*_: object) -> None:
+        raise MemoryError("the soft key ran out of memory")
+
+    monkeypatch.setattr(export, "soft_key", broken)
+    target = Target(tmp_path, "frames", 0, 25.0)
+    with pytest.raises(MemoryError, match="soft key"):
+        write_outputs(target, CAMS[0], grid, results[CAMS[0]], (0.0, 10.0), ("exr", "pfm", "png"))
+    assert not target.path(CAMS[0], ".exr").exists()
