@@ -8,6 +8,7 @@ image (its dominant green); the matte falls from 1 to 0 between ``low`` and ``hi
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -129,6 +130,11 @@ class _LocalMean:
         self.weighted = np.empty(values.shape, np.float32)
         np.multiply(values, weight[..., None], out=self.weighted)
         self.fields: dict[int, F32] = {}
+
+    def made(self, k: int) -> _LocalMean:
+        """This mean with its blur ``k`` made (to make it in a thread of the caller's choosing)."""
+        self.field(k)
+        return self
 
     def field(self, k: int) -> F32:
         """The blurred weighted values at ``sigmas[k]``: over the frame, or at 1 / scale of it."""
@@ -297,8 +303,12 @@ def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None, everywhere: bool =
     screen = cv2.erode((hard <= 0).astype(np.uint8), k3).astype(np.float32)
     inner = (cv2.erode(solid.astype(np.uint8), k3) > 0).reshape(-1)  # well inside the hard key: the subject
     ycc1 = _with_ones(ycc)
-    front = _LocalMean(ycc1, solid, (3.0, 12.0))  # the nearby subject: the same in both passes
-    back = _LocalMean(ycc1, screen, (4.0, 16.0, 64.0))
+    # the nearby subject (the same in both passes) and the screen: their fine blurs, the key's dearest step,
+    # side by side (OpenCV lets go of the GIL; both are held at once either way, within a few MB)
+    with ThreadPoolExecutor(1, thread_name_prefix="soft-key-front") as beside:
+        made = beside.submit(lambda: _LocalMean(ycc1, solid, (3.0, 12.0)).made(0))
+        back = _LocalMean(ycc1, screen, (4.0, 16.0, 64.0)).made(0)
+        front = made.result()
     full = inner.astype(np.float32)  # the key over the frame: 1 inside, 0 on the screen
 
     def solve(idx: NDArray[np.intp], back: _LocalMean) -> _Pass:
