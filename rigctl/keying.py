@@ -127,7 +127,7 @@ class _LocalMean:
         self.shape = weight.shape
         self.sigmas = sigmas
         # the weighted values and the weight side by side, built once for every sigma
-        self.weighted = np.empty(values.shape, np.float32)
+        self.weighted: F32 = np.empty(values.shape, np.float32)
         np.multiply(values, weight[..., None], out=self.weighted)
         self.fields: dict[int, F32] = {}
 
@@ -144,9 +144,9 @@ class _LocalMean:
             if scale > 1:
                 size = (max(1, w // scale), max(1, h // scale))
                 small = cv2.resize(self.weighted, size, interpolation=cv2.INTER_AREA)
-                self.fields[k] = cv2.GaussianBlur(small, (0, 0), sigma / scale)
+                self.fields[k] = np.asarray(cv2.GaussianBlur(small, (0, 0), sigma / scale), np.float32)
             else:
-                self.fields[k] = cv2.GaussianBlur(self.weighted, (0, 0), sigma)
+                self.fields[k] = np.asarray(cv2.GaussianBlur(self.weighted, (0, 0), sigma), np.float32)
         return self.fields[k]
 
     def sample(self, k: int, idx: NDArray[np.intp]) -> F32:
@@ -333,7 +333,8 @@ def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None, everywhere: bool =
     idx = np.flatnonzero(band)
     # the second pass measures the screen without the faint strands the first one found
     del back  # its fields (the second pass's take their place)
-    done = solve(idx, _LocalMean(ycc1, cv2.erode((full.reshape(h, w) <= 0).astype(np.uint8), k3), (4.0, 16.0, 64.0)))
+    screen = cv2.erode((full.reshape(h, w) <= 0).astype(np.uint8), k3).astype(np.float32)
+    done = solve(idx, _LocalMean(ycc1, screen, (4.0, 16.0, 64.0)))
     lo, hi = min(0.0, float(captured.min())), max(1.0, float(captured.max()))
     fg = captured.copy()
     at = fg.reshape(-1, fg.shape[2])
