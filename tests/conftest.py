@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 import sys
 from collections.abc import Callable, Iterator
@@ -36,6 +37,12 @@ def _shared() -> Path:
 
 
 SHARED = _shared()
+
+# A suite started as a background job of a script (`.ci/run &`, nohup) inherits SIGINT ignored, and so would
+# every rigctl it starts: the tests that stop a command with Ctrl-C would wait for it forever. The suite takes
+# Python's own handler back, and its children then start with the default, as they would from a terminal.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 settings.register_profile("ci", deadline=None, max_examples=200, derandomize=True)
 settings.register_profile("dev", deadline=None, max_examples=100)
