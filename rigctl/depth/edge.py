@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 
 from rigctl.depth.cost import F32
 from rigctl.depth.cost_kernels import better_half_mean
+from rigctl.depth.fixed_kernels import window_disagreements
 from rigctl.depth.grid import Grid
 
 DEPTH_COVERAGE = 0.5  # depth where the subject covers at least this share of the pixel
@@ -43,6 +44,7 @@ MIN_LUMA_STEP = 0.03  # below this luma difference between subject and screen, t
 LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)  # BT.709
 COMPILED = True  # the better half's mean by the compiled kernel; False: the numpy reference
 AGREE_MARGIN = 0.02  # how much better (mean absolute difference, 0..1) the views must agree unshifted
+SPARSE = True  # the fixed-to-the-sensor tests only where the views may agree unshifted; False: the whole box
 
 
 def _near_mean(values: F32, weight: F32) -> tuple[F32, F32]:
@@ -139,18 +141,23 @@ def sensor_fixed(
     box = (int(ys.min()), int(ys.max()) + 1, int(xs.min()), int(xs.max()) + 1)
     y0, y1, x0, x1 = box
     d = np.where(have[y0:y1, x0:x1], disparity[y0:y1, x0:x1], 0.0).astype(np.float32)
-    lumas = {n: np.asarray(grid.images[n] @ LUMA, np.float32) for n in views}
     ref_y = np.asarray(grid.images[ref][y0:y1, x0:x1] @ LUMA, np.float32)
-    off = grid.offsets
-    at_estimate, count = _disagreement(lumas, ref_y, off, ref, views, d, box)
-    unshifted, _ = _disagreement(lumas, ref_y, off, ref, views, np.zeros_like(d), box, seen_by=count)
-    # a match, not a flat patch that agrees at any shift: one pixel of disparity either way agrees worse
-    nearby = np.minimum(
-        *(
-            _disagreement(lumas, ref_y, off, ref, views, np.full_like(d, step), box, seen_by=count)[0]
-            for step in (-1.0, 1.0)
+    if SPARSE:
+        at_estimate, count, unshifted, nearby = _tests_where_unshifted_may_agree(
+            grid, ref, views, d, have[y0:y1, x0:x1], box, ref_y
         )
-    )
+    else:
+        lumas = {n: np.asarray(grid.images[n] @ LUMA, np.float32) for n in views}
+        off = grid.offsets
+        at_estimate, count = _disagreement(lumas, ref_y, off, ref, views, d, box)
+        unshifted, _ = _disagreement(lumas, ref_y, off, ref, views, np.zeros_like(d), box, seen_by=count)
+        # a match, not a flat patch that agrees at any shift: one pixel of disparity either way agrees worse
+        nearby = np.minimum(
+            *(
+                _disagreement(lumas, ref_y, off, ref, views, np.full_like(d, step), box, seen_by=count)[0]
+                for step in (-1.0, 1.0)
+            )
+        )
     seen = np.isfinite(at_estimate) & np.isfinite(unshifted) & have[y0:y1, x0:x1]
     weak = seen & (unshifted < AGREE_MARGIN) & (unshifted <= at_estimate)
     sure = weak & (unshifted + AGREE_MARGIN < nearby)
@@ -161,6 +168,60 @@ def sensor_fixed(
     seeded[0] = False
     out[y0:y1, x0:x1] = seeded[labels]
     return out
+
+
+def _tests_where_unshifted_may_agree(
+    grid: Grid,
+    ref: str,
+    views: list[str],
+    d: F32,
+    have: NDArray[np.bool_],
+    box: tuple[int, int, int, int],
+    ref_y: F32,
+) -> tuple[F32, F32, F32, F32]:
+    """:func:`sensor_fixed`'s four disagreements (at the estimate, its count of views, unshifted, the nearer
+    of one pixel either way), box-sized, only at pixels with an estimate (``have``, box-sized) that can agree
+    unshifted (inf and count 0 elsewhere): the mean of
+    its better half of views is at least its best single view's, so a pixel whose every view differs
+    unshifted by AGREE_MARGIN or more is not tested (issue 24: about two thirds of the presenter's pixels).
+    There the compiled kernel (``fixed_kernels.py``) samples each view, its luma made only where the samples
+    reach; the reference's samples and means within float32 rounding (``tests/unit/test_edge.py``)."""
+    y0, y1, x0, x1 = box
+    bh, bw = y1 - y0, x1 - x0
+    ox, oy = grid.offsets[ref]
+    inf = np.float32(np.inf)
+    h, w = grid.shape
+    rel = np.array([(grid.offsets[n][0] - ox, grid.offsets[n][1] - oy) for n in views], np.float32).reshape(-1, 2)
+    # each view's part: the box grown by the farthest shift along its offset and the window, in the frame
+    reach = max(1.0, float(np.abs(d[have]).max(initial=0.0))) + 3.0
+    parts = [_grown(box, reach * abs(float(rx)), reach * abs(float(ry)), h, w) for rx, ry in rel]
+    ph = max((p[1] - p[0] for p in parts), default=1)
+    pw = max((p[3] - p[2] for p in parts), default=1)
+    org = np.array([(min(p[0], h - ph), min(p[2], w - pw)) for p in parts], np.int64).reshape(-1, 2)
+    luma = np.empty((len(views), ph, pw), np.float32)
+    best = np.full((bh, bw), inf, np.float32)
+    for i, n in enumerate(views):
+        py0, px0 = int(org[i, 0]), int(org[i, 1])
+        luma[i] = grid.images[n][py0 : py0 + ph, px0 : px0 + pw] @ LUMA
+        # unshifted: the view's own pixels (outside is impossible: the box lies in the frame, and in the part)
+        unshifted = np.abs(luma[i, y0 - py0 : y1 - py0, x0 - px0 : x1 - px0] - ref_y)
+        np.minimum(best, cv2.blur(unshifted, (3, 3)), out=best)
+    cand = have & (best < AGREE_MARGIN * (1.0 + 1e-5))  # the slack: a mean of values at the bound may round below it
+    stacks, cy, cx = window_disagreements(luma, org, (h, w), ref_y, d, rel, y0, x0, cand)
+    mean = better_half_mean if COMPILED else _better_half_reference
+    at, count = mean(stacks[0], None)
+    found = [at, count] + [mean(s, count)[0] for s in stacks[1:]]
+    full = []
+    for v in found:
+        a = np.full((bh, bw), inf if v is not count else 0.0, np.float32)
+        a[cy, cx] = v[:, 0]
+        full.append(a)
+    return full[0], full[1], full[2], np.minimum(full[3], full[4])
+
+
+def _grown(box: tuple[int, int, int, int], px: float, py: float, h: int, w: int) -> tuple[int, int, int, int]:
+    y0, y1, x0, x1 = box
+    return max(0, int(y0 - py)), min(h, int(np.ceil(y1 + py))), max(0, int(x0 - px)), min(w, int(np.ceil(x1 + px)))
 
 
 ORDER_TOL = 1.0  # disparity (px of the horizontal spacing) by which another view must see the point farther

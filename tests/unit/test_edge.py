@@ -154,3 +154,54 @@ def test_depth_in_front_of_what_the_other_views_see_takes_what_they_see() -> Non
     for n in names:  # cameras whose depth is right are untouched, occluded torso beside the hand included
         if n != "r1c1":
             assert not out[n][1].any() and np.array_equal(out[n][0], truth[n])
+
+
+def test_the_sensor_tests_only_where_the_views_may_agree_unshifted_match_the_whole_box() -> None:
+    """Issue 24: ``sensor_fixed`` tests only the pixels whose best view agrees unshifted within the margin
+    (the mean of a better half is at least its best view's), sampling the views there alone. Against the
+    reference over the whole box: the same four disagreements at those pixels (within float32 rounding: the
+    window's mean sums in another order), the same count of views, no pixel left out that the reference
+    would find agreeing unshifted, and the same pixels marked, with the pattern and the frame's edges (where
+    views fall outside) in the box."""
+    from rigctl.depth import edge
+
+    images = plane_with_overlay(10.0)
+    g = grid_from_arrays(images, 1000.0, 0.12, 0.12 * 0.65)
+    rng = np.random.default_rng(7)
+    d = np.full(g.shape, 10.0, np.float32) + rng.normal(0, 0.4, g.shape).astype(np.float32)
+    d[40:60, 50:90] = np.inf  # a hole: the box keeps it, the tests leave it out
+    views = [n for n in g.names if n != "r1c1"]
+    h, w = g.shape
+    box = (0, h, 0, w)
+    dz = np.where(np.isfinite(d), d, 0.0).astype(np.float32)
+    ref_y = np.asarray(g.images["r1c1"] @ edge.LUMA, np.float32)
+    at, count, unshifted, nearby = edge._tests_where_unshifted_may_agree(
+        g, "r1c1", views, dz, np.isfinite(d), box, ref_y
+    )
+    lumas = {n: np.asarray(g.images[n] @ edge.LUMA, np.float32) for n in views}
+    r_at, r_count = edge._disagreement(lumas, ref_y, g.offsets, "r1c1", views, dz, box)
+    r_un, _ = edge._disagreement(lumas, ref_y, g.offsets, "r1c1", views, np.zeros_like(dz), box, seen_by=r_count)
+    r_near = np.minimum(
+        *(edge._disagreement(lumas, ref_y, g.offsets, "r1c1", views, np.full_like(dz, s), box, seen_by=r_count)[0]
+          for s in (-1.0, 1.0))
+    )  # fmt: skip
+    tested = np.isfinite(unshifted) | (count > 0)
+    assert not tested[~np.isfinite(d)].any()  # only the estimated pixels
+    assert 0.05 < tested.mean() < 0.95, tested.mean()  # some left out, some tested: the comparison means something
+    # nothing with an estimate left out that could agree unshifted
+    assert (r_un[~tested & np.isfinite(d)] >= edge.AGREE_MARGIN).all()
+    assert np.array_equal(count[tested], r_count[tested])
+    assert (count[tested] < len(views)).any()  # the frame's edge: some views do not see some tested pixels
+    for got, ref in ((at, r_at), (unshifted, r_un), (nearby, r_near)):
+        both = tested & np.isfinite(ref)
+        assert np.array_equal(np.isfinite(got[tested]), np.isfinite(ref[tested]))
+        assert np.abs(got[both] - ref[both]).max() <= 1e-6
+    fixed = {}
+    for sparse in (True, False):
+        edge.SPARSE = sparse
+        try:
+            fixed[sparse] = edge.sensor_fixed(g, "r1c1", views, d, (5.0, 20.0))
+        finally:
+            edge.SPARSE = True
+    assert fixed[True][:5, :47].all()  # the pattern
+    assert np.array_equal(fixed[True], fixed[False])
