@@ -63,6 +63,20 @@ def _capped(d_range: tuple[float, float], scale: float, extent: int) -> tuple[fl
     return lo, min(hi, math.floor(lo) + room - 1)
 
 
+PATH_MARGIN = 64  # px beyond the reach the matcher sees: its paths along the line start that far out
+
+
+def _reach(span: tuple[int, int], rel: float, d_range: tuple[float, float], extent: int) -> tuple[int, int]:
+    """The stretch of a line (of ``extent`` px) a pair matches the ``span`` of the reference on: the span and
+    where its points lie in the other camera (at ``rel`` spacings along the line) for every disparity of the
+    range, grown by PATH_MARGIN, inside the image. The same disparities as on the whole line, except near
+    where the matcher's paths now start (PATH_MARGIN away)."""
+    ends = [span[0] - d * rel for d in d_range] + [span[1] - d * rel for d in d_range]
+    lo = min(float(span[0]), *ends)
+    hi = max(float(span[1]), *ends)
+    return max(0, math.floor(lo) - PATH_MARGIN), min(extent, math.ceil(hi) + PATH_MARGIN)
+
+
 def nan_median(stack: F32) -> tuple[F32, F32]:
     """Median over axis 0 ignoring NaN, and the spread (largest minus smallest); NaN where nothing is finite.
     The few layers are sorted by compare-and-swap over whole images (odd-even transposition), many times
@@ -99,7 +113,7 @@ def pair_disparity(
 ) -> F32:
     """SGBM between ``ref`` and one neighbour, returned as disparity of the horizontal spacing for ``ref``.
     ``box`` (y0, y1, x0, x1): only that part of ``ref`` is wanted; a horizontal pair then matches only those
-    rows (all columns: the match may lie outside the box), a vertical pair only those columns. ``searched``
+    rows, and of them the columns its matches can reach (``_reach``), a vertical pair likewise. ``searched``
     and ``work`` collect the levels searched and the pixel-levels the matcher evaluated."""
     rx = grid.offsets[other][0] - grid.offsets[ref][0]
     ry = grid.offsets[other][1] - grid.offsets[ref][1]
@@ -111,11 +125,16 @@ def pair_disparity(
         if n not in u8:
             u8[n] = grid.bgr8(n)
     a, b = u8[ref], u8[other]
-    if abs(ry) < abs(rx):
-        a, b = a[y0:y1], b[y0:y1]
+    horizontal = abs(ry) < abs(rx)
+    # only the lines through the box (a horizontal pair its rows, a vertical one its columns), and along them
+    # only the stretch the box's matches reach, with a margin for the matcher's paths (issue 24)
+    if horizontal:
+        c0, c1 = _reach((x0, x1), rx, d_range, w)
+        a, b = a[y0:y1, c0:c1], b[y0:y1, c0:c1]
     else:
-        a, b = a[:, x0:x1], b[:, x0:x1]
-    if abs(ry) < abs(rx):  # horizontal: the other camera to the right is the "right" image
+        c0, c1 = _reach((y0, y1), ry, d_range, h)
+        a, b = a[c0:c1, x0:x1], b[c0:c1, x0:x1]
+    if horizontal:  # horizontal: the other camera to the right is the "right" image
         scale = abs(rx)
         flip = rx < 0
         if flip:
@@ -138,7 +157,7 @@ def pair_disparity(
         m = make_sgbm(*rng, block)
         d = _to_float(m.compute(np.ascontiguousarray(a), np.ascontiguousarray(b)), m)
         d = (d[:, ::-1] if flip else d).T
-    d = d[:, x0:x1] if abs(ry) < abs(rx) else d[y0:y1]
+    d = d[:, x0 - c0 : x1 - c0] if horizontal else d[y0 - c0 : y1 - c0]
     if searched is not None:
         searched.append(int(m.getNumDisparities()))
     if work is not None:
