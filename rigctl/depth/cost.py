@@ -192,6 +192,24 @@ class SweepLevel:
         return out
 
 
+def active_pixels(
+    region: NDArray[np.bool_] | None, scale: float, shape: tuple[int, int] | None, grow: int
+) -> NDArray[np.bool_] | None:
+    """The pixels of a crop whose costs the sweeps compute, at ``scale`` (``shape``): ``region`` (the pixels
+    estimated, full resolution) grown by ``grow`` full-resolution px (the context their estimates read: the
+    guided filters of the sweep and the refinement, the windows), and by one coarse pixel more (the coarse
+    estimate a full-resolution pixel starts from). None (every pixel) without a region."""
+    if region is None:
+        return None
+    m = region
+    if scale != 1.0:
+        assert shape is not None
+        small = cv2.resize(region.astype(np.float32), (shape[1], shape[0]), interpolation=cv2.INTER_AREA)
+        m, grow = small > 0, math.ceil(grow * scale) + 1
+    k = np.ones((2 * grow + 1, 2 * grow + 1), np.uint8)
+    return np.asarray(cv2.dilate(m.astype(np.uint8), k) > 0)
+
+
 def exposure(g_ref: F32, g: F32, shift: tuple[float, float]) -> tuple[float, float]:
     """Gain and offset that match view ``g`` to the reference, from the part of the scene both show: the
     view moved by ``shift`` (the disparity range's centre times its baseline). Whole-image statistics would
@@ -209,9 +227,10 @@ def exposure(g_ref: F32, g: F32, shift: tuple[float, float]) -> tuple[float, flo
     return gain, m_a - gain * m_b
 
 
-def features(g: F32, part: tuple[int, int, int, int]) -> F32:
+def features(g: F32, part: tuple[int, int, int, int], out: F32 | None = None) -> F32:
     """(h, w, 3): intensity, d/dx and d/dy of ``g`` (a whole image) on ``part`` (y0, y1, x0, x1), the
-    derivatives as the whole image's (the part taken with the one pixel around it that they read)."""
+    derivatives as the whole image's (the part taken with the one pixel around it that they read). Written
+    into ``out`` when given (a view's place in a stack: no temporary of the three planes)."""
     y0, y1, x0, x1 = part
     h, w = g.shape
     a0, a1, b0, b1 = max(0, y0 - 1), min(h, y1 + 1), max(0, x0 - 1), min(w, x1 + 1)
@@ -219,7 +238,10 @@ def features(g: F32, part: tuple[int, int, int, int]) -> F32:
     gx = cv2.Sobel(sub, cv2.CV_32F, 1, 0, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
     gy = cv2.Sobel(sub, cv2.CV_32F, 0, 1, ksize=1, scale=0.5, borderType=cv2.BORDER_REFLECT)
     sl = (slice(y0 - a0, y1 - a0), slice(x0 - b0, x1 - b0))
-    return np.ascontiguousarray(np.dstack([sub[sl], gx[sl], gy[sl]]), dtype=np.float32)
+    if out is None:
+        out = np.empty((y1 - y0, x1 - x0, 3), np.float32)
+    cv2.merge([sub[sl], gx[sl], gy[sl]], dst=out)
+    return out
 
 
 def side_groups(level: SweepLevel) -> list[list[int]]:

@@ -266,13 +266,16 @@ def combined_costs(
     invalid: float,
     org: NDArray[np.int64] | None = None,
     frame: tuple[int, int] | None = None,
+    active: NDArray[np.bool_] | None = None,
 ) -> F32:
     """(h, w) combined cost at the disparity ``d`` (a number or an (h, w) map): ``feats`` (views, H, W, 3) the
     views' intensity and gradients, ``ref`` (h, w, 3) the reference crop whose top-left pixel is ``origin``
     (y, x) in the views, ``rel`` (views, 2) the baselines, ``weights`` the intensity and gradient scale and
     truncation. At a number, samples and the outside test are placed as ``MatchViews.warp`` places them
     (``warpAffine``'s float32 translation; the test in double precision). ``feats[v]`` may be a part of view
-    v: its top-left pixel at ``org[v]`` (y, x) in the view's ``frame`` (h, w) (default: the whole view)."""
+    v: its top-left pixel at ``org[v]`` (y, x) in the view's ``frame`` (h, w) (default: the whole view).
+    ``active`` (h, w): only these pixels are wanted; each block of rows is computed on the columns its active
+    pixels and their windows span (the same values there, bit for bit), ``invalid`` beside them."""
     nv = feats.shape[0]
     hh, ww = frame if frame is not None else (feats.shape[1], feats.shape[2])
     org = np.zeros((nv, 2), np.int64) if org is None else np.ascontiguousarray(org, np.int64)
@@ -291,21 +294,56 @@ def combined_costs(
     for a in range(0, h, ROWS):
         b = min(h, a + ROWS)
         a0, b0 = max(0, a - r), min(h, b + r)
-        ad = np.empty((nv, b0 - a0, w), np.float32)
-        outside = np.empty((nv, b0 - a0, w), bool)
-        ref_b = ref[a0:b0]
+        ca, cb = (0, w) if active is None else block_columns(active, a, b, r)
+        out[a:b, :ca] = out[a:b, cb:] = invalid
+        if cb <= ca:
+            continue
+        # the block's columns ca..cb, the same samples (at a number the shift is the crop's: the views' parts
+        # are moved by ca instead, exact in integers)
+        ad = np.empty((nv, b0 - a0, cb - ca), np.float32)
+        outside = np.empty((nv, b0 - a0, cb - ca), bool)
+        ref_b = np.ascontiguousarray(ref[a0:b0, ca:cb])
         if dm is None:
             assert isinstance(d, float)
             for v in range(nv):
                 rx, ry = float(rel[v, 0]), float(rel[v, 1])
-                xs = np.arange(x0, x0 + w, dtype=np.float32) - d * rx
+                xs = np.arange(x0, x0 + w, dtype=np.float32)[ca:cb] - d * rx
                 ys = np.arange(y0 + a0, y0 + b0, dtype=np.float32) - d * ry
                 outside[v] = ((ys < 0) | (ys > hh - 1))[:, None] | ((xs < 0) | (xs > ww - 1))[None, :]
-            _differences_at(feats, ref_b, shift.astype(np.float64), r, *weights, ad, org, a0)
+            org_c = org - np.array([0, ca], np.int64)
+            _differences_at(feats, ref_b, shift.astype(np.float64), r, *weights, ad, org_c, a0)
         else:
-            _differences(feats, ref_b, rel32, dm[a0:b0], y0 + a0, x0, r, *weights, ad, outside, org, hh, ww)
-        _aggregate(ad, outside, win, keep, invalid, out[a:b], a, h, a0)
+            d_b = np.ascontiguousarray(dm[a0:b0, ca:cb])
+            _differences(feats, ref_b, rel32, d_b, y0 + a0, x0 + ca, r, *weights, ad, outside, org, hh, ww)
+        if ca == 0 and cb == w:
+            _aggregate(ad, outside, win, keep, invalid, out[a:b], a, h, a0)
+        else:
+            part = np.empty((b - a, cb - ca), np.float32)
+            _aggregate(ad, outside, win, keep, invalid, part, a, h, a0)
+            out[a:b, ca:cb] = part
     return out
+
+
+def block_columns(active: NDArray[np.bool_], a: int, b: int, r: int) -> tuple[int, int]:
+    """The columns [ca, cb) that rows a..b of ``combined_costs`` are computed on (with the window's rows
+    around them): those of the rows' active pixels and ``r`` more either side (their windows)."""
+    w = active.shape[1]
+    cols = np.flatnonzero(active[a:b].any(axis=0))
+    if cols.size == 0:
+        return 0, 0
+    return max(0, int(cols[0]) - r), min(w, int(cols[-1]) + 1 + r)
+
+
+def computed_pixels(active: NDArray[np.bool_] | None, shape: tuple[int, int], win: int) -> int:
+    """How many pixels ``combined_costs`` computes with ``active`` (for the report's pixel-levels)."""
+    h, w = shape
+    if active is None:
+        return h * w
+    total = 0
+    for a in range(0, h, ROWS):
+        ca, cb = block_columns(active, a, min(h, a + ROWS), win // 2)
+        total += (min(h, a + ROWS) - a) * max(0, cb - ca)
+    return total
 
 
 @njit(parallel=True, cache=True, fastmath=False)

@@ -29,8 +29,18 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.depth.cost import INVALID_COST, TRUNCATE, combine, exposure, features, grey, normalise, view_part
-from rigctl.depth.cost_kernels import combined_costs, visible_views
+from rigctl.depth.cost import (
+    INVALID_COST,
+    TRUNCATE,
+    active_pixels,
+    combine,
+    exposure,
+    features,
+    grey,
+    normalise,
+    view_part,
+)
+from rigctl.depth.cost_kernels import combined_costs, computed_pixels, visible_views
 from rigctl.depth.search import EstimateStats
 
 F32 = NDArray[np.float32]
@@ -53,6 +63,7 @@ OCCLUDER_PX = 1.0  # a surface nearer by more than this (disparity px) hides wha
 # (OpenCV rounds their count up to 16, in the pair's own px: more for a pair closer than 0.5 spacings, see
 # ``reach_pad``) and the refinement's half pixel
 REACH_PAD = 32.0
+CONTEXT_PX = 8  # full-res px beyond the reach of the filters around the estimated pixels (``cost.active_pixels``)
 
 
 class MatchViews:
@@ -73,8 +84,10 @@ class MatchViews:
         scale: float = 1.0,
         centre: float = 0.0,
         reach: tuple[float, float] | None = None,
+        active: NDArray[np.bool_] | None = None,
     ) -> None:
         self.scale = scale
+        self.active = active  # the crop's pixels whose costs are wanted (all without it): ``combined_costs``
         self.box = tuple(round(v * scale) for v in box)
         y0, y1, x0, x1 = self.box
         self.rel = rel
@@ -109,7 +122,7 @@ class MatchViews:
             gain, offset = exposure(g_ref, g, (centre * scale * rel[n][0], centre * scale * rel[n][1]))
             g = g * np.float32(gain) + np.float32(offset)
             oy, ox = int(self.org[i, 0]), int(self.org[i, 1])
-            self.stack[i] = features(g, (oy, oy + ph, ox, ox + pw))
+            features(g, (oy, oy + ph, ox, ox + pw), out=self.stack[i])
             self.feat[n] = self.stack[i]
             del g
         self.rel_array = np.array([rel[n] for n in self.names], np.float64).reshape(-1, 2)
@@ -204,6 +217,7 @@ class MatchViews:
             INVALID_COST,
             self.org,
             (self.h, self.w),
+            self.active,
         )
 
     def view_costs(self, d: float | F32, win: int) -> F32:
@@ -373,9 +387,11 @@ def volume_disparity(
     d_range: tuple[float, float],
     p: VolumeParams,
     stats: EstimateStats,
+    region: NDArray[np.bool_] | None = None,
 ) -> tuple[Sweep, MatchViews]:
     """Integer then fractional sweep for the reference crop ``box``; returns the fractional result and the
-    full-resolution views (for the continuous refinement)."""
+    full-resolution views (for the continuous refinement). ``region`` (box-sized): the pixels estimated; the
+    costs are computed within CONTEXT_PX of them (``active``), no cost elsewhere (the keyed background's)."""
     lo, hi = d_range
     y0, y1, x0, x1 = box
     t0 = time.perf_counter()
@@ -384,18 +400,21 @@ def volume_disparity(
     pad = reach_pad(rel)
     asked = (lo - pad, hi + pad)  # every disparity the views are asked for (REACH_PAD)
     cv = MatchViews(images, ref, rel, box, s, centre, asked)
+    grow = CONTEXT_PX + 4 * p.radius + 2 * p.window  # what the filters around an estimate read
+    cv.active = active_pixels(region, s, cv.shape, grow)
     first, last = math.floor(lo * s) - 1, math.ceil(hi * s) + 1
     levels = [float(v) for v in np.arange(first, last + 1, 1.0)]
     levels = levels[: max(1, 4 * max(cv.h, cv.w))]  # a range far beyond the image is capped
     stats["levels"] = len(levels)
     stats["coarse_scale"] = s
-    stats["integer_sweep_pixel_levels"] = cv.shape[0] * cv.shape[1] * len(levels)
+    stats["integer_sweep_pixel_levels"] = computed_pixels(cv.active, cv.shape, p.window) * len(levels)
     coarse = sweep(cv, list(levels), p, p.window, max(1, round(p.radius * s)), stats)
     stats["integer_sweep_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     if s != 1.0:
         del cv  # the coarse views go before the full-resolution ones are made
-    full = MatchViews(images, ref, rel, box, 1.0, centre, asked) if s != 1.0 else cv
+    act = active_pixels(region, 1.0, None, grow)
+    full = cv if s == 1.0 else MatchViews(images, ref, rel, box, 1.0, centre, asked, act)
     h, w = full.shape
     d0 = coarse.disparity / np.float32(s)
     if s != 1.0:
@@ -405,7 +424,7 @@ def volume_disparity(
     step = FRACTION if s >= 0.5 else WIDE_STEP
     n_side = math.ceil(reach / step)
     cands = Around(d0, step, n_side)
-    stats["fractional_sweep_pixel_levels"] = h * w * len(cands)
+    stats["fractional_sweep_pixel_levels"] = computed_pixels(full.active, full.shape, p.window) * len(cands)
     fine = sweep(full, cands, p, p.window, p.radius, stats)
     stats["fractional_candidates"] = len(cands)
     stats["fractional_step"] = step
@@ -427,11 +446,3 @@ def reach_pad(rel: dict[str, tuple[float, float]]) -> float:
     baseline is shorter than half the horizontal spacing."""
     steps = [abs(v) for r in rel.values() for v in r if abs(v) > 1e-6]
     return max(REACH_PAD, 17.0 / min(steps) + 2.0) if steps else REACH_PAD
-
-
-def choose(views: MatchViews, candidates: list[F32], p: VolumeParams) -> NDArray[np.intp]:
-    """Per pixel, the index of the candidate disparity map that the kept views agree with best (the same
-    aggregated cost as the sweep)."""
-    agg = Aggregator(views.guide, p.radius, p.eps)
-    costs = np.stack([agg(views.costs(c, p.window, p.keep)) for c in candidates])
-    return np.asarray(np.argmin(costs, axis=0))

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.depth.costvolume import F32, FRACTION, TRUNCATE, MatchViews, VolumeParams, choose, volume_disparity
+from rigctl.depth.costvolume import F32, FRACTION, TRUNCATE, Aggregator, MatchViews, VolumeParams, volume_disparity
 from rigctl.depth.pair_fusion import pairs_engine
 from rigctl.depth.pairs import neighbour
 from rigctl.depth.presets import PRESETS
@@ -52,7 +52,7 @@ def volume_engine(job: SearchJob) -> BoxEstimate:
     pairs = pairs_engine(job).disparity if with_pairs else None
     t_pairs = time.perf_counter() - t0
     pair_levels = stats.get("levels")
-    sw, views = volume_disparity(dict(job.grid.images), job.ref, rel, job.box, job.d_range, params, stats)
+    sw, views = volume_disparity(dict(job.grid.images), job.ref, rel, job.box, job.d_range, params, stats, job.region)
     if pairs is not None and pair_levels is not None:
         stats["levels"] = pair_levels  # as reported before the pairs ran first: the widest pair's levels
     t0 = time.perf_counter() - t_pairs
@@ -101,3 +101,11 @@ def pick_pairs(views: MatchViews, d: F32, pairs: F32, params: VolumeParams) -> N
 
 def neighbour_count(job: SearchJob) -> int:
     return sum(neighbour(job.grid, job.ref, dx, dy) is not None for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)))
+
+
+def choose(views: MatchViews, candidates: list[F32], p: VolumeParams) -> NDArray[np.intp]:
+    """Per pixel, the index of the candidate disparity map that the kept views agree with best (the same
+    aggregated cost as the sweep)."""
+    agg = Aggregator(views.guide, p.radius, p.eps)
+    costs = np.stack([agg(views.costs(c, p.window, p.keep)) for c in candidates])
+    return np.asarray(np.argmin(costs, axis=0))

@@ -33,16 +33,23 @@ def both(views: cvm.MatchViews, d: float | np.ndarray, win: int, keep: int) -> t
     return fast, ref
 
 
-@pytest.mark.parametrize("scale", [1.0, 0.5])
-@pytest.mark.parametrize("win,keep", [(3, 4), (1, 4), (3, 8), (5, 2)])
-def test_the_compiled_cost_matches_the_reference(scale: float, win: int, keep: int) -> None:
-    grid = surfaces((96, 128))
+def surface_views(
+    size: tuple[int, int], box: tuple[int, int, int, int], scale: float
+) -> tuple[cvm.MatchViews, tuple[float, float]]:
+    """The centre camera's views of the surfaces scene on ``box``, and the scene's disparity range."""
+    grid = surfaces(size)
     ref = "r1c1"
     ox, oy = grid.offsets[ref]
     rel = {n: (grid.offsets[n][0] - ox, grid.offsets[n][1] - oy) for n in grid.images if n != ref}
     assert grid.disparity_range is not None
     lo, hi = grid.disparity_range
-    views = cvm.MatchViews(dict(grid.images), ref, rel, (10, 90, 6, 120), scale, 0.5 * (lo + hi))
+    return cvm.MatchViews(dict(grid.images), ref, rel, box, scale, 0.5 * (lo + hi)), (lo, hi)
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.5])
+@pytest.mark.parametrize("win,keep", [(3, 4), (1, 4), (3, 8), (5, 2)])
+def test_the_compiled_cost_matches_the_reference(scale: float, win: int, keep: int) -> None:
+    views, (lo, hi) = surface_views((96, 128), (10, 90, 6, 120), scale)
     rng = np.random.default_rng(1)
     maps = [
         (rng.uniform(lo, hi, views.shape) * scale).astype(np.float32),
@@ -167,13 +174,7 @@ def test_row_blocks_give_the_one_pass_bits(monkeypatch: pytest.MonkeyPatch) -> N
     import rigctl.depth.cost_kernels as ck
     import rigctl.depth.refine as rf
 
-    grid = surfaces((96, 128))
-    ref = "r1c1"
-    ox, oy = grid.offsets[ref]
-    rel = {n: (grid.offsets[n][0] - ox, grid.offsets[n][1] - oy) for n in grid.images if n != ref}
-    assert grid.disparity_range is not None
-    lo, hi = grid.disparity_range
-    views = cvm.MatchViews(dict(grid.images), ref, rel, (3, 91, 2, 126), 1.0, 0.5 * (lo + hi))
+    views, (lo, hi) = surface_views((96, 128), (3, 91, 2, 126), 1.0)
     d = np.random.default_rng(5).uniform(lo, hi, views.shape).astype(np.float32)
 
     def run() -> list[np.ndarray]:
@@ -233,3 +234,33 @@ def test_the_compiled_visible_count_matches_the_reference() -> None:
     got = views.visible_count(d, front)
     assert np.array_equal(got, want)
     assert (want < len(rel)).any() and (want == len(rel)).any()
+
+
+@pytest.mark.parametrize("win", [1, 3, 5])
+def test_costs_on_the_active_pixels_alone_are_the_same_bits(win: int) -> None:
+    """Issue 24: with ``active`` (the keyed subject grown by its context), each block of rows is computed on
+    the columns its active pixels' windows span. There the costs are the whole crop's, bit for bit, at a
+    constant disparity and at a map (samples outside the views included); beside them INVALID; and fewer
+    pixels are computed (a blob in one corner and a strip along the bottom, as a subject and a floor)."""
+    from rigctl.depth.cost_kernels import ROWS, computed_pixels
+
+    views, (lo, hi) = surface_views((300, 200), (4, 296, 2, 198), 1.0)
+    h, w = views.shape
+    active = np.zeros((h, w), bool)
+    active[20:150, 10:70] = True  # rows across a block boundary (ROWS)
+    active[h - 12 :, :] = True
+    assert ROWS < 150
+    rng = np.random.default_rng(3)
+    maps = [rng.uniform(lo, 3 * w, views.shape).astype(np.float32), np.full(views.shape, hi + 0.3, np.float32)]
+    seen = []
+    for d in [float(lo), hi + 0.37, *maps]:
+        views.active = None
+        whole = views.costs(d, win, 4)
+        views.active = active
+        part = views.costs(d, win, 4)
+        assert np.array_equal(part[active], whole[active])
+        seen.append(whole[active] < INVALID_COST * 0.5)
+        assert (part[~active] == INVALID_COST).mean() > 0.5
+    assert all(s.any() for s in seen) and not all(s.all() for s in seen)  # matches, and samples outside
+    assert computed_pixels(active, (h, w), win) < 0.6 * h * w
+    assert computed_pixels(None, (h, w), win) == h * w
