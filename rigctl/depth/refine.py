@@ -56,6 +56,7 @@ def refine(
                 TAU_I,
                 views.org,
                 (views.h, views.w),
+                views.active,
             )
             a, b = agg.smooth(a_raw), agg.smooth(b_raw)
         else:

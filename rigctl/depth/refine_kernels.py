@@ -137,11 +137,12 @@ def refine_sums(
     tau_i: float,
     org: NDArray[np.int64] | None = None,
     frame: tuple[int, int] | None = None,
+    active: NDArray[np.bool_] | None = None,
 ) -> tuple[F32, F32]:
     """One Gauss-Newton step's normal equations before their aggregation (``refine.refine``): per pixel the
     sums of J^2 and J r over the ``keep`` views that fit best locally, divided by ``keep``. What the
     reference path computes with ``cv2.remap``, ``cv2.boxFilter`` and ``np.partition`` over the views.
-    ``org``, ``frame``: as for :func:`combined_costs`."""
+    ``org``, ``frame``, ``active``: as for :func:`combined_costs` (beside the active columns, sums 0: no step)."""
     nv = feats.shape[0]
     fh, fw = frame if frame is not None else (feats.shape[1], feats.shape[2])
     org = np.zeros((nv, 2), np.int64) if org is None else np.ascontiguousarray(org, np.int64)
@@ -153,10 +154,20 @@ def refine_sums(
     for a in range(0, h, cost_kernels.ROWS):  # in blocks of rows with the 5x5's rows around them, as combined_costs
         b = min(h, a + cost_kernels.ROWS)
         a0, b0 = max(0, a - 2), min(h, b + 2)
-        res = np.empty((nv, b0 - a0, w), np.float32)
-        jac = np.empty((nv, b0 - a0, w), np.float32)
-        tr = np.empty((nv, b0 - a0, w), np.float32)
+        ca, cb = (0, w) if active is None else cost_kernels.block_columns(active, a, b, 2)
+        a_sum[a:b, :ca] = a_sum[a:b, cb:] = b_sum[a:b, :ca] = b_sum[a:b, cb:] = 0.0
+        if cb <= ca:
+            continue
+        res = np.empty((nv, b0 - a0, cb - ca), np.float32)
+        jac = np.empty((nv, b0 - a0, cb - ca), np.float32)
+        tr = np.empty((nv, b0 - a0, cb - ca), np.float32)
         y0, x0 = origin
-        _residuals(feats, ref[a0:b0], rel32, dm[a0:b0], y0 + a0, x0, inv, tau_i, res, jac, tr, org, fh, fw)
-        _selected_sums(res, jac, tr, keep, inv, tau_i, a_sum[a:b], b_sum[a:b], a, h, a0)
+        ref_b, d_b = np.ascontiguousarray(ref[a0:b0, ca:cb]), np.ascontiguousarray(dm[a0:b0, ca:cb])
+        _residuals(feats, ref_b, rel32, d_b, y0 + a0, x0 + ca, inv, tau_i, res, jac, tr, org, fh, fw)
+        if ca == 0 and cb == w:
+            _selected_sums(res, jac, tr, keep, inv, tau_i, a_sum[a:b], b_sum[a:b], a, h, a0)
+        else:
+            a_part, b_part = np.empty((b - a, cb - ca), np.float32), np.empty((b - a, cb - ca), np.float32)
+            _selected_sums(res, jac, tr, keep, inv, tau_i, a_part, b_part, a, h, a0)
+            a_sum[a:b, ca:cb], b_sum[a:b, ca:cb] = a_part, b_part
     return a_sum, b_sum

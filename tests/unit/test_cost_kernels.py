@@ -240,9 +240,11 @@ def test_the_compiled_visible_count_matches_the_reference() -> None:
 def test_costs_on_the_active_pixels_alone_are_the_same_bits(win: int) -> None:
     """Issue 24: with ``active`` (the keyed subject grown by its context), each block of rows is computed on
     the columns its active pixels' windows span. There the costs are the whole crop's, bit for bit, at a
-    constant disparity and at a map (samples outside the views included); beside them INVALID; and fewer
-    pixels are computed (a blob in one corner and a strip along the bottom, as a subject and a floor)."""
+    constant disparity and at a map (samples outside the views included), and so are the refinement's sums;
+    beside them INVALID (the sums 0); and fewer pixels are computed (a blob in one corner and a strip along
+    the bottom, as a subject and a floor)."""
     from rigctl.depth.cost_kernels import ROWS, computed_pixels
+    from rigctl.depth.refine_kernels import refine_sums
 
     views, (lo, hi) = surface_views((300, 200), (4, 296, 2, 198), 1.0)
     h, w = views.shape
@@ -262,5 +264,13 @@ def test_costs_on_the_active_pixels_alone_are_the_same_bits(win: int) -> None:
         seen.append(whole[active] < INVALID_COST * 0.5)
         assert (part[~active] == INVALID_COST).mean() > 0.5
     assert all(s.any() for s in seen) and not all(s.all() for s in seen)  # matches, and samples outside
+    # the refinement's sums likewise (0 beside the active columns: no step there)
+    y0, _, x0, _ = views.box
+    args = (views.stack, views.ref, views.rel_array, maps[1] - 0.6, (y0, x0), 4, INVALID_COST, cvm.TAU_I)
+    whole_sums = refine_sums(*args, views.org, (views.h, views.w))
+    part_sums = refine_sums(*args, views.org, (views.h, views.w), active)
+    for got, want in zip(part_sums, whole_sums, strict=True):
+        assert np.array_equal(got[active], want[active]) and (want[active] != 0).mean() > 0.5
+        assert (got[~active] == 0).mean() > 0.5
     assert computed_pixels(active, (h, w), win) < 0.6 * h * w
     assert computed_pixels(None, (h, w), win) == h * w
