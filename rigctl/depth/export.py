@@ -10,7 +10,7 @@ import dataclasses
 import hashlib
 import shutil
 import uuid
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -111,21 +111,38 @@ def soft_key(image: F32, res: DepthResult) -> SoftKey:
 def write_outputs(
     target: Target, name: str, grid: Grid, res: DepthResult, d_range: tuple[float, float], formats: tuple[str, ...]
 ) -> None:
-    d = res.disparity
-    keyed = "exr" in formats and bool((res.matte < 1).any())
-    # the EXR picture's soft key, the write's dearest part, in a second thread while the PFM and the PNG are
-    # made and written (numpy and OpenCV let go of the GIL); the depth layers after it, so that the key's
-    # temporaries and theirs are not held at once (at 3840x2160 that kept the write's peak at 0.98 GiB, not
-    # 1.11)
+    """One camera's outputs (:func:`write_all` of it alone)."""
+    write_all(target, grid, {name: res}, d_range, formats)
+
+
+def write_all(
+    target: Target, grid: Grid, results: dict[str, DepthResult], d_range: tuple[float, float], formats: tuple[str, ...]
+) -> None:
+    """Every camera's outputs, one camera after another. The EXR picture's soft key, the write's dearest part,
+    is made in a second thread (numpy and OpenCV let go of the GIL): a camera's while its PFM and PNG are made
+    and written and while the camera before it writes its EXR (issue 24: the key and the EXR's compression
+    side by side). Each camera's depth layers are made after its key is done, so that the key's temporaries
+    and theirs are not held at once (at 3840x2160 that kept the write's peak at 0.98 GiB, not 1.11)."""
+    cams = list(results)
     with ThreadPoolExecutor(1, thread_name_prefix="soft-key") as beside:
-        pending = beside.submit(soft_key, grid.images[name], res) if keyed else None
-        if "pfm" in formats:
-            write_pfm(target.path(name, ".pfm"), d)
-        if "png" in formats:
-            publish_png(target.path(name, ".png"), colour_preview(d, d_range))
-        if "exr" in formats:
+
+        def start(i: int) -> Future[SoftKey] | None:
+            if i >= len(cams) or "exr" not in formats or not bool((results[cams[i]].matte < 1).any()):
+                return None
+            return beside.submit(soft_key, grid.images[cams[i]], results[cams[i]])
+
+        pending = start(0)
+        for i, name in enumerate(cams):
+            res = results[name]
+            if "pfm" in formats:
+                write_pfm(target.path(name, ".pfm"), res.disparity)
+            if "png" in formats:
+                publish_png(target.path(name, ".png"), colour_preview(res.disparity, d_range))
             key = pending.result() if pending is not None else None
-            write_depth_exr(target, name, grid, res, key, depth_channels(grid, name, res))
+            pending = start(i + 1)
+            if "exr" in formats:
+                write_depth_exr(target, name, grid, res, key, depth_channels(grid, name, res))
+            del key
 
 
 def depth_channels(grid: Grid, name: str, res: DepthResult) -> dict[str, F32]:
@@ -190,15 +207,13 @@ class Exporter:
     ) -> dict[str, FileRecord]:
         target = Target(self.out, self.layout, number, fps, timecode, flat=self.flat, colour=self.colour)
         if not self.atomic:
-            for cam, res in results.items():
-                write_outputs(target, cam, grid, res, d_range, self.formats)
+            write_all(target, grid, results, d_range, self.formats)
             return {}
         name = frame_name(number)
         tmp = self.out / f"{PARTIAL_PREFIX}{name}-{uuid.uuid4().hex[:12]}"
         staging = dataclasses.replace(target, out=tmp, flat=True)
         try:
-            for cam, res in results.items():
-                write_outputs(staging, cam, grid, res, d_range, self.formats)
+            write_all(staging, grid, results, d_range, self.formats)
             return publish(tmp, inside(self.out, self.out / name))
         finally:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -210,3 +210,41 @@ def test_a_soft_key_that_fails_fails_the_write(
     with pytest.raises(MemoryError, match="soft key"):
         write_outputs(target, CAMS[0], grid, results[CAMS[0]], (0.0, 10.0), ("exr", "pfm", "png"))
     assert not target.path(CAMS[0], ".exr").exists()
+
+
+def test_the_next_cameras_key_is_made_while_this_one_writes_its_exr(
+    computed: tuple[Grid, dict[str, DepthResult]], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 24: a frame set's cameras are written one after another, the next camera's soft key made in the
+    second thread while this camera's EXR is compressed and written (each EXR waits here until the next
+    camera's key has started: written one step after another, it would wait in vain); and the files are
+    the bytes each camera written alone gives."""
+    import threading
+
+    grid, results = computed
+    started = {c: threading.Event() for c in CAMS}
+    real_key, real_exr = export.soft_key, export.write_depth_exr
+
+    def key(image: np.ndarray, res: DepthResult) -> object:
+        started[next(c for c in CAMS if results[c] is res)].set()
+        return real_key(image, res)
+
+    overlapped = []
+
+    def exr(target: Target, name: str, *args: object) -> None:
+        after = CAMS[CAMS.index(name) + 1 :]
+        overlapped.append(not after or started[after[0]].wait(timeout=20.0))
+        real_exr(target, name, *args)
+
+    monkeypatch.setattr(export, "soft_key", key)
+    monkeypatch.setattr(export, "write_depth_exr", exr)
+    together = Target(tmp_path / "together", "frames", 0, 25.0)
+    export.write_all(together, grid, dict(results), (0.0, 10.0), ("exr", "pfm", "png"))
+    assert overlapped == [True] * len(CAMS)
+    monkeypatch.setattr(export, "soft_key", real_key)
+    monkeypatch.setattr(export, "write_depth_exr", real_exr)
+    for cam in CAMS:
+        alone = Target(tmp_path / cam, "frames", 0, 25.0)
+        write_outputs(alone, cam, grid, results[cam], (0.0, 10.0), ("exr", "pfm", "png"))
+        for ext in (".exr", ".pfm", ".png"):
+            assert together.path(cam, ext).read_bytes() == alone.path(cam, ext).read_bytes()
