@@ -35,12 +35,12 @@ from rigctl.depth.cost import (
     active_pixels,
     combine,
     exposure,
-    features,
     grey,
     normalise,
     view_part,
 )
 from rigctl.depth.cost_kernels import combined_costs, computed_pixels, visible_views
+from rigctl.depth.feature_kernels import view_features
 from rigctl.depth.search import EstimateStats
 
 F32 = NDArray[np.float32]
@@ -106,7 +106,7 @@ class MatchViews:
         del std
         self.guide = np.ascontiguousarray(g_ref[y0:y1, x0:x1])
         self.bright = self.guide  # the same pixels (read only)
-        self.ref = features(g_ref, (y0, y1, x0, x1))
+        self.ref = view_features(g_ref, (y0, y1, x0, x1))  # cost.features, compiled (feature_kernels.py)
         # each view's part (all the same size, for the compiled cost): its top-left pixel in the view's frame
         parts = [self.part(rel[n], reach) for n in self.names]
         ph = max((b[1] - b[0] for b in parts), default=0)
@@ -120,9 +120,8 @@ class MatchViews:
             # statistic mixes a foreground edge with the background it moves over, and moves the edge
             g = scaled_grey(n)
             gain, offset = exposure(g_ref, g, (centre * scale * rel[n][0], centre * scale * rel[n][1]))
-            g = g * np.float32(gain) + np.float32(offset)
             oy, ox = int(self.org[i, 0]), int(self.org[i, 1])
-            features(g, (oy, oy + ph, ox, ox + pw), out=self.stack[i])
+            view_features(g, (oy, oy + ph, ox, ox + pw), out=self.stack[i], exposure=(gain, offset))
             self.feat[n] = self.stack[i]
             del g
         self.rel_array = np.array([rel[n] for n in self.names], np.float64).reshape(-1, 2)
