@@ -9,6 +9,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from numba import njit, prange
 from numpy.typing import NDArray
 
 from rigctl.depth.grid import Grid
@@ -78,9 +79,47 @@ def _reach(span: tuple[int, int], rel: float, d_range: tuple[float, float], exte
 
 
 def nan_median(stack: F32) -> tuple[F32, F32]:
-    """Median over axis 0 ignoring NaN, and the spread (largest minus smallest); NaN where nothing is finite.
-    The few layers are sorted by compare-and-swap over whole images (odd-even transposition), many times
-    faster than ``np.nanmedian`` (masked arrays) or a sort along a strided axis."""
+    """Median over axis 0 of what is finite (NaN and infinities ignored), and the spread (largest minus
+    smallest); NaN where nothing is finite. Compiled: each pixel's few layers sorted in registers, one pass
+    (issue 24); :func:`nan_median_reference` is the numpy form it matches bit for bit."""
+    layers = np.ascontiguousarray(stack, dtype=np.float32)
+    med = np.empty(layers.shape[1:], np.float32)
+    spread = np.empty(layers.shape[1:], np.float32)
+    if layers.shape[0] and med.size:
+        _median_spread(layers.reshape(layers.shape[0], -1), med.reshape(-1), spread.reshape(-1))
+    else:
+        med[...] = np.nan
+        spread[...] = np.nan
+    return med, spread
+
+
+@njit(parallel=True, cache=True, fastmath=False)
+def _median_spread(layers: F32, med: F32, spread: F32) -> None:
+    n, size = layers.shape
+    for start in prange((size + 4095) // 4096):
+        buf = np.empty(n, np.float32)
+        for p in range(start * 4096, min(size, start * 4096 + 4096)):
+            k = 0
+            for i in range(n):
+                v = layers[i, p]
+                if np.isfinite(v):  # insertion into the sorted finite values
+                    j = k
+                    while j > 0 and buf[j - 1] > v:
+                        buf[j] = buf[j - 1]
+                        j -= 1
+                    buf[j] = v
+                    k += 1
+            if k == 0:
+                med[p] = np.float32(np.nan)
+                spread[p] = np.float32(np.nan)
+            else:
+                med[p] = np.float32(0.5) * (buf[(k - 1) // 2] + buf[k // 2])
+                spread[p] = buf[k - 1] - buf[0]
+
+
+def nan_median_reference(stack: F32) -> tuple[F32, F32]:
+    """:func:`nan_median` in numpy: the few layers sorted by compare-and-swap over whole images (odd-even
+    transposition), many times faster than ``np.nanmedian`` (masked arrays) or a sort along a strided axis."""
     layers = [np.where(np.isfinite(x), x, np.float32(np.inf)).astype(np.float32) for x in stack]
     n = len(layers)
     for p in range(n):
