@@ -42,7 +42,7 @@ def bt709_to_linear(v: NDArray[np.floating]) -> NDArray[np.float32]:
     v = np.asarray(v, dtype=np.float32)
     knee = np.float32(_SLOPE * _BETA)  # 0.081
     high = ((np.maximum(v, knee) + np.float32(_ALPHA - 1)) / np.float32(_ALPHA)) ** np.float32(1 / 0.45)
-    return np.where(v < knee, v / np.float32(_SLOPE), high).astype(np.float32)
+    return np.where(v < knee, v / np.float32(_SLOPE), high).astype(np.float32, copy=False)
 
 
 def linear_to_bt709(linear: NDArray[np.floating]) -> NDArray[np.float32]:
@@ -69,12 +69,14 @@ def _acescg() -> Any:
 
 
 def to_colour(linear: NDArray[np.floating], colour: str) -> NDArray[np.float32]:
-    """Scene-linear Rec. 709 RGB in ``colour`` (one of :data:`COLOURS`)."""
+    """Scene-linear Rec. 709 RGB in ``colour`` (one of :data:`COLOURS`): ``linear`` itself when it is already
+    contiguous float32 Rec. 709 (no copy of a frame for nothing), else a new array."""
     if colour not in COLOURS:
         raise ParameterError(f"--colour {colour!r}: choose {' or '.join(COLOURS)}")
+    if colour == "rec709":
+        return np.ascontiguousarray(linear, dtype=np.float32)
     out = np.array(linear, dtype=np.float32, order="C")
-    if colour == "acescg":
-        _acescg().applyRGB(out)  # in place, on the contiguous copy
+    _acescg().applyRGB(out)  # in place, on the contiguous copy
     return out
 
 

@@ -248,3 +248,20 @@ def test_the_next_cameras_key_is_made_while_this_one_writes_its_exr(
         write_outputs(alone, cam, grid, results[cam], (0.0, 10.0), ("exr", "pfm", "png"))
         for ext in (".exr", ".pfm", ".png"):
             assert together.path(cam, ext).read_bytes() == alone.path(cam, ext).read_bytes()
+
+
+@pytest.mark.parametrize("d_range", [(74.06, 112.29), (100.0, 100.0), (120.0, 80.0), (-5.5, 300.25), (0.0, 1e-30)])
+def test_the_compiled_preview_is_the_reference_bit_for_bit(d_range: tuple[float, float]) -> None:
+    rng = np.random.default_rng(7)
+    d = (rng.random((67, 131)) * 320 - 10).astype(np.float32)
+    u = rng.random(d.shape)
+    d[u < 0.1] = np.inf
+    d[(u >= 0.1) & (u < 0.12)] = np.nan
+    d[(u >= 0.12) & (u < 0.13)] = -np.inf
+    got = export.colour_preview(d, d_range)
+    ref = export.colour_preview_reference(d, d_range)
+    assert got.dtype == np.uint8 and got.shape == (67, 131, 3)
+    assert np.array_equal(got, ref)
+    assert (got[~np.isfinite(d)] == 0).all()
+    if d_range[1] - d_range[0] > 1:
+        assert len(np.unique(got.reshape(-1, 3), axis=0)) > 100  # the whole map in use, not one colour
