@@ -42,6 +42,7 @@ from rigctl.depth.cost import (
 from rigctl.depth.cost_kernels import combined_costs, computed_pixels, visible_views
 from rigctl.depth.feature_kernels import view_features
 from rigctl.depth.search import EstimateStats
+from rigctl.depth.sweep_kernels import truncate_level, update, update_reference
 
 F32 = NDArray[np.float32]
 log = logging.getLogger(__name__)
@@ -293,26 +294,21 @@ def sweep(
     total = np.zeros(shape, np.float32)
     prev = np.full(shape, np.inf, np.float32)
     seen_any = np.zeros(shape, bool)
+    state = (best, k_best, c_minus, c_plus, total, seen_any)  # updated in place (no per-level copies of it)
     for k, d in enumerate(candidates):
         t0 = time.perf_counter()
         raw = views.costs(d, win, p.keep)
         t1 = time.perf_counter()
-        seen = raw < INVALID_COST * 0.5
-        c = agg(raw)
-        del raw
-        c[~seen] = np.float32(INVALID_COST)
+        if COMPILED:  # truncated and where a view saw it in one pass, the bookkeeping in one (sweep_kernels.py)
+            clipped, seen = truncate_level(raw, TRUNCATE, INVALID_COST)
+            del raw
+            prev = update(agg.smooth(clipped), seen, k, prev, state, INVALID_COST, TRUNCATE)
+        else:
+            seen = raw < INVALID_COST * 0.5
+            prev = update_reference(agg(raw), seen, k, prev, state, INVALID_COST, TRUNCATE)
+            del raw
         t_agg += time.perf_counter() - t1
         t_cost += t1 - t0
-        # the state updated in place (no per-level copies of it)
-        np.copyto(c_plus, c, where=k_best == k - 1)  # the level right after the current best
-        better = c < best
-        np.copyto(k_best, k, where=better)
-        np.copyto(c_minus, prev, where=better)
-        c_plus[better] = np.inf
-        np.minimum(best, c, out=best)
-        total += np.minimum(c, TRUNCATE)
-        seen_any |= seen
-        prev = c
     if stats is not None:
         stats["cost_s"] = stats.get("cost_s", 0.0) + t_cost
         stats["aggregation_s"] = stats.get("aggregation_s", 0.0) + t_agg

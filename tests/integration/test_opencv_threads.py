@@ -29,7 +29,9 @@ def restore_threads() -> Iterator[None]:
 
 
 def _files(root: Path) -> dict[str, str]:
-    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() for p in root.rglob("*") if p.is_file()}
+    return {
+        str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() for p in root.rglob("*") if p.is_file()
+    }
 
 
 def test_outputs_do_not_depend_on_opencvs_threads(tmp_path: Path, restore_threads: None) -> None:
