@@ -185,7 +185,8 @@ def default_memory_limit(take: Path, cameras: int | None) -> int:
 # Peak resident memory of a worker, measured with ``rigctl bench depth --size`` (preset best, every camera): a
 # fixed part (interpreter, OpenCV, Dask) and a part per pixel and camera: 56 B for one frame set (measured
 # between 1920x1080, 1.29 GiB, and 3840x2160, 4.17 GiB, with the cost volume at every range: issue 24; 1.33
-# and 4.47 GiB since the soft key is made in a thread of its own beside the other files, within the bound), and
+# and 4.47 GiB since the soft key is made in a thread of its own beside the other files; 1.40 and 4.59 GiB
+# since OpenCV has the kernels' threads on a worker: all within the bound), and
 # 18 B more in a chunk, where the temporal stabiliser holds the previous frame set's pictures and results
 # (a chunk of three 1920x1080 frame sets peaked at 1.66 GiB against 1.33 GiB for one, in one script on one
 # day). The worker limit is this with a margin of 25 %: Dask pauses a worker at 80 % of it (above the
