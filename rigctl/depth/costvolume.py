@@ -39,10 +39,11 @@ from rigctl.depth.cost import (
     normalise,
     view_part,
 )
-from rigctl.depth.cost_kernels import combined_costs, computed_pixels, visible_views
+from rigctl.depth.cost_kernels import combined_costs, computed_pixels
 from rigctl.depth.feature_kernels import view_features
 from rigctl.depth.search import EstimateStats
 from rigctl.depth.sweep_kernels import truncate_level, update, update_reference
+from rigctl.depth.visible_kernels import visible_views
 
 F32 = NDArray[np.float32]
 log = logging.getLogger(__name__)
@@ -166,16 +167,18 @@ class MatchViews:
         )
         return np.asarray(out, np.float32), np.asarray((mx < 0) | (mx > self.w - 1) | (my < 0) | (my > self.h - 1))
 
-    def visible_count(self, d: F32, front: NDArray[np.bool_], tol: float = OCCLUDER_PX) -> NDArray[np.int32]:
+    def visible_count(
+        self, d: F32, front: NDArray[np.bool_], tol: float = OCCLUDER_PX, where: NDArray[np.bool_] | None = None
+    ) -> NDArray[np.int32]:
         """How many views see the point at disparity ``d`` (a map): it lies inside the view's frame and no
         ``front`` pixel of the reference lands on the same place in that view with a disparity more than
         ``tol`` larger (a nearer surface covers it there: the bands behind a foreground edge). The occluders
         are what the reference itself sees (its estimated disparity), splatted on the view by the largest
-        disparity (a z-buffer); a pixel is hidden when all four cells around its place are nearer. With
-        ``COMPILED`` off, by the numpy reference."""
+        disparity (a z-buffer); a pixel is hidden when all four cells around its place are nearer. Counted
+        only at ``where`` when given (0 elsewhere). With ``COMPILED`` off, by the numpy reference."""
         y0, _, x0, _ = self.box
         if COMPILED:
-            count = visible_views(d, front, self.rel_array, (y0, x0), (self.h, self.w), tol)
+            count = visible_views(d, front, self.rel_array, (y0, x0), (self.h, self.w), tol, where)
             return np.asarray(count, np.int32)
         n = np.zeros(self.shape, np.int32)
         for rx, ry in self.rel.values():
@@ -195,7 +198,7 @@ class MatchViews:
             xb, yb = np.minimum(xa + 1, self.w - 1), np.minimum(ya + 1, self.h - 1)
             nearest = np.minimum(np.minimum(zbuf[ya, xa], zbuf[ya, xb]), np.minimum(zbuf[yb, xa], zbuf[yb, xb]))
             n += inside & ~(nearest > d + np.float32(tol))
-        return n
+        return n if where is None else np.where(where, n, 0).astype(np.int32)
 
     def costs(self, d: float | F32, win: int, keep: int) -> F32:
         """The combined cost at ``d`` (a number or a map): the mean of the ``keep`` best views'

@@ -234,6 +234,8 @@ def test_the_compiled_visible_count_matches_the_reference() -> None:
     got = views.visible_count(d, front)
     assert np.array_equal(got, want)
     assert (want < len(rel)).any() and (want == len(rel)).any()
+    # counted only where asked (the report's pixels), the same counts there and none elsewhere
+    assert np.array_equal(views.visible_count(d, front, where=front), np.where(front, want, 0))
 
 
 @pytest.mark.parametrize("win", [1, 3, 5])
