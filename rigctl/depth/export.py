@@ -25,7 +25,7 @@ from rigctl.depth.estimate import DepthResult
 from rigctl.depth.grid import Grid
 from rigctl.disparity_layers import header as disparity_header
 from rigctl.disparity_layers import layers, steps
-from rigctl.exr import picture, picture_attributes, write_exr
+from rigctl.exr import FAST_LOSSLESS, picture, picture_attributes, write_exr
 from rigctl.exrcam import camera_attributes
 from rigctl.keying import Keyer, SoftKey
 from rigctl.layout import inside, output_path
@@ -215,7 +215,7 @@ def write_depth_exr(
         "rigctl:disparity": "pixels of the horizontal spacing; depth.Z holds 1/Z",
         **disparity_header(st),
     }
-    write_exr(target.path(name, ".exr"), channels, attrs, half=("RGB", "A"))
+    write_exr(target.path(name, ".exr"), channels, attrs, half=("RGB", "A"), compression=FAST_LOSSLESS)
 
 
 def publish(tmp: Path, final: Path) -> dict[str, FileRecord]:

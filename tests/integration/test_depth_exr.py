@@ -6,6 +6,7 @@ rectify`` on a tiny simulated take recorded with ``--sim deterministic=true``) p
 from __future__ import annotations
 
 import re
+import subprocess
 from collections.abc import Callable
 from pathlib import Path
 
@@ -43,6 +44,31 @@ def test_oiiotool_lists_half_colour_float_depth_the_time_and_the_camera(depth: t
     assert "framesPerSecond: 25/1" in info
     assert re.search(r"smpte:TimeCode: \d\d:\d\d:\d\d:\d\d", info), info
     assert "worldToCamera:" in info and "worldToNDC:" in info
+    assert 'compression: "rle"' in info  # issue 24: half ZIP's encoding time, lossless, read by every OpenEXR
+
+
+def test_another_reader_decodes_the_rle_file_to_our_values(depth: tuple[Path, Path]) -> None:
+    """OpenImageIO's statistics of every channel (its own decoder of the run-length file) are those of the
+    values we wrote, as OpenEXR reads them back: a codec that lost or shifted a run would change them."""
+    path = depth[1] / "r1c1.exr"
+    proc = subprocess.run(["oiiotool", "--stats", "-v", str(path)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    listed = re.search(r"channel list: (.*)", proc.stdout)
+    assert listed is not None, proc.stdout
+    names = re.findall(r"([\w.]+) \((?:half|float)\)", listed[1])
+    stats = {}
+    for k in ("Min", "Max", "Avg"):
+        line = re.search(rf"Stats {k}: ([^(\n]*)", proc.stdout)
+        assert line is not None, proc.stdout
+        stats[k] = [float(v) for v in line[1].split()]
+    channels, _ = read_exr(path)
+    planes = {n: channels["RGB"][..., "RGB".index(n)] if n in "RGB" else channels[n] for n in names}
+    assert len(names) == 12 and float(np.ptp(planes["depth.Z"])) > 0  # a real depth, not a constant
+    for i, n in enumerate(names):
+        v = planes[n].astype(np.float64)
+        assert stats["Min"][i] == pytest.approx(v.min(), abs=1e-5), n
+        assert stats["Max"][i] == pytest.approx(v.max(), abs=1e-5), n
+        assert stats["Avg"][i] == pytest.approx(v.mean(), abs=1e-5), n
 
 
 @pytest.mark.parametrize("camera", CAMS)
