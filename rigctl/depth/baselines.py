@@ -51,9 +51,7 @@ def sgbm_fused(grid: Grid, ref: str, d_range: tuple[float, float]) -> F32:
         other = neighbour(grid, ref, dx, dy)
         if other is not None:
             maps.append(pair_disparity(grid, ref, other, d_range, u8=u8))
-    stack = np.stack(maps)
-    stack[~np.isfinite(stack)] = np.nan
-    fused, _ = nan_median(stack)
+    fused, _ = nan_median(np.stack(maps))  # what no pair estimated (+-inf or NaN) is ignored
     return np.asarray(np.where(np.isfinite(fused), fused, np.inf), dtype=np.float32)
 
 

@@ -44,10 +44,9 @@ def pairs_engine(job: SearchJob) -> BoxEstimate:
             f"camera {ref} has no other camera on its row or column, which preset {preset.name} matches with; "
             "use --preset balanced"
         )
-    stack = np.stack(maps)
-    stack[~np.isfinite(stack)] = np.nan
-    have = np.isfinite(stack).any(0)
+    stack = np.stack(maps)  # +-inf or NaN where a pair has no estimate: the median ignores all three
     med, spread = nan_median(stack)
+    have = ~np.isnan(med)  # some pair has an estimate (the median is NaN exactly where none has)
     # a point no pair matched (hidden from each, or outside each pair's search) takes the background side
     base = fill_from_background(np.where(have, med, np.inf).astype(np.float32), np.asarray(~have, bool))
     base = np.where(np.isfinite(base), base, 0.5 * (d_range[0] + d_range[1])).astype(np.float32)
