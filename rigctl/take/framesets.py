@@ -2,7 +2,8 @@
 
 Genlock makes the sensors scan together but does not tell the host which captured frames belong
 together (sequence numbers restart on every start, cameras start at different moments). Frames are
-therefore grouped by capture timestamp, within half a frame period of each set's time, tracking the
+therefore grouped by capture timestamp, within half a frame period of each set's time (one frame stamped up to a
+period late or early still finds its own set when its neighbour is on time), tracking the
 rig's phase; or by timecode (its frame count, exact at drop-frame rates) when every frame carries one.
 A camera missing from a set leaves an explicit gap: later sets are never shifted.
 """
@@ -62,18 +63,32 @@ def assemble(
     sets: list[FrameSet] = []
     k = 0
     number = 0
-    while k < len(items):
+    carried: dict[str, tuple[int, int]] = {}  # a camera's frame stamped early, for the next set
+    while k < len(items) or carried:
         lo, hi = expected - half, expected + half
-        members: dict[str, int] = {}
-        times: list[int] = []
+        members = {cam: i for cam, (_, i) in carried.items()}
+        stamps = {cam: t for cam, (t, _) in carried.items()}
+        carried = {}
         while k < len(items) and items[k][0] < hi:
             t, cam, i = items[k]
-            if t >= lo and cam not in members:
-                members[cam] = i
-                times.append(t)
-            # a frame before the window (or a second one of a camera in this window) would belong
-            # to no set: it can only happen with timestamps that jump; it is left out
             k += 1
+            if t < lo:
+                continue  # before the window: only timestamps that jump back do that; left out
+            if cam not in members:
+                members[cam], stamps[cam] = i, t
+                continue
+            # a second frame of the camera within half a period: one of the two was stamped more than half
+            # a period off its slot (a host starved of CPU stamps a frame late; the next one on time). The
+            # earlier goes back to the set before when that set lacks the camera and it is less than a period
+            # late for it; else the later goes on to the next set when it lies past this one's time; else
+            # (two frames at one instant) the later is left out. Nothing is shifted past one slot.
+            prev = sets[-1] if sets and sets[-1].number == number - 1 else None
+            if prev is not None and cam not in prev.members and 0 <= stamps[cam] - prev.time_ns < period_ns:
+                sets[-1] = _with_member(prev, cam, members[cam], stamps[cam], timestamps)
+                members[cam], stamps[cam] = i, t
+            elif t > expected:
+                carried[cam] = (t, i)
+        times = list(stamps.values())
         if times:
             centre = int(np.median(times))
             sets.append(FrameSet(number, centre, members, max(times) - min(times)))
@@ -85,6 +100,13 @@ def assemble(
     while sets and not sets[-1].members:
         sets.pop()
     return sets
+
+
+def _with_member(fs: FrameSet, cam: str, index: int, t: int, timestamps: dict[str, NDArray[np.int64]]) -> FrameSet:
+    """``fs`` with ``cam``'s frame ``index`` (stamped ``t``) added: its time stays that of the others (the
+    tracked phase), its spread counts the added stamp."""
+    times = [int(timestamps[c][i]) for c, i in fs.members.items()] + [t]
+    return FrameSet(fs.number, fs.time_ns, {**fs.members, cam: index}, max(times) - min(times), fs.timecode)
 
 
 def timecode_counts(indexes: dict[str, NDArray[np.void]], fps: float) -> dict[str, NDArray[np.int64]] | None:
