@@ -11,15 +11,11 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.depth.grid import Grid
+from rigctl.depth.grid import Grid, grey_of
 
 F32 = NDArray[np.float32]
 INVALID_COST = 1e3  # a view that cannot see the point (outside its image)
 TRUNCATE = 1.5  # normalised-intensity difference above this is an occlusion or a mismatch, not more
-
-
-def grey(rgb: F32) -> F32:
-    return np.asarray(cv2.cvtColor(np.ascontiguousarray(rgb, np.float32), cv2.COLOR_RGB2GRAY), dtype=np.float32)
 
 
 def normalise(g: F32, win: int = 7) -> tuple[F32, F32]:
@@ -82,7 +78,7 @@ class SweepLevel:
         self.views = views
         scaled = None if reach is None else (reach[0] * scale, reach[1] * scale)
         for n in [ref, *views]:  # one camera at a time: its grey and whole normalised image go before the next
-            g = grey(grid.images[n])
+            g = grey_of(grid.images, n)
             if scale != 1.0:
                 g = np.asarray(cv2.resize(g, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA), np.float32)
             norm, std = normalise(g)

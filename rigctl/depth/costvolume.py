@@ -35,12 +35,12 @@ from rigctl.depth.cost import (
     active_pixels,
     combine,
     exposure,
-    grey,
     normalise,
     view_part,
 )
 from rigctl.depth.cost_kernels import combined_costs, computed_pixels
 from rigctl.depth.feature_kernels import view_features
+from rigctl.depth.grid import grey_of
 from rigctl.depth.search import EstimateStats
 from rigctl.depth.sweep_kernels import truncate_level, update, update_reference
 from rigctl.depth.visible_kernels import visible_views
@@ -96,7 +96,7 @@ class MatchViews:
         self.names = list(rel)
 
         def scaled_grey(n: str) -> F32:
-            g = grey(images[n])
+            g = grey_of(images, n)
             if scale != 1.0:
                 g = np.asarray(cv2.resize(g, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA), np.float32)
             return g
@@ -378,7 +378,7 @@ def coarse_scale(levels: float, size: tuple[int, int]) -> float:
 
 
 def volume_disparity(
-    images: dict[str, F32],
+    images: Mapping[str, F32],
     ref: str,
     rel: dict[str, tuple[float, float]],
     box: tuple[int, int, int, int],

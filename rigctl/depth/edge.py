@@ -141,7 +141,7 @@ def sensor_fixed(
     box = (int(ys.min()), int(ys.max()) + 1, int(xs.min()), int(xs.max()) + 1)
     y0, y1, x0, x1 = box
     d = np.where(have[y0:y1, x0:x1], disparity[y0:y1, x0:x1], 0.0).astype(np.float32)
-    ref_y = np.asarray(grid.images[ref][y0:y1, x0:x1] @ LUMA, np.float32)
+    ref_y = np.asarray(grid.frames.region(ref, slice(y0, y1), slice(x0, x1)) @ LUMA, np.float32)
     if SPARSE:
         at_estimate, count, unshifted, nearby = _tests_where_unshifted_may_agree(
             grid, ref, views, d, have[y0:y1, x0:x1], box, ref_y
@@ -202,7 +202,7 @@ def _tests_where_unshifted_may_agree(
     best = np.full((bh, bw), inf, np.float32)
     for i, n in enumerate(views):
         py0, px0 = int(org[i, 0]), int(org[i, 1])
-        luma[i] = grid.images[n][py0 : py0 + ph, px0 : px0 + pw] @ LUMA
+        luma[i] = grid.frames.region(n, slice(py0, py0 + ph), slice(px0, px0 + pw)) @ LUMA
         # unshifted: the view's own pixels (outside is impossible: the box lies in the frame, and in the part)
         unshifted = np.abs(luma[i, y0 - py0 : y1 - py0, x0 - px0 : x1 - px0] - ref_y)
         np.minimum(best, cv2.blur(unshifted, (3, 3)), out=best)

@@ -3,10 +3,12 @@ rectify``'s output, or an ``ideal=true`` simulated take, rectified as recorded),
 (``r{row}c{col}.png`` + ``grid.yaml``).
 
 A grid holds each picture as it came: a take's frame bytes in their captured format, 8-bit BGR from an 8-bit
-PNG, float RGB from a 16-bit PNG or an array. What an engine reads is derived on first use and kept:
-``grid.images[name]`` (float RGB in [0, 1]: the cost volume, the keyer, the EXR picture) and
-:meth:`Grid.bgr8` (8-bit BGR: the semi-global matcher), each straight from what was given, so a take's frames
-reach the matcher without a float round trip and the float picture is not quantised on the way."""
+PNG, float RGB from a 16-bit PNG or an array. What an engine reads is derived from it, each straight from what
+was given, so a take's frames reach the matcher without a float round trip and the float picture is not
+quantised on the way: :meth:`Grid.bgr8` (8-bit BGR: the semi-global matcher) and :meth:`FrameImages.grey`
+(the cost volume's grey) are made on first use and kept; ``grid.images[name]`` (float RGB in [0, 1]: the
+keyer, the EXR picture) is made when asked and only the last one kept, and :meth:`FrameImages.region` makes
+a part of it (issue 24: nine float pictures held for the whole frame set were 0.83 GiB at 3840x2160)."""
 
 from __future__ import annotations
 
@@ -36,10 +38,17 @@ F32 = NDArray[np.float32]
 U8 = NDArray[np.uint8]
 
 
+def grey(rgb: F32) -> F32:
+    """The grey the cost volume matches (OpenCV's RGB to grey of float RGB)."""
+    return np.asarray(cv2.cvtColor(np.ascontiguousarray(rgb, np.float32), cv2.COLOR_RGB2GRAY), dtype=np.float32)
+
+
 class FrameImages(Mapping[str, F32]):
     """The pictures of a grid by camera: float RGB in [0, 1] when read as a mapping, 8-bit BGR through
-    :meth:`bgr8`. Each is made on first use and kept, from the picture as given (8-bit BGR or float RGB) or
-    straight from a take's captured bytes (:meth:`captured`), so neither goes through the other."""
+    :meth:`bgr8`, the grey through :meth:`grey`; each from the picture as given (8-bit BGR or float RGB) or
+    straight from a take's captured bytes (:meth:`captured`), so neither goes through the other. The 8-bit
+    pictures and the greys are kept once made; a float picture that was not given is made when asked, and
+    only the last one made is kept (the reads of one camera follow each other)."""
 
     def __init__(self, images: Mapping[str, NDArray[Any]]) -> None:
         self._names = list(images)
@@ -47,6 +56,8 @@ class FrameImages(Mapping[str, F32]):
         self._float: dict[str, F32] = {n: v for n, v in images.items() if v.dtype != np.uint8}
         self._captured: dict[str, U8] = {}
         self._format = ("", 0, 0)
+        self._grey: dict[str, F32] = {}
+        self._last: tuple[str, F32] | None = None  # the last float picture made (one assignment: thread-safe)
 
     @classmethod
     def captured(cls, frames: Mapping[str, U8], pixel_format: str, width: int, height: int) -> FrameImages:
@@ -59,13 +70,37 @@ class FrameImages(Mapping[str, F32]):
 
     def __getitem__(self, name: str) -> F32:
         rgb = self._float.get(name)
-        if rgb is None:
-            if name in self._captured:
-                rgb = to_rgb(self._captured[name], *self._format)
-            else:
-                rgb = bgr8_to_rgb(self._u8[name])
-            self._float[name] = rgb
+        if rgb is not None:
+            return rgb
+        last = self._last
+        if last is not None and last[0] == name:
+            return last[1]
+        if name in self._captured:
+            rgb = to_rgb(self._captured[name], *self._format)
+        else:
+            rgb = bgr8_to_rgb(self._u8[name])  # KeyError for a camera the grid does not have, as a mapping's
+        self._last = (name, rgb)
         return rgb
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._names  # without making the picture (a Mapping's own test reads it)
+
+    def region(self, name: str, rows: slice, cols: slice) -> F32:
+        """``self[name][rows, cols]``, made from that part alone when the picture came as 8-bit BGR (the same
+        values: the conversion is per pixel)."""
+        if name in self._u8 and name not in self._float:
+            last = self._last
+            if last is None or last[0] != name:
+                return bgr8_to_rgb(self._u8[name][rows, cols])
+        return self[name][rows, cols]
+
+    def grey(self, name: str) -> F32:
+        """:func:`grey` of the float picture, made on first use and kept (every camera's estimate reads every
+        view's)."""
+        g = self._grey.get(name)
+        if g is None:
+            g = self._grey[name] = grey(self[name])
+        return g
 
     def bgr8(self, name: str) -> U8:
         bgr = self._u8.get(name)
@@ -89,6 +124,11 @@ class FrameImages(Mapping[str, F32]):
 
     def __len__(self) -> int:
         return len(self._names)
+
+
+def grey_of(images: Mapping[str, F32], name: str) -> F32:
+    """Camera ``name``'s grey: kept by the grid's pictures (:meth:`FrameImages.grey`), else made."""
+    return images.grey(name) if isinstance(images, FrameImages) else grey(images[name])
 
 
 @dataclass

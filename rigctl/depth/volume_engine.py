@@ -52,7 +52,7 @@ def volume_engine(job: SearchJob) -> BoxEstimate:
     pairs = pairs_engine(job).disparity if with_pairs else None
     t_pairs = time.perf_counter() - t0
     pair_levels = stats.get("levels")
-    sw, views = volume_disparity(dict(job.grid.images), job.ref, rel, job.box, job.d_range, params, stats, job.region)
+    sw, views = volume_disparity(job.grid.images, job.ref, rel, job.box, job.d_range, params, stats, job.region)
     if pairs is not None and pair_levels is not None:
         stats["levels"] = pair_levels  # as reported before the pairs ran first: the widest pair's levels
     t0 = time.perf_counter() - t_pairs

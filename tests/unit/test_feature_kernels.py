@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 from conftest import SHARED
 
-from rigctl.depth.cost import features, grey
+from rigctl.depth.cost import features
 from rigctl.depth.feature_kernels import view_features
+from rigctl.depth.grid import grey
 
 
 def _reference(g: np.ndarray, part: tuple[int, int, int, int], exposure: tuple[float, float] | None) -> np.ndarray:
