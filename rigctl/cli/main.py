@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 from rigctl import __version__
+from rigctl.allocator import limit_arenas
 from rigctl.cli import args
 from rigctl.cli.helptext import examples
 from rigctl.errors import EXIT_INTERRUPTED, EXIT_USAGE, RigctlError
@@ -34,6 +35,8 @@ VERBS = (
     "plan", "devices", "record", "take", "tally", "control", "board", "calibrate", "rectify", "depth", "process",
     "render", "bench", "demo", "tui", "miv", "usd", "view", "completion",
 )  # fmt: skip
+# the verbs that estimate depth in this process: one allocator arena (rigctl.allocator)
+DEPTH_VERBS = ("depth", "process", "bench", "demo")
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
@@ -96,6 +99,8 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(ns, "func", None):
         parser.print_help()
         return EXIT_USAGE
+    if ns.verb in DEPTH_VERBS:
+        limit_arenas()  # before any of the verb's threads allocate (recording keeps glibc's default)
     try:
         code = int(ns.func(ns))
         sys.stdout.flush()  # a closed pipe shows here, inside the handler, not at interpreter exit

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rigctl.allocator import limit_arenas
 from rigctl.depth.export import Exporter, frame_name
 from rigctl.depth.grid import TakeGrid
 from rigctl.depth.options import DepthOptions
@@ -48,14 +49,16 @@ class ChunkJob:
 
 
 def pin_threads() -> None:
-    """One thread for the BLAS libraries, OpenCV as many as the compiled kernels (numba's), fixed seeds:
-    identical results on every worker. OpenCV's results here do not depend on its thread count (its
-    semi-global matcher cuts every image into four stripes whatever the threads; the filters compute each
-    pixel alike), so a worker need not run the matcher, a third of the depth time, on one thread (issue 24):
+    """One allocator arena (:mod:`rigctl.allocator`), one thread for the BLAS libraries, OpenCV as many as
+    the compiled kernels (numba's), fixed seeds: identical results on every worker. OpenCV's results here do
+    not depend on its thread count (its semi-global matcher cuts every image into four stripes whatever the
+    threads; the filters compute each pixel alike), so a worker need not run the matcher, a third of the
+    depth time, on one thread (issue 24):
     ``test_outputs_do_not_depend_on_opencvs_threads`` holds a frame set's files byte-identical at 1, 2 and 3."""
     import cv2
     import numba
 
+    limit_arenas()  # before the kernels' and OpenCV's threads first allocate
     for var in THREAD_ENV:
         os.environ[var] = "1"
     cv2.setNumThreads(int(numba.get_num_threads()))
