@@ -37,6 +37,7 @@ from rigctl.depth.cost import F32
 from rigctl.depth.cost_kernels import better_half_mean
 from rigctl.depth.fixed_kernels import window_disagreements
 from rigctl.depth.grid import Grid
+from rigctl.keying import subject_box
 
 DEPTH_COVERAGE = 0.5  # depth where the subject covers at least this share of the pixel
 WINDOW = 2  # radius of the window the local subject and screen colours are taken from
@@ -227,41 +228,58 @@ def _grown(box: tuple[int, int, int, int], px: float, py: float, h: int, w: int)
 ORDER_TOL = 1.0  # disparity (px of the horizontal spacing) by which another view must see the point farther
 
 
-def occlusion_order(grid: Grid, disparities: dict[str, F32]) -> dict[str, tuple[F32, NDArray[np.bool_]]]:
-    """Per camera: its disparity with the pixels that most other views see farther replaced (the median of
-    what they see, +inf where that is the screen), and which pixels those were. Decided from every camera's
-    disparity as given (none sees another's corrections)."""
-    out: dict[str, tuple[F32, NDArray[np.bool_]]] = {}
+def occlusion_order(grid: Grid, disparities: dict[str, F32]) -> dict[str, tuple[NDArray[np.bool_], F32]]:
+    """Per camera: the pixels that most other views see farther, and what to put there (the median of what
+    they see, +inf where that is the screen), in :func:`ordered`'s form. Decided from every camera's
+    disparity as given (none sees another's corrections). Only the box of the camera's estimates is tested
+    (nothing outside it can be flagged), each other view sampled where the box's points fall in it."""
+    screen = {b: _screen_far(d) for b, d in disparities.items()}
+    out: dict[str, tuple[NDArray[np.bool_], F32]] = {}
     for a, d in disparities.items():
         flagged = np.zeros(d.shape, bool)
-        have = np.isfinite(d)
+        out[a] = (flagged, np.zeros(0, np.float32))
+        have_all = np.isfinite(d)
+        box = subject_box(have_all, 0)
         ox, oy = grid.offsets[a]
         others = [b for b in disparities if b != a and grid.offsets[b] != (ox, oy)]
-        if len(others) < 2 or not have.any():
-            out[a] = (d, flagged)
+        if len(others) < 2 or box is None:
             continue
-        h, w = d.shape
-        gy, gx = np.mgrid[0:h, 0:w].astype(np.float32)
-        dz = np.where(have, d, 0.0).astype(np.float32)
-        seen = []
-        for b in others:
+        y0, y1, x0, x1 = box
+        have, dz = have_all[y0:y1, x0:x1], d[y0:y1, x0:x1]
+        gy, gx = np.mgrid[y0:y1, x0:x1].astype(np.float32)
+        dz = np.where(have, dz, 0.0).astype(np.float32)
+        stack = np.empty((len(others), y1 - y0, x1 - x0), np.float32)
+        for i, b in enumerate(others):
             rx, ry = grid.offsets[b][0] - ox, grid.offsets[b][1] - oy
-            db = np.where(np.isfinite(disparities[b]), disparities[b], -np.inf).astype(np.float32)  # screen: far
             mx, my = gx - dz * np.float32(rx), gy - dz * np.float32(ry)
-            seen.append(cv2.remap(db, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan))
-        stack = np.stack(seen)
+            nearest, outside = cv2.INTER_NEAREST, cv2.BORDER_CONSTANT  # NaN: outside b's frame
+            cv2.remap(screen[b], mx, my, nearest, dst=stack[i], borderMode=outside, borderValue=np.nan)
+        np.copyto(stack, np.float32(-np.inf), where=np.isinf(stack))  # a view's screen: far
         in_frame = ~np.isnan(stack)
         farther = in_frame & (stack < dz - ORDER_TOL)
         n_in, n_far = in_frame.sum(axis=0), farther.sum(axis=0)
-        flagged = have & (n_in >= 2) & (2 * n_far > n_in)
-        if not flagged.any():
-            out[a] = (d, flagged)
+        flagged[y0:y1, x0:x1] = have & (n_in >= 2) & (2 * n_far > n_in)
+        inside = flagged[y0:y1, x0:x1]
+        if not inside.any():
             continue
-        seen_far = np.where(farther[:, flagged] & np.isfinite(stack[:, flagged]), stack[:, flagged], np.nan)
+        seen_far = np.where(farther[:, inside] & np.isfinite(stack[:, inside]), stack[:, inside], np.nan)
         some = np.isfinite(seen_far).any(axis=0)
         value = np.full(seen_far.shape[1], np.inf, np.float32)
         value[some] = np.nanmedian(seen_far[:, some], axis=0)
-        fixed = d.copy()
-        fixed[flagged] = value
-        out[a] = (fixed, flagged)
+        out[a] = (flagged, value)
     return out
+
+
+def _screen_far(d: F32) -> F32:
+    """``d`` for sampling by another view: its NaN (not expected: no estimate is +inf) as -inf, so that after
+    sampling NaN means outside the frame alone and every infinity is the screen, far."""
+    return np.where(np.isnan(d), np.float32(-np.inf), d).astype(np.float32) if np.isnan(d).any() else d
+
+
+def ordered(d: F32, flagged: NDArray[np.bool_], value: F32) -> F32:
+    """``d`` with :func:`occlusion_order`'s values at the flagged pixels (a copy; ``d`` itself when none)."""
+    if not flagged.any():
+        return d
+    fixed = d.copy()
+    fixed[flagged] = value
+    return fixed

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from rigctl.depth.edge import occlusion_order
+from rigctl.depth.edge import occlusion_order, ordered
 from rigctl.depth.estimate import DepthResult, cross_check, estimate
 from rigctl.depth.export import Exporter, FileRecord
 from rigctl.depth.grid import Grid, SkippedFrameSet
@@ -109,11 +109,11 @@ def order_all(grid: Grid, out: dict[str, DepthResult]) -> None:
     """No camera's depth in front of what the others see (:func:`rigctl.depth.edge.occlusion_order`): a pixel
     that most views see farther takes what they see, or no depth (then no confidence, no flags) on the screen."""
     t0 = time.perf_counter()
-    ordered = occlusion_order(grid, {cam: res.disparity for cam, res in out.items()})
-    for cam, (disparity, flagged) in ordered.items():
+    order = occlusion_order(grid, {cam: res.disparity for cam, res in out.items()})
+    for cam, (flagged, value) in order.items():
         res = out[cam]
-        gone = flagged & ~np.isfinite(disparity)
-        res.disparity = disparity
+        res.disparity = ordered(res.disparity, flagged, value)
+        gone = flagged & ~np.isfinite(res.disparity)
         res.confidence[gone] = 0.0
         res.unreliable[gone] = False
         res.bound_hit[gone] = False

@@ -133,7 +133,7 @@ def test_depth_in_front_of_what_the_other_views_see_takes_what_they_see() -> Non
     """Foreground fattened over the torso and over the screen in one camera (as a window matcher spreads an
     occluding edge) is put back: the torso's disparity where the others see torso, none where they see screen;
     everything else, occluded points included, is left alone."""
-    from rigctl.depth.edge import occlusion_order
+    from rigctl.depth.edge import occlusion_order, ordered
 
     names = [f"r{r}c{c}" for r in range(3) for c in range(3)]
     grid = grid_from_arrays({n: np.zeros((80, 120, 3), np.float32) for n in names}, 1000.0, 0.12, 0.078)
@@ -146,14 +146,15 @@ def test_depth_in_front_of_what_the_other_views_see_takes_what_they_see() -> Non
     halo = cv2.dilate(np.isfinite(truth["r1c1"]).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
     ref[halo & ~np.isfinite(truth["r1c1"])] = 4.0  # a one-pixel halo of torso over the screen
     out = occlusion_order(grid, fat)
-    fixed, flagged = out["r1c1"]
+    flagged = out["r1c1"][0]
+    fixed = ordered(fat["r1c1"], *out["r1c1"])
     wrong = (grown & ~hand) | (halo & ~np.isfinite(truth["r1c1"]))
     assert flagged[wrong].mean() > 0.95 and not flagged[~wrong].any()
     assert np.array_equal(np.isfinite(fixed), np.isfinite(truth["r1c1"]))
     assert np.abs(fixed[grown & ~hand] - 4.0).max() == 0.0
     for n in names:  # cameras whose depth is right are untouched, occluded torso beside the hand included
         if n != "r1c1":
-            assert not out[n][1].any() and np.array_equal(out[n][0], truth[n])
+            assert not out[n][0].any() and ordered(fat[n], *out[n]) is fat[n]
 
 
 def test_the_sensor_tests_only_where_the_views_may_agree_unshifted_match_the_whole_box() -> None:
@@ -205,3 +206,69 @@ def test_the_sensor_tests_only_where_the_views_may_agree_unshifted_match_the_who
             edge.SPARSE = True
     assert fixed[True][:5, :47].all()  # the pattern
     assert np.array_equal(fixed[True], fixed[False])
+
+
+def _order_reference(grid, disparities):  # type: ignore[no-untyped-def]
+    """The occlusion order as first written (issue 24 moved it to the box of each camera's estimates): every
+    other view sampled over the whole frame, its non-finite values as -inf before sampling."""
+    out = {}
+    for a, d in disparities.items():
+        flagged = np.zeros(d.shape, bool)
+        have = np.isfinite(d)
+        ox, oy = grid.offsets[a]
+        others = [b for b in disparities if b != a and grid.offsets[b] != (ox, oy)]
+        fixed = d
+        if len(others) >= 2 and have.any():
+            h, w = d.shape
+            gy, gx = np.mgrid[0:h, 0:w].astype(np.float32)
+            dz = np.where(have, d, 0.0).astype(np.float32)
+            seen = []
+            for b in others:
+                rx, ry = grid.offsets[b][0] - ox, grid.offsets[b][1] - oy
+                db = np.where(np.isfinite(disparities[b]), disparities[b], -np.inf).astype(np.float32)
+                mx, my = gx - dz * np.float32(rx), gy - dz * np.float32(ry)
+                border = {"borderMode": cv2.BORDER_CONSTANT, "borderValue": np.nan}
+                seen.append(cv2.remap(db, mx, my, cv2.INTER_NEAREST, **border))
+            stack = np.stack(seen)
+            in_frame = ~np.isnan(stack)
+            farther = in_frame & (stack < dz - 1.0)
+            n_in, n_far = in_frame.sum(axis=0), farther.sum(axis=0)
+            flagged = have & (n_in >= 2) & (2 * n_far > n_in)
+            if flagged.any():
+                seen_far = np.where(farther[:, flagged] & np.isfinite(stack[:, flagged]), stack[:, flagged], np.nan)
+                some = np.isfinite(seen_far).any(axis=0)
+                value = np.full(seen_far.shape[1], np.inf, np.float32)
+                value[some] = np.nanmedian(seen_far[:, some], axis=0)
+                fixed = d.copy()
+                fixed[flagged] = value
+        out[a] = (fixed, flagged)
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_occlusion_order_in_the_box_of_the_estimates_is_the_whole_frames(seed: int) -> None:
+    """Issue 24: testing only the box of a camera's estimates changes nothing. Against the whole-frame
+    reference, bit for bit: subjects touching the frame's edges (views sample outside the frame), a camera
+    with no estimate, one with a single pixel, NaN where an estimate should be +inf (taken as the screen, as
+    the reference does), and the ``ORDER_TOL`` boundary hit exactly."""
+    from rigctl.depth.edge import occlusion_order, ordered
+
+    names = [f"r{r}c{c}" for r in range(3) for c in range(3)]
+    grid = grid_from_arrays({n: np.zeros((60, 90, 3), np.float32) for n in names}, 1000.0, 0.12, 0.078)
+    rng = np.random.default_rng(seed)
+    disparities = {}
+    for n in names:
+        d = np.full((60, 90), np.inf, np.float32)
+        y0, x0 = rng.integers(0, 30), rng.integers(0, 45)
+        d[y0 : y0 + rng.integers(5, 60), x0 : x0 + rng.integers(5, 90)] = rng.choice([3.0, 4.0, 5.0, 8.0], 1)[0]
+        d[rng.random(d.shape) < 0.05] = rng.uniform(0, 12)
+        disparities[n] = d
+    disparities["r0c0"][:] = np.inf  # no estimate at all
+    disparities["r2c2"][:] = np.inf
+    disparities["r2c2"][59, 89] = 6.0  # one pixel, in the corner
+    disparities["r1c0"][rng.random((60, 90)) < 0.02] = np.nan
+    got, want = occlusion_order(grid, disparities), _order_reference(grid, disparities)
+    assert sum(int(want[n][1].sum()) for n in names) > 50  # the scene does flag pixels
+    for n in names:
+        assert np.array_equal(got[n][0], want[n][1])
+        assert np.array_equal(ordered(disparities[n], *got[n]), want[n][0], equal_nan=True)
