@@ -197,8 +197,9 @@ def _linear(dst: NDArray[np.intp], small: int, size: int) -> tuple[NDArray[np.in
 
 def _with_ones(values: F32) -> F32:
     """H x W x C values with a channel of ones after them (what :class:`_LocalMean` weighs)."""
-    out = np.ones((*values.shape[:2], values.shape[2] + 1), np.float32)
+    out = np.empty((*values.shape[:2], values.shape[2] + 1), np.float32)
     out[..., :-1] = values
+    out[..., -1] = 1.0
     return out
 
 
@@ -223,8 +224,9 @@ class _Pass:
 
 
 def _solve(ycc: F32, idx: NDArray[np.intp], front_mean: _LocalMean, back_mean: _LocalMean, pairs: bool) -> _Pass:
-    """The key's alpha at ``idx`` (every 4:2:2 pair whole, in frame order) for one estimate of the screen."""
-    pix = ycc.reshape(-1, 3)[idx]
+    """The key's alpha at ``idx`` (every 4:2:2 pair whole, in frame order) for one estimate of the screen;
+    ``ycc``: the picture's Y, Cb, Cr (and anything after them) per pixel, N x 3 or more."""
+    pix = ycc[idx, :3]
     front, have_front = front_mean.at(idx)
     back, _ = back_mean.at(idx)
     chroma_b = back[:, 1:]
@@ -289,11 +291,25 @@ def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None, everywhere: bool =
     again). It is below 1 somewhere exactly when the keyer found a screen (the screen's own pixels key to 0),
     so it also says whether there is one."""
     captured = np.asarray(rgb, np.float32)
-    rgb = np.clip(captured, 0.0, 1.0)
+    least, most = float(captured.min()), float(captured.max())  # NaN fails both tests: clipped, as before
+    rgb = captured if least >= 0.0 and most <= 1.0 else np.clip(captured, 0.0, 1.0)  # no copy when within
     if hard is None:
         hard = keyer.matte(rgb)
     if not bool((hard < 1).any()):
         return SoftKey(np.ones(rgb.shape[:2], np.float32), captured.copy())
+    full, idx, done, solved = _key_band(rgb, hard, everywhere)
+    del rgb  # the clipped copy, when one was made
+    lo, hi = min(0.0, least), max(1.0, most)
+    fg = captured.copy()
+    at = fg.reshape(-1, fg.shape[2])
+    at[idx] = _unmix(solved, done, at[idx], (lo, hi))
+    return SoftKey(full, fg, len(idx))
+
+
+def _key_band(rgb: F32, hard: F32, everywhere: bool) -> tuple[F32, NDArray[np.intp], _Pass, F32]:
+    """:func:`soft_key`'s alpha over the frame, the pixels it was solved on, the last pass there and their
+    Y, Cb, Cr; every frame-sized temporary (the local means' fields) is gone when it returns, before the
+    colour is unmixed into a copy of the picture (issue 24: the write's memory)."""
     ycc = np.asarray(rgb @ RGB_TO_YCC.T, np.float32)
     # 4:2:2 decoded: the two pixels of each pair share their chroma (but where decoding clipped)
     h, w = hard.shape
@@ -303,6 +319,8 @@ def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None, everywhere: bool =
     screen = cv2.erode((hard <= 0).astype(np.uint8), k3).astype(np.float32)
     inner = (cv2.erode(solid.astype(np.uint8), k3) > 0).reshape(-1)  # well inside the hard key: the subject
     ycc1 = _with_ones(ycc)
+    del ycc  # read from ycc1: the same values, without a second frame of them
+    pix_ycc = ycc1.reshape(-1, 4)
     # the nearby subject (the same in both passes) and the screen: their fine blurs, the key's dearest step,
     # side by side (OpenCV lets go of the GIL; both are held at once either way, within a few MB)
     with ThreadPoolExecutor(1, thread_name_prefix="soft-key-front") as beside:
@@ -312,7 +330,7 @@ def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None, everywhere: bool =
     full = inner.astype(np.float32)  # the key over the frame: 1 inside, 0 on the screen
 
     def solve(idx: NDArray[np.intp], back: _LocalMean) -> _Pass:
-        done = _solve(ycc, idx, front, back, pairs)
+        done = _solve(pix_ycc, idx, front, back, pairs)
         done.alpha[inner[idx]] = 1.0  # solved as part of a pair, but inside the subject
         full[idx] = done.alpha
         return done
@@ -335,11 +353,8 @@ def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None, everywhere: bool =
     del back  # its fields (the second pass's take their place)
     screen = cv2.erode((full.reshape(h, w) <= 0).astype(np.uint8), k3).astype(np.float32)
     done = solve(idx, _LocalMean(ycc1, screen, (4.0, 16.0, 64.0)))
-    lo, hi = min(0.0, float(captured.min())), max(1.0, float(captured.max()))
-    fg = captured.copy()
-    at = fg.reshape(-1, fg.shape[2])
-    at[idx] = _unmix(ycc.reshape(-1, 3)[idx], done, at[idx], (lo, hi))
-    return SoftKey(full.reshape(h, w), fg, len(idx))
+    solved = pix_ycc[idx, :3]
+    return full.reshape(h, w), idx, done, solved
 
 
 def _split_pairs(pair_alpha: F32, luma: F32, screen_luma: F32) -> F32:
