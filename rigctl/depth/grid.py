@@ -88,10 +88,9 @@ class FrameImages(Mapping[str, F32]):
     def region(self, name: str, rows: slice, cols: slice) -> F32:
         """``self[name][rows, cols]``, made from that part alone when the picture came as 8-bit BGR (the same
         values: the conversion is per pixel)."""
-        if name in self._u8 and name not in self._float:
-            last = self._last
-            if last is None or last[0] != name:
-                return bgr8_to_rgb(self._u8[name][rows, cols])
+        last = self._last
+        if name in self._u8 and name not in self._float and (last is None or last[0] != name):
+            return bgr8_to_rgb(self._u8[name][rows, cols])
         return self[name][rows, cols]
 
     def grey(self, name: str) -> F32:
