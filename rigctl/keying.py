@@ -291,7 +291,8 @@ def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None, everywhere: bool =
     again). It is below 1 somewhere exactly when the keyer found a screen (the screen's own pixels key to 0),
     so it also says whether there is one."""
     captured = np.asarray(rgb, np.float32)
-    least, most = float(captured.min()), float(captured.max())  # NaN fails both tests: clipped, as before
+    # NaN fails both tests: clipped, as before; an empty picture has nothing to clip
+    least, most = (float(captured.min()), float(captured.max())) if captured.size else (0.0, 0.0)
     rgb = captured if least >= 0.0 and most <= 1.0 else np.clip(captured, 0.0, 1.0)  # no copy when within
     if hard is None:
         hard = keyer.matte(rgb)

@@ -273,6 +273,7 @@ def occlusion_order(grid: Grid, disparities: dict[str, F32]) -> dict[str, tuple[
 def _screen_far(d: F32) -> F32:
     """``d`` for sampling by another view: its NaN (not expected: no estimate is +inf) as -inf, so that after
     sampling NaN means outside the frame alone and every infinity is the screen, far."""
+    d = np.asarray(d, np.float32)  # what remap writes into the float32 stack (another type: a new array)
     return np.where(np.isnan(d), np.float32(-np.inf), d).astype(np.float32) if np.isnan(d).any() else d
 
 

@@ -267,6 +267,7 @@ def test_the_occlusion_order_in_the_box_of_the_estimates_is_the_whole_frames(see
     disparities["r2c2"][:] = np.inf
     disparities["r2c2"][59, 89] = 6.0  # one pixel, in the corner
     disparities["r1c0"][rng.random((60, 90)) < 0.02] = np.nan
+    disparities["r0c1"] = disparities["r0c1"].astype(np.float64)  # another type: sampled as float32, as before
     got, want = occlusion_order(grid, disparities), _order_reference(grid, disparities)
     assert sum(int(want[n][1].sum()) for n in names) > 50  # the scene does flag pixels
     for n in names:

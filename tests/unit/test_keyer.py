@@ -42,3 +42,10 @@ def test_a_small_green_prop_is_not_a_screen() -> None:
     scene = skimage.data.astronaut()[:300, :400].astype(np.float32) / 255
     scene[100:110, 100:110] = (0.1, 0.6, 0.1)  # 0.08 % of the view, flat green
     assert np.all(Keyer().matte(scene) == 1.0)
+
+
+def test_the_soft_key_of_an_empty_picture_is_empty() -> None:
+    """A degenerate input: no pixels, no key, not an error (the soft key's range test reads the picture's
+    minimum and maximum, which an empty array has not)."""
+    key = Keyer().soft(np.zeros((0, 0, 3), np.float32))
+    assert key.alpha.shape == (0, 0) and key.foreground.shape == (0, 0, 3) and key.solved == 0
