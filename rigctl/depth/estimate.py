@@ -127,9 +127,11 @@ def estimate(
     region = fg[y0:y1, x0:x1]
     valid = region & ~crop.no_view & np.isfinite(disp)
     out[y0:y1, x0:x1] = np.where(valid, disp, np.inf)
+    t0 = time.perf_counter()
     fixed = _drop_sensor_fixed(grid, ref, moving, out, (lo, hi), keyer.min_area if keyer else DEFAULT_KEYER.min_area)
     valid &= ~fixed[y0:y1, x0:x1]
     stats["sensor_fixed_pixels"] = int(fixed.sum())
+    stats["sensor_fixed_s"] = time.perf_counter() - t0
     conf = np.zeros((h, w), np.float32)
     c_local = np.clip(1.0 - crop.cost / TRUNCATE, 0, 1) * crop.distinct
     unreliable_local = (crop.texture < 0.01) | (crop.bright > 0.98)

@@ -31,6 +31,7 @@ class EstimateStats(TypedDict, total=False):
     bound_hit_pixels: int
     unreliable_pixels: int
     sensor_fixed_pixels: int  # matched unshifted, outside the range: fixed to the sensor (edge.py)
+    sensor_fixed_s: float
     filled_from_background_pixels: int
     levels: int  # disparity levels searched
     sgm: bool
@@ -60,6 +61,7 @@ class EstimateStats(TypedDict, total=False):
     # estimated pixels whose point fewer than three other views see: inside their frame and not behind a
     # nearer surface of the camera's own estimate (the bands at the frame's edges and behind foreground edges)
     fewer_than_3_views_pixels: int
+    views_count_s: float  # counting them
     occlusion_order_pixels: int  # seen farther by most other views: given what they see (edge.occlusion_order)
     occlusion_order_removed_pixels: int  # of those, the ones every such view saw as screen: no depth
     occlusion_order_s: float

@@ -77,8 +77,10 @@ def volume_engine(job: SearchJob) -> BoxEstimate:
     stats["outliers_replaced"] = int(outliers.sum())
     # the bands only some views see, at the frame's edges and behind every foreground edge (a nearer surface
     # of the estimate covers the point there): how many pixels rest on few views
+    t2 = time.perf_counter()
     seen_by = views.visible_count(d, job.region, where=job.region)  # counted where it is reported
     stats["fewer_than_3_views_pixels"] = int((job.region & (seen_by < 3)).sum())
+    stats["views_count_s"] = time.perf_counter() - t2
     stats["refine_s"] = time.perf_counter() - t0
     with np.errstate(divide="ignore", invalid="ignore"):
         uniq = np.where(sw.cost > 1e-6, sw.mean_cost / np.maximum(sw.cost, 1e-6), 4.0)

@@ -70,7 +70,12 @@ def _reset_peak() -> None:
         log.warning("cannot reset the peak memory counter: the peak includes building the input")
 
 
-STAGES = ("cost", "aggregation", "candidates", "refinement")  # EstimateStats' <stage>_s, summed over cameras
+# EstimateStats' <stage>_s, summed over cameras: the cost volume's and its second candidate's, then the rest of
+# a frame set's depth (none of them within another, so what the depth spent outside them all is ``other``)
+STAGES = (
+    *("cost", "aggregation", "candidates", "refinement"),
+    *("key", "sensor_fixed", "views_count", "temporal", "occlusion_order", "cross_check"),
+)
 WORK = ("integer_sweep", "fractional_sweep", "pairs", "refine")  # EstimateStats' <stage>_pixel_levels
 SGBM_RUNS = 3  # the reference pair is timed this many times, the median kept
 

@@ -233,6 +233,7 @@ def test_subprocess_cluster_survives_a_killed_worker_and_keeps_images_off_the_sc
 
 
 def test_a_frame_set_stays_within_the_worker_memory_bound(tmp_path: Path) -> None:
+    from rigctl.farm.membench import STAGES
     from rigctl.farm.run import worker_memory_bytes
 
     res = run_rigctl("bench", "depth", "--size", "480x270", "--json", cwd=tmp_path)
@@ -241,6 +242,12 @@ def test_a_frame_set_stays_within_the_worker_memory_bound(tmp_path: Path) -> Non
     assert r["size"] == [480, 270] and len(r["cameras"]) == 9 and r["seconds"] > 0
     assert r["input_bytes"] == 9 * 480 * 270 * 3  # 8-bit BGR, as a rectified take reaches a worker
     assert r["input_bytes"] < r["peak_rss_bytes"] < worker_memory_bytes(480, 270, 9)
+    # where the depth went: stages none of which lies within another, these work the presenter's first frame set
+    # needs (no previous frame set to stabilise against, no cross-check in `best`: 0 s)
+    stages = r["stages_s"]
+    assert set(stages) == set(STAGES) and all(v >= 0 for v in stages.values())
+    assert all(stages[k] > 0 for k in ("cost", "key", "sensor_fixed", "views_count", "occlusion_order"))
+    assert sum(stages.values()) <= r["timings_s"]["depth"]
 
 
 def test_bench_size_refuses_a_bad_size() -> None:
