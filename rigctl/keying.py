@@ -112,15 +112,18 @@ class SoftKey:
     solved: int = 0  # how many pixels the key was solved on (the edge band); the rest are 0 or 1
 
 
+TILE = 32  # px: the fine blurs are made on the tiles of the frame the key reads (the edge band's)
 BAND_PX = 16  # at 1920 px wide: how far past the subject (the hard key's, and partial cover) the key looks
 STEP_PX = 2  # and past its faintest cover (a speck of screen noise is not followed further than this)
 
 
 class _LocalMean:
     """Normalised convolution: the weighted local mean of ``values`` (H x W x C) at the first of ``sigmas``
-    that has weight nearby, else the next. A blur is made only when some pixel asked for needs it, the fine
-    ones over the frame (OpenCV's are fast) and the wide ones at a coarser scale, read at the pixels asked for
-    (:meth:`at`) as OpenCV's bilinear enlargement would give them, without enlarging the frame."""
+    that has weight nearby, else the next. A blur is made only when some pixel asked for needs it: a fine one
+    on the :data:`TILE` x :data:`TILE` tiles the pixels asked for lie in (the edge band is a few % of a frame),
+    each run of tiles blurred with the blur's reach around it, which gives OpenCV's values over the frame there
+    bit for bit; the wide ones at a coarser scale, read at the pixels asked for (:meth:`at`) as OpenCV's
+    bilinear enlargement would give them, without enlarging the frame."""
 
     def __init__(self, values: F32, weight: F32, sigmas: tuple[float, ...]) -> None:
         """``values``: H x W x C+1, the last channel ones (:func:`_with_ones`, shared by every mean)."""
@@ -130,30 +133,71 @@ class _LocalMean:
         self.weighted: F32 = np.empty(values.shape, np.float32)
         np.multiply(values, weight[..., None], out=self.weighted)
         self.fields: dict[int, F32] = {}
+        self.todo: dict[int, NDArray[np.bool_]] = {}  # a fine field's tiles not blurred yet
 
-    def made(self, k: int) -> _LocalMean:
-        """This mean with its blur ``k`` made (to make it in a thread of the caller's choosing)."""
-        self.field(k)
+    def made(self, k: int, idx: NDArray[np.intp]) -> _LocalMean:
+        """This mean with its blur ``k`` made where ``idx`` will read it (to make it in a thread of the
+        caller's choosing)."""
+        self.field(k, idx)
         return self
 
-    def field(self, k: int) -> F32:
-        """The blurred weighted values at ``sigmas[k]``: over the frame, or at 1 / scale of it."""
+    def scale(self, k: int) -> int:
+        """1 / the scale blur ``k`` is made at: a wide blur at a coarser scale, the same field in a fraction of
+        the time."""
+        return max(1, int(self.sigmas[k] // 4))
+
+    def field(self, k: int, idx: NDArray[np.intp]) -> F32:
+        """The blurred weighted values at ``sigmas[k]``, right at least at the flat pixel indices ``idx``:
+        over the frame, or at 1 / scale of it."""
+        sigma, (h, w) = self.sigmas[k], self.shape
+        scale = self.scale(k)
+        if scale == 1:
+            return self._fine(k, idx)
         if k not in self.fields:
-            sigma, (h, w) = self.sigmas[k], self.shape
-            scale = max(1, int(sigma // 4))  # a wide blur at a coarser scale: the same field, a fraction of the time
-            if scale > 1:
-                size = (max(1, w // scale), max(1, h // scale))
-                small = cv2.resize(self.weighted, size, interpolation=cv2.INTER_AREA)
-                self.fields[k] = np.asarray(cv2.GaussianBlur(small, (0, 0), sigma / scale), np.float32)
-            else:
-                self.fields[k] = np.asarray(cv2.GaussianBlur(self.weighted, (0, 0), sigma), np.float32)
+            small = cv2.resize(self.weighted, (max(1, w // scale), max(1, h // scale)), interpolation=cv2.INTER_AREA)
+            self.fields[k] = np.asarray(cv2.GaussianBlur(small, (0, 0), sigma / scale), np.float32)
         return self.fields[k]
+
+    def _fine(self, k: int, idx: NDArray[np.intp]) -> F32:
+        """Field ``k`` at full resolution, blurred on the tiles ``idx`` lies in that were not blurred before:
+        each run of them along a row of tiles with the Gaussian's reach around it (OpenCV's kernel for float:
+        8 sigma + 1 taps, rounded), so every value in the run is the frame's blur bit for bit (the frame's own edges are
+        the run's). Over the frame at once when most tiles are asked for."""
+        h, w = self.shape
+        if k not in self.fields:
+            self.fields[k] = np.empty(self.weighted.shape, np.float32)  # pages a run never writes stay untouched
+            self.todo[k] = np.ones((-(-h // TILE), -(-w // TILE)), bool)
+        field, todo = self.fields[k], self.todo[k]
+        need = np.zeros_like(todo)
+        ys, xs = np.divmod(idx, w)
+        need[ys // TILE, xs // TILE] = True
+        need &= todo
+        sigma = self.sigmas[k]
+        if need.sum() > 0.5 * todo.size:
+            field[...] = cv2.GaussianBlur(self.weighted, (0, 0), sigma)
+            todo[...] = False
+            return field
+        reach = int(np.ceil(4 * sigma)) + 1  # past the kernel's half width, whichever way OpenCV rounds it
+        for ty in np.flatnonzero(need.any(1)).tolist():
+            ends = np.flatnonzero(np.diff(np.concatenate([[False], need[ty], [False]]).astype(np.int8))).tolist()
+            y0, y1 = ty * TILE, min(h, ty * TILE + TILE)
+            for a, b in zip(ends[0::2], ends[1::2], strict=True):
+                x0, x1 = a * TILE, min(w, b * TILE)
+                # the run starts a whole number of tiles into the frame: its rows end as the frame's do, in the
+                # same vector lanes (OpenCV's last few pixels of a row, past its vector loop, may round apart)
+                top, left = max(0, y0 - reach), max(0, x0 - -(-reach // TILE) * TILE)
+                part = cv2.GaussianBlur(
+                    self.weighted[top : min(h, y1 + reach), left : min(w, x1 + reach)], (0, 0), sigma
+                )
+                field[y0:y1, x0:x1] = part[y0 - top : y1 - top, x0 - left : x1 - left]
+        todo &= ~need
+        return field
 
     def sample(self, k: int, idx: NDArray[np.intp]) -> F32:
         """Field ``k`` at the frame's flat pixel indices ``idx`` (N x C+1)."""
-        field = self.field(k)
+        field = self.field(k, idx)
         h, w = self.shape
-        if field.shape[:2] == (h, w):
+        if self.scale(k) == 1:
             return field.reshape(-1, field.shape[2])[idx]
         hs, ws = field.shape[:2]
         y, x = np.divmod(idx, w)
@@ -322,11 +366,15 @@ def _key_band(rgb: F32, hard: F32, everywhere: bool) -> tuple[F32, NDArray[np.in
     ycc1 = _with_ones(ycc)
     del ycc  # read from ycc1: the same values, without a second frame of them
     pix_ycc = ycc1.reshape(-1, 4)
-    # the nearby subject (the same in both passes) and the screen: their fine blurs, the key's dearest step,
-    # side by side (OpenCV lets go of the GIL; both are held at once either way, within a few MB)
+    r = max(4, round(BAND_PX * w / 1920))
+    outside = _near(~inner.reshape(h, w), 0, pairs)  # and both pixels of a pair one of which is outside
+    band = np.ones((h, w), bool) if everywhere else _near(_cover(rgb, hard), r, pairs) & outside
+    idx = np.flatnonzero(band)
+    # the nearby subject (the same in both passes) and the screen: their fine blurs on the band, the key's
+    # dearest step, side by side (OpenCV lets go of the GIL; both are held at once either way, within a few MB)
     with ThreadPoolExecutor(1, thread_name_prefix="soft-key-front") as beside:
-        made = beside.submit(lambda: _LocalMean(ycc1, solid, (3.0, 12.0)).made(0))
-        back = _LocalMean(ycc1, screen, (4.0, 16.0, 64.0)).made(0)
+        made = beside.submit(lambda: _LocalMean(ycc1, solid, (3.0, 12.0)).made(0, idx))
+        back = _LocalMean(ycc1, screen, (4.0, 16.0, 64.0)).made(0, idx)
         front = made.result()
     full = inner.astype(np.float32)  # the key over the frame: 1 inside, 0 on the screen
 
@@ -336,10 +384,6 @@ def _key_band(rgb: F32, hard: F32, everywhere: bool) -> tuple[F32, NDArray[np.in
         full[idx] = done.alpha
         return done
 
-    r = max(4, round(BAND_PX * w / 1920))
-    outside = _near(~inner.reshape(h, w), 0, pairs)  # and both pixels of a pair one of which is outside
-    band = np.ones((h, w), bool) if everywhere else _near(_cover(rgb, hard), r, pairs) & outside
-    idx = np.flatnonzero(band)
     solve(idx, back)
     while not everywhere:  # the first pass follows strands out past the band
         found = full.reshape(h, w)

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import skimage.data
 
-from rigctl.keying import Keyer
+from rigctl.keying import Keyer, _LocalMean
 
 
 def _screen_behind_a_subject(h: int = 300, w: int = 400) -> tuple[np.ndarray, np.ndarray]:
@@ -49,3 +50,26 @@ def test_the_soft_key_of_an_empty_picture_is_empty() -> None:
     minimum and maximum, which an empty array has not)."""
     key = Keyer().soft(np.zeros((0, 0, 3), np.float32))
     assert key.alpha.shape == (0, 0) and key.foreground.shape == (0, 0, 3) and key.solved == 0
+
+
+def test_the_soft_keys_fine_blur_on_tiles_is_the_frames_bit_for_bit() -> None:
+    """The fine local means are blurred only on the tiles the key reads (issue 24: the write): at every pixel
+    asked for, the value OpenCV's blur of the whole frame has, bit for bit; at the frame's edges and corners,
+    in frames whose sizes the tile does not divide, for scattered pixels, for runs of tiles reaching the right
+    edge, asked for in several calls (the band, then the strands it grows) and once for most of the frame."""
+    rng = np.random.default_rng(24)
+    for h, w in ((200, 301), (97, 1920), (64, 64), (5, 7)):
+        values = rng.normal(0, 1, (h, w, 4)).astype(np.float32)
+        weight = (rng.random((h, w)) > 0.4).astype(np.float32)
+        for sigma in (3.0, 4.0):
+            mean = _LocalMean(values, weight, (sigma, 4 * sigma))
+            whole = cv2.GaussianBlur(mean.weighted, (0, 0), sigma).reshape(-1, 4)
+            corners = np.array([0, w - 1, (h - 1) * w, h * w - 1])
+            edge_rows = np.concatenate([np.arange(w), (h - 1) * w + np.arange(w)])
+            scattered = rng.choice(h * w, size=max(1, h * w // 400), replace=False)
+            for idx in (corners, scattered, edge_rows[::7], np.arange(h * w)):
+                assert np.array_equal(mean.sample(0, idx), whole[idx])
+            assert not mean.todo[0].any()  # the last asked for everything: made over the frame at once
+        part = _LocalMean(values, weight, (3.0,))
+        part.sample(0, np.array([w - 1]))  # one tile at the right edge: only it is made
+        assert part.todo[0].sum() == part.todo[0].size - 1
