@@ -85,7 +85,39 @@ def picture(
 ) -> dict[str, NDArray[np.float32]]:
     """``RGB`` (scene-linear in ``colour``, premultiplied by the matte) and ``A`` from BT.709 code values and a
     key matte. Without a matte the picture is opaque (``A`` = 1), so every output reads the same way.
-    """
+    Rec. 709 float32 pictures in two compiled passes around numpy's power (``exr_kernels.py``; issue 24: the
+    write's time and memory), bit for bit :func:`picture_reference`'s values."""
+    if matte is None or colour != "rec709" or not _compilable(rgb, matte):
+        return picture_reference(rgb, matte, colour)
+    from rigctl.exr_kernels import lifted, premultiply  # compiled on first use
+
+    knee = _SLOPE * _BETA
+    out = np.empty(rgb.shape, np.float32)
+    alpha = np.empty(matte.shape, np.float32)
+    lifted(rgb, out, knee, _ALPHA - 1, _ALPHA)
+    np.power(out, np.float32(1 / 0.45), out=out)  # numpy's, as the reference's
+    premultiply(rgb, matte, out, alpha, knee, _SLOPE)
+    return {"RGB": out, "A": alpha}
+
+
+def _compilable(rgb: NDArray[np.floating], matte: NDArray[np.floating]) -> bool:
+    """What the compiled pass takes: float32 H x W x 3 and its H x W matte, both in memory order."""
+    return (
+        rgb.dtype == np.float32
+        and matte.dtype == np.float32
+        and rgb.ndim == 3
+        and rgb.shape[2] == 3
+        and rgb.shape[:2] == matte.shape
+        and rgb.flags.c_contiguous
+        and matte.flags.c_contiguous
+    )
+
+
+def picture_reference(
+    rgb: NDArray[np.floating], matte: NDArray[np.floating] | None, colour: str = "rec709"
+) -> dict[str, NDArray[np.float32]]:
+    """:func:`picture` with numpy, in a pass per operation: what the compiled pass (``exr_kernels.py``) is
+    tested against, and what a picture it does not take (another type, a view, ACEScg) is made with."""
     linear = to_colour(bt709_to_linear(rgb), colour)
     alpha = np.ones(linear.shape[:2], np.float32) if matte is None else np.clip(matte, 0, 1).astype(np.float32)
     return {"RGB": linear * alpha[..., None], "A": alpha}

@@ -1,0 +1,57 @@
+"""The EXR picture's compiled passes (``rigctl/exr_kernels.py``) against the numpy path they replaced
+(``picture_reference``): the same alpha and premultiplied linear light bit for bit, on both sides of the
+knee and at it, with sub-blacks, super-whites and mattes outside [0, 1]; NaN stays NaN; and what the compiled
+passes do not take goes the numpy way."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rigctl.exr import bt709_to_linear, picture, picture_reference
+
+
+def _pictures(h: int = 67, w: int = 91) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(24)
+    rgb = rng.uniform(-0.1, 1.2, (h, w, 3)).astype(np.float32)  # sub-blacks and super-whites as captured
+    matte = rng.uniform(-0.3, 1.3, (h, w)).astype(np.float32)  # clipped to [0, 1]
+    rgb[0, :3] = np.float32(4.5 * 0.018)  # the knee itself, and either side of it
+    rgb[0, 3:6] = np.nextafter(np.float32(0.081), np.float32(0))
+    rgb[0, 6:9] = np.nextafter(np.float32(0.081), np.float32(1))
+    matte[1, :4] = (0.0, 1.0, -0.0, 0.5)
+    return rgb, matte
+
+
+def test_the_compiled_picture_is_numpys_bit_for_bit() -> None:
+    rgb, matte = _pictures()
+    got, want = picture(rgb, matte), picture_reference(rgb, matte)
+    assert set(got) == {"RGB", "A"} and got["RGB"].dtype == got["A"].dtype == np.float32
+    assert got["RGB"].shape == rgb.shape and got["A"].shape == matte.shape
+    assert np.array_equal(got["A"], want["A"]) and np.array_equal(got["RGB"], want["RGB"])
+    assert (rgb < np.float32(0.081)).any() and (rgb > 1).any() and (matte < 0).any() and (matte > 1).any()
+    assert np.array_equal(got["RGB"][matte <= 0], np.zeros_like(got["RGB"][matte <= 0]))
+    whole = matte >= 1  # the linear light itself where the subject is whole
+    assert whole.any() and np.array_equal(got["RGB"][whole], bt709_to_linear(rgb)[whole])
+
+
+def test_nan_stays_nan_as_in_numpys_path() -> None:
+    rgb, matte = _pictures(4, 5)
+    rgb[2, 2, 1] = np.nan
+    matte[3, 3] = np.nan
+    got, want = picture(rgb, matte), picture_reference(rgb, matte)
+    assert np.array_equal(np.isnan(got["RGB"]), np.isnan(want["RGB"]))
+    assert np.array_equal(np.isnan(got["A"]), np.isnan(want["A"])) and np.isnan(got["A"][3, 3])
+    assert np.isnan(got["RGB"][2, 2, 1]) and np.isnan(got["RGB"][3, 3]).all()
+
+
+def test_what_the_compiled_pass_does_not_take_goes_the_numpy_way() -> None:
+    rgb, matte = _pictures(8, 10)
+    for args in (
+        (rgb.astype(np.float64), matte),  # another type
+        (rgb[:, ::2], matte[:, ::2]),  # a view, not in memory order
+        (rgb, None),  # no matte: opaque
+    ):
+        got, want = picture(*args), picture_reference(*args)
+        assert all(np.array_equal(got[k], want[k]) for k in want)
+    assert np.array_equal(picture(rgb, None)["A"], np.ones(matte.shape, np.float32))
+    empty = np.zeros((0, 0, 3), np.float32)
+    assert picture(empty, np.zeros((0, 0), np.float32))["RGB"].shape == (0, 0, 3)
