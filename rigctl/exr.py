@@ -86,7 +86,8 @@ def picture(
     """``RGB`` (scene-linear in ``colour``, premultiplied by the matte) and ``A`` from BT.709 code values and a
     key matte. Without a matte the picture is opaque (``A`` = 1), so every output reads the same way.
     Rec. 709 float32 pictures in two compiled passes around numpy's power (``exr_kernels.py``; issue 24: the
-    write's time and memory), bit for bit :func:`picture_reference`'s values."""
+    write's time and memory), bit for bit :func:`picture_reference`'s values (a NaN's sign aside, where both
+    the code value and the matte are NaN)."""
     if matte is None or colour != "rec709" or not _compilable(rgb, matte):
         return picture_reference(rgb, matte, colour)
     from rigctl.exr_kernels import lifted, premultiply  # compiled on first use

@@ -28,7 +28,7 @@ def premultiply(  # pragma: no cover  (compiled)
     rgb: np.ndarray, matte: np.ndarray, out: np.ndarray, alpha: np.ndarray, knee: float, slope: float
 ) -> None:
     """``alpha`` = ``matte`` clipped to [0, 1]; ``out`` (the powers above the knee) becomes the linear light,
-    v / slope below the knee, times alpha; float32, NaN kept as NaN as numpy's clip and where keep it."""
+    v / slope below the knee, times alpha; float32. A NaN matte or code value gives NaN, as in numpy's path."""
     k, s = np.float32(knee), np.float32(slope)
     zero, one = np.float32(0.0), np.float32(1.0)
     h, w = matte.shape

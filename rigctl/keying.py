@@ -161,11 +161,13 @@ class _LocalMean:
     def _fine(self, k: int, idx: NDArray[np.intp]) -> F32:
         """Field ``k`` at full resolution, blurred on the tiles ``idx`` lies in that were not blurred before:
         each run of them along a row of tiles with the Gaussian's reach around it (OpenCV's kernel for float:
-        8 sigma + 1 taps, rounded), so every value in the run is the frame's blur bit for bit (the frame's own edges are
-        the run's). Over the frame at once when most tiles are asked for."""
+        8 sigma + 1 taps, rounded), so every value in the run is the frame's blur bit for bit (the frame's own
+        edges are the run's). Over the frame at once when the runs and their margins would blur half as many
+        pixels as the frame has or more (scattered tiles: specks of noise on a screen)."""
         h, w = self.shape
         if k not in self.fields:
-            self.fields[k] = np.empty(self.weighted.shape, np.float32)  # pages a run never writes stay untouched
+            # memory is committed only for the pages a run writes (np.empty maps the rest lazily)
+            self.fields[k] = np.empty(self.weighted.shape, np.float32)
             self.todo[k] = np.ones((-(-h // TILE), -(-w // TILE)), bool)
         field, todo = self.fields[k], self.todo[k]
         need = np.zeros_like(todo)
@@ -173,23 +175,26 @@ class _LocalMean:
         need[ys // TILE, xs // TILE] = True
         need &= todo
         sigma = self.sigmas[k]
-        if need.sum() > 0.5 * todo.size:
-            field[...] = cv2.GaussianBlur(self.weighted, (0, 0), sigma)
-            todo[...] = False
-            return field
         reach = int(np.ceil(4 * sigma)) + 1  # past the kernel's half width, whichever way OpenCV rounds it
+        # a run starts a whole number of tiles into the frame, so its rows end as the frame's do, in the same
+        # vector lanes (OpenCV's last few pixels of a row, past its vector loop, may round apart): its margin
+        # on the left is the reach rounded up to whole tiles
+        before = -(-reach // TILE) * TILE
+        runs = []  # (y0, y1, x0, x1) of each run of tiles, and (top, bottom, left, right) of what is blurred
         for ty in np.flatnonzero(need.any(1)).tolist():
             ends = np.flatnonzero(np.diff(np.concatenate([[False], need[ty], [False]]).astype(np.int8))).tolist()
             y0, y1 = ty * TILE, min(h, ty * TILE + TILE)
             for a, b in zip(ends[0::2], ends[1::2], strict=True):
                 x0, x1 = a * TILE, min(w, b * TILE)
-                # the run starts a whole number of tiles into the frame: its rows end as the frame's do, in the
-                # same vector lanes (OpenCV's last few pixels of a row, past its vector loop, may round apart)
-                top, left = max(0, y0 - reach), max(0, x0 - -(-reach // TILE) * TILE)
-                part = cv2.GaussianBlur(
-                    self.weighted[top : min(h, y1 + reach), left : min(w, x1 + reach)], (0, 0), sigma
-                )
-                field[y0:y1, x0:x1] = part[y0 - top : y1 - top, x0 - left : x1 - left]
+                blurred = (max(0, y0 - reach), min(h, y1 + reach), max(0, x0 - before), min(w, x1 + reach))
+                runs.append(((y0, y1, x0, x1), blurred))
+        if 2 * sum((bottom - top) * (right - left) for _, (top, bottom, left, right) in runs) >= h * w:
+            field[...] = cv2.GaussianBlur(self.weighted, (0, 0), sigma)
+            todo[...] = False
+            return field
+        for (y0, y1, x0, x1), (top, bottom, left, right) in runs:
+            part = cv2.GaussianBlur(self.weighted[top:bottom, left:right], (0, 0), sigma)
+            field[y0:y1, x0:x1] = part[y0 - top : y1 - top, x0 - left : x1 - left]
         todo &= ~need
         return field
 

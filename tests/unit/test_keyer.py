@@ -70,6 +70,17 @@ def test_the_soft_keys_fine_blur_on_tiles_is_the_frames_bit_for_bit() -> None:
             for idx in (corners, scattered, edge_rows[::7], np.arange(h * w)):
                 assert np.array_equal(mean.sample(0, idx), whole[idx])
             assert not mean.todo[0].any()  # the last asked for everything: made over the frame at once
-        part = _LocalMean(values, weight, (3.0,))
-        part.sample(0, np.array([w - 1]))  # one tile at the right edge: only it is made
-        assert part.todo[0].sum() == part.todo[0].size - 1
+    values = rng.normal(0, 1, (200, 301, 4)).astype(np.float32)
+    part = _LocalMean(values, np.ones((200, 301), np.float32), (3.0,))
+    part.sample(0, np.array([300]))  # one tile at the right edge: only it is made
+    assert part.todo[0].sum() == part.todo[0].size - 1
+    calls = []
+    real = cv2.GaussianBlur
+    try:  # scattered tiles whose margins add up to half the frame or more: the frame's blur, once
+        cv2.GaussianBlur = lambda src, *a: calls.append(src.shape) or real(src, *a)
+        ty, tx = np.mgrid[0:200:32, 0:301:32]
+        checker = ((ty + tx) // 32) % 2 == 0
+        part.sample(0, (ty[checker] * 301 + tx[checker]).ravel())
+    finally:
+        cv2.GaussianBlur = real
+    assert calls == [(200, 301, 4)] and not part.todo[0].any()
