@@ -126,6 +126,7 @@ def run_depth(
                 assert isinstance(done, FrameDone)  # nothing is caught: an error ends the run
                 report.frames[str(done.number)] = done.report
                 video.add(done)
+                del done  # its pictures and results: not held through the next frame set's depth
             ends.append(processor.chunk_end())
         return ends
 

@@ -42,7 +42,14 @@ from numpy.typing import NDArray
 from rigctl.depth.cost import SweepLevel
 from rigctl.depth.estimate import DepthResult
 from rigctl.depth.grid import Grid
-from rigctl.depth.temporal_change import MAD_TO_SIGMA, FrameChange, NoiseHistory, frame_change, still_in_every_view
+from rigctl.depth.temporal_change import (
+    MAD_TO_SIGMA,
+    FrameChange,
+    HalfPictures,
+    NoiseHistory,
+    frame_change,
+    still_in_every_view,
+)
 
 F32 = NDArray[np.float32]
 
@@ -63,8 +70,14 @@ class TemporalParams:
 
 @dataclass
 class Previous:
-    grid: Grid
-    results: dict[str, DepthResult]
+    """What the next frame set reads of this one: its pictures at half size (the change test's), each camera's
+    final disparity and the frames in each pixel's mean. Not the frame set itself, nor the rest of its results
+    (at 3840x2160 that held 16 bytes a pixel and camera more, about 1.1 GiB for nine cameras, through the
+    next frame set's depth; issue 24: a chunk's memory)."""
+
+    shape: tuple[int, int]
+    pictures: HalfPictures
+    disparity: dict[str, F32]
     frames: dict[str, NDArray[np.int16]] = field(default_factory=dict)  # per camera: frames in each pixel's mean
 
 
@@ -89,11 +102,11 @@ class Temporal:
         p = self.params
         d_new = result.disparity
         prev = self.previous
-        if not p.enabled or prev is None or ref not in prev.results or prev.grid.shape != grid.shape:
+        if not p.enabled or prev is None or ref not in prev.disparity or prev.shape != grid.shape:
             self._frames[ref] = np.isfinite(d_new).astype(np.int16)
             return result
-        change = self._frame_change(prev.grid, grid)
-        d_prev = prev.results[ref].disparity
+        change = self._frame_change(prev.pictures, grid)
+        d_prev = prev.disparity[ref]
         n_prev = prev.frames.get(ref)
         if n_prev is None:
             n_prev = np.isfinite(d_prev).astype(np.int16)
@@ -148,11 +161,15 @@ class Temporal:
             self.previous = None
             return
         frames = {n: self._frames[n] for n in results if n in self._frames}
-        self.previous = Previous(grid, dict(results), frames)
+        # the half-size pictures the change test made of this frame set (the first of a run: made now)
+        made = self._change[1].pictures if self._change is not None and self._change[0] is grid else None
+        pictures = (made if made is not None else HalfPictures.of(grid)).made()
+        disparity = {n: r.disparity for n, r in results.items()}
+        self.previous = Previous(grid.shape, pictures, disparity, frames)
         self._frames = {}
         self._change = None
 
-    def _frame_change(self, prev: Grid, grid: Grid) -> FrameChange:
+    def _frame_change(self, prev: HalfPictures, grid: Grid) -> FrameChange:
         """The colour change of every camera between the previous frame set and this one, once per frame set."""
         if self._change is None or self._change[0] is not grid:
             p = self.params

@@ -127,6 +127,35 @@ class FrameChange:
     changed: dict[str, NDArray[np.uint8]]  # 1: changed (dilated by the window), per camera
     sigma: dict[str, float]  # sensor noise, 8-bit levels
     share: dict[str, float]  # share of the camera's pixels that changed
+    pictures: HalfPictures | None = None  # the later frame set's, as the test read them (the next one's earlier)
+
+
+@dataclass
+class HalfPictures:
+    """A frame set's pictures at half size (:func:`half`), made once each: what the change test reads of the
+    frame set before, and all the temporal state keeps of its pictures (a quarter of the pixels in float,
+    not the frame set's pictures and their grey; issue 24: a chunk's memory)."""
+
+    names: list[str]
+    pictures: dict[str, F32] = field(default_factory=dict)
+    grid: Grid | None = None  # where the ones not made yet come from (let go of by :meth:`made`)
+
+    @classmethod
+    def of(cls, grid: Grid) -> HalfPictures:
+        return cls(list(grid.names), {}, grid)
+
+    def __getitem__(self, name: str) -> F32:
+        if name not in self.pictures:
+            assert self.grid is not None, f"the half-size picture of {name} was not made"
+            self.pictures[name] = half(self.grid.images[name])
+        return self.pictures[name]
+
+    def made(self) -> HalfPictures:
+        """Every camera's picture made and the frame set let go of."""
+        for name in self.names:
+            self[name]
+        self.grid = None
+        return self
 
 
 def half(img: F32) -> F32:
@@ -136,17 +165,22 @@ def half(img: F32) -> F32:
     return np.asarray(cv2.resize(img, ((w + 1) // 2, (h + 1) // 2), interpolation=cv2.INTER_AREA), np.float32)
 
 
-def frame_change(prev: Grid, cur: Grid, history: dict[str, NoiseHistory], window: int, sigmas: float) -> FrameChange:
-    """The change of every camera present in both grids; adds this pair's noise figures to ``history``. The
-    test runs at half size (``window`` is in full-size pixels), its answer is given at full size."""
+def frame_change(
+    prev: Grid | HalfPictures, cur: Grid, history: dict[str, NoiseHistory], window: int, sigmas: float
+) -> FrameChange:
+    """The change of every camera present in both frame sets (``prev`` may be the half-size pictures kept of
+    it); adds this pair's noise figures to ``history``. The test runs at half size (``window`` is in
+    full-size pixels), its answer is given at full size, with ``cur``'s half-size pictures."""
     changed, sigma, share = {}, {}, {}
     win = max(3, window // 2 | 1)
     kernel = np.ones((win, win), np.uint8)
     h, w = cur.shape
+    before = prev if isinstance(prev, HalfPictures) else HalfPictures.of(prev)
+    now = HalfPictures.of(cur)
     for name in cur.names:
-        if name not in prev.names:
+        if name not in before.names:
             continue
-        a, b = half(prev.images[name]), half(cur.images[name])
+        a, b = before[name], now[name]
         flat = flat_pixels(a, b, win)
         stat = change_statistic(a, b, win, flat)
         hist = history.setdefault(name, NoiseHistory())
@@ -157,7 +191,7 @@ def frame_change(prev: Grid, cur: Grid, history: dict[str, NoiseHistory], window
         changed[name] = np.asarray(cv2.resize(grown, (w, h), interpolation=cv2.INTER_NEAREST), np.uint8)
         sigma[name] = hist.sigma()
         share[name] = float(changed[name].mean())
-    return FrameChange(changed, sigma, share)
+    return FrameChange(changed, sigma, share, now)
 
 
 def still_in_every_view(change: FrameChange, grid: Grid, ref: str, disparity: F32) -> NDArray[np.bool_]:

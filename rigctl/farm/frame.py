@@ -108,6 +108,7 @@ def run_chunk(job: ChunkJob) -> tuple[list[tuple[int, FrameEntry]], ChunkEnd]:
             log.debug("frame %s failed: %s", item.number, item.error)
             entry = FrameEntry(status="failed", worker=worker, seconds=seconds, error=one_line(item.error))
         out.append((item.number, entry))
+        del item  # its pictures and results: not held through the next frame set's depth
         t0 = time.perf_counter()
     return out, processor.chunk_end()
 

@@ -6,8 +6,10 @@ depth stages itself."""
 from __future__ import annotations
 
 import ast
+import gc
 import itertools
 import json
+import weakref
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -204,3 +206,27 @@ def test_rigctl_depth_reports_the_take_range_bound_hits_and_flicker_of_a_recorde
     assert video["change_error_mean_px"] is not None and video["change_error_mean_px"] >= 0
     bad = run_rigctl("depth", str(tmp_path / "t"), "--out", str(out), "--chunk", "0")
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--chunk" in bad.stderr, bad.stderr
+
+
+def test_a_frame_set_is_let_go_of_once_the_next_one_is_done_but_for_what_the_next_reads(moving_ideal: Any) -> None:
+    """Issue 24, a chunk's memory: the temporal state keeps of a frame set only its half-size pictures, the
+    final disparities and the frames in each pixel's mean; not its pictures (and their grey), nor the rest
+    of its results. Once a consumer has let go of a frame set (the farm's and ``rigctl depth``'s loops do),
+    nothing holds it through the next frame set's depth, and the stabiliser still stabilises."""
+    processor = TakeProcessor(moving_ideal, DepthOptions(cameras=("r1c1", "r1c2"), chunk=3))
+    grids, results, blended = [], [], []
+    for done in processor.run_chunk([0, 1, 2]):
+        assert isinstance(done, FrameDone)
+        gc.collect()
+        assert all(ref() is None for ref in grids + results)  # every frame set before this one is gone
+        grids.append(weakref.ref(done.grid))
+        results += [weakref.ref(r) for r in done.results.values()]
+        blended.append(done.results["r1c1"].stats.get("temporal_blended_share", 0.0))
+        kept = processor.temporal.previous
+        assert kept is not None and set(kept.disparity) == {"r1c1", "r1c2"}
+        assert all(kept.disparity[c] is done.results[c].disparity for c in kept.disparity)
+        assert kept.pictures.grid is None and set(kept.pictures.pictures) == set(done.grid.names)
+        h, w = done.grid.shape
+        assert all(p.shape == ((h + 1) // 2, (w + 1) // 2, 3) for p in kept.pictures.pictures.values())
+        del done, kept
+    assert blended[0] == 0.0 and max(blended[1:]) > 0  # the later frame sets were stabilised against the earlier
