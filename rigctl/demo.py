@@ -54,9 +54,15 @@ def prepare_folder(out: Path, fresh: bool) -> Iterator[Path]:
     with OutputLock(out, "demo"):
         entries = list(out.iterdir())
         if entries:
-            # an unfinished demo (a step failed or was interrupted) is replaced without asking; a finished demo's
-            # figures, or a folder that is no demo's, only with --fresh. The folder itself stays: it holds the lock
-            unfinished = (out / MARKER).exists() and not (out / "report.md").exists()
+            # an unfinished demo (a step failed or was interrupted) is replaced without asking, a finished demo's
+            # figures only with --fresh, and a folder that holds no demo never (it is somebody's work). The
+            # folder itself stays: it holds the lock
+            if not (out / MARKER).exists():
+                raise ParameterError(
+                    f"{out}: exists, is not empty and holds no demo (no {MARKER}): choose another --out "
+                    "(--fresh replaces only a demo's folder)"
+                )
+            unfinished = not (out / "report.md").exists()
             if not fresh and not unfinished:
                 raise ParameterError(f"{out}: exists and is not empty (choose another --out, or --fresh to replace it)")
             for p in entries:

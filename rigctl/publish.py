@@ -23,6 +23,7 @@ import json
 import logging
 import os
 import shutil
+import stat
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -93,6 +94,29 @@ def temp_name(path: Path) -> Path:
     return path.with_name(f".{path.name}.{os.getpid()}{TEMP_SUFFIX}")
 
 
+def refuse_special(path: Path) -> None:
+    """An output is published by rename over its final name, which would put a regular file in place of a
+    FIFO, a device (``/dev/null`` as root) or a socket there, or fail on a folder: refused in one line first."""
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise output_error(path, exc) from None
+    if stat.S_ISREG(mode) or stat.S_ISLNK(mode):
+        return
+    kind = (
+        "a folder"
+        if stat.S_ISDIR(mode)
+        else "a FIFO"
+        if stat.S_ISFIFO(mode)
+        else "a socket"
+        if stat.S_ISSOCK(mode)
+        else "a device"
+    )
+    raise OutputError(f"{path}: exists and is {kind}, not a file: not replaced (choose another output name)")
+
+
 @contextmanager
 def publishing(path: Path, durable: bool = True) -> Iterator[Path]:
     """Yields the temporary name to write (same folder, hidden, ours), then fsyncs it, renames it over ``path``
@@ -104,6 +128,7 @@ def publishing(path: Path, durable: bool = True) -> Iterator[Path]:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise output_error(path.parent, exc) from None
+    refuse_special(path)
     tmp = temp_name(path)
     try:
         yield tmp

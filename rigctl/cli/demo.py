@@ -25,7 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", type=Path, default=Path("rigctl-demo"), metavar="DIR", help="(default: ./rigctl-demo)")
     p.add_argument(
-        "--fresh", action="store_true", help="replace a finished demo in DIR (an unfinished one is always replaced)"
+        "--fresh",
+        action="store_true",
+        help="replace a finished demo in DIR (an unfinished one is always replaced; a folder with no demo, never)",
     )
     add_quiet(p)
     p.set_defaults(func=run)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+import stat
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,7 @@ from reliab_support import (  # type: ignore[import-not-found]
 )
 
 from rigctl.errors import EXIT_BAD_INPUT, EXIT_CHECK_FAILED, EXIT_DAMAGED, EXIT_DEVICE, EXIT_USAGE
+from rigctl.publish import TEMP_SUFFIX
 
 VICTIM = "../../../../../../tmp/rigctl-victim-{}/victim"
 
@@ -329,6 +331,29 @@ def test_a_demo_on_a_folder_another_demo_is_writing_is_refused_and_clears_nothin
     finally:
         os.close(fd)
     assert (out / "takes").is_dir() and (out / ".rigctl-demo").exists()
+
+
+def test_demo_fresh_never_clears_a_folder_that_holds_no_demo(tmp_path: Path) -> None:
+    """``--fresh`` replaces a finished demo; somebody's folder is refused in one line and kept as it was."""
+    mine = tmp_path / "mine"
+    (mine / "sub").mkdir(parents=True)
+    (mine / "notes.txt").write_text("keep")
+    (mine / "sub" / "d.bin").write_bytes(b"x")
+    one_line(rigctl("demo", "--out", str(mine), "--fresh", timeout=60), EXIT_USAGE, str(mine), "holds no demo")
+    assert (mine / "notes.txt").read_text() == "keep" and (mine / "sub" / "d.bin").read_bytes() == b"x"
+    assert sorted(p.name for p in mine.iterdir()) == ["notes.txt", "sub"]
+
+
+def test_an_output_name_held_by_a_fifo_or_a_device_is_not_replaced(tmp_path: Path) -> None:
+    """Outputs are published by rename over their final name: a FIFO (or a device, or a folder) found there is
+    refused in one line, not replaced by a regular file."""
+    os.mkfifo(tmp_path / "b.yaml")
+    (tmp_path / "c.yaml").mkdir()
+    for stem in ("b", "c"):
+        run = rigctl("board", "--out", str(tmp_path / stem), timeout=60)
+        one_line(run, EXIT_DEVICE, f"{stem}.yaml", "not replaced")
+    assert stat.S_ISFIFO(os.lstat(tmp_path / "b.yaml").st_mode) and (tmp_path / "c.yaml").is_dir()
+    assert not any(p.name.endswith(TEMP_SUFFIX) for p in tmp_path.iterdir())  # no temporary left behind
 
 
 # 4. numbers bounded to physical ranges; the machine bounds the workers

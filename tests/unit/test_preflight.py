@@ -176,9 +176,12 @@ def test_an_unfinished_demo_folder_is_replaced_without_flags_a_finished_one_is_k
     other = tmp_path / "mine"
     other.mkdir()
     (other / "keep.txt").write_text("not a demo")
-    with pytest.raises(ParameterError), prepare_folder(other, fresh=False):
-        pass
-    assert (other / "keep.txt").exists()
+    for fresh in (False, True):  # somebody's folder is never cleared, --fresh or not
+        with pytest.raises(ParameterError, match="holds no demo"), prepare_folder(other, fresh=fresh):
+            pass
+    assert (other / "keep.txt").read_text() == "not a demo"
+    with prepare_folder(out, fresh=True):  # a finished demo is replaced with --fresh
+        assert not (out / "report.md").exists() and (out / MARKER).exists()
 
 
 def test_a_second_demo_on_a_folder_being_written_is_refused_and_clears_nothing(tmp_path: Path) -> None:
