@@ -27,7 +27,7 @@ class SimSettings(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     scene: Literal["presenter", "charuco"] = Field("presenter", description="what the cameras see")
-    seed: int = Field(0, description="same seed, same frames, byte for byte")
+    seed: Annotated[int, Field(ge=0, le=2**32 - 1)] = Field(0, description="same seed, same frames, byte for byte")
     ideal: bool = Field(False, description="perfect lattice, identical pinhole cameras, no noise")
     # the presenter scene
     subject_distance_m: Annotated[float, Field(gt=0.3, le=50, allow_inf_nan=False)] = Field(
@@ -66,7 +66,7 @@ class SimSettings(BaseModel):
     principal_offset_px: NonNeg = Field(2.0, description="sigma of principal point offsets")
     distortion_k1: float = Field(-0.04, ge=-0.5, le=0.5, description="mean radial distortion k1")
     distortion_spread: NonNeg = Field(0.01, description="sigma of k1 between cameras")
-    noise: NonNeg = Field(1.0, description="sensor noise sigma, 8-bit grey levels")
+    noise: Annotated[NonNeg, Field(le=255)] = Field(1.0, description="sensor noise sigma, 8-bit grey levels")
     exposure_stops: Annotated[float, Field(ge=-8, le=8, allow_inf_nan=False)] = Field(
         0.0,
         description="light reaching the sensors, in stops (+1 doubles it): above 0, highlights beyond nominal "
@@ -74,7 +74,7 @@ class SimSettings(BaseModel):
     )
     exposure_spread: NonNeg = Field(0.03, description="relative sigma of exposure between cameras")
     colour_spread: NonNeg = Field(0.02, description="relative sigma of per-channel gains")
-    vignetting: NonNeg = Field(0.15, description="relative fall-off at the image corners")
+    vignetting: Annotated[NonNeg, Field(le=1)] = Field(0.15, description="relative fall-off at the image corners")
     # timing
     deterministic: bool = Field(
         False,
@@ -83,9 +83,12 @@ class SimSettings(BaseModel):
         "benchmarks; false: real time, a reader more than 8 frames behind loses frames at the source",
     )
     fps: Annotated[float, Field(gt=0, le=240)] | None = Field(None, description="frame rate (default: rig's)")
-    jitter_us: NonNeg = Field(50.0, description="sigma of capture timestamp jitter")
-    skew_us: dict[str, float] = Field(default_factory=dict, description="fixed per-camera timestamp skew")
-    stagger_ms: NonNeg = Field(0.0, description="largest start-up stagger between cameras")
+    # timing faults within what a real rig shows (a second), not beyond what a take's clock can hold
+    jitter_us: Annotated[NonNeg, Field(le=1e6)] = Field(50.0, description="sigma of capture timestamp jitter")
+    skew_us: dict[str, Annotated[float, Field(ge=-1e6, le=1e6, allow_inf_nan=False)]] = Field(
+        default_factory=dict, description="fixed per-camera timestamp skew (at most a second either way)"
+    )
+    stagger_ms: Annotated[NonNeg, Field(le=1000)] = Field(0.0, description="largest start-up stagger between cameras")
     drops: dict[str, list[Annotated[int, Field(ge=0)]]] = Field(
         default_factory=dict, description="sequence numbers a camera drops"
     )

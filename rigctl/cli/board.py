@@ -39,6 +39,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 MAX_BOARD_PIXELS = 1 << 28  # 256 MB of grey: a 2 x 1.5 m board at 200 dpi
 
 
+DICTIONARY_SIZE = 250  # markers in each dictionary offered (DICT_*_250)
+
+
 def run(ns: argparse.Namespace) -> int:
     try:
         sx, sy = (int(v) for v in ns.squares.lower().split("x"))
@@ -46,6 +49,15 @@ def run(ns: argparse.Namespace) -> int:
         raise ParameterError(f"--squares {ns.squares!r}: expected COLUMNSxROWS such as 8x6") from None
     if not (3 <= sx <= 40 and 3 <= sy <= 40):
         raise ParameterError(f"--squares {ns.squares}: each count must be 3..40")
+    markers = sx * sy // 2  # a ChArUco board has a marker in every other square
+    if markers > DICTIONARY_SIZE:
+        raise ParameterError(
+            f"--squares {sx}x{sy}: needs {markers} markers, {ns.dictionary} has {DICTIONARY_SIZE} (fewer squares)"
+        )
+    if not ns.out.name:
+        raise ParameterError(f"--out {str(ns.out)!r}: give a file stem such as board")
+    if not (ns.square_mm > 0 and math.isfinite(ns.square_mm)):
+        raise ParameterError(f"--square-mm {ns.square_mm:g}: must be a positive length")
     if not 0 < ns.marker_mm < ns.square_mm:
         raise ParameterError(f"--marker-mm {ns.marker_mm} must be positive and smaller than --square-mm {ns.square_mm}")
     if not 30 <= ns.dpi <= 2400 or ns.margin_mm < 0:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -75,8 +76,8 @@ def run(ns: argparse.Namespace) -> int:
     name = check_take_name(ns.take)
     if ns.frames is not None and ns.frames <= 0:
         raise ParameterError(f"--frames must be a positive number of frame sets, got {ns.frames}")
-    if ns.seconds is not None and not ns.seconds > 0:
-        raise ParameterError(f"--seconds must be positive, got {ns.seconds}")
+    if ns.seconds is not None and not (ns.seconds > 0 and math.isfinite(ns.seconds)):
+        raise ParameterError(f"--seconds must be a positive number of seconds, got {ns.seconds}")
     frames = ns.frames if ns.frames is not None else (round(ns.seconds * rig.fps) if ns.seconds else None)
     sim = list(ns.sim) + ([f"scene={ns.scene}"] if ns.scene else [])
 

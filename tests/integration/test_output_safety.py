@@ -529,13 +529,22 @@ def test_a_scheduler_that_shakes_hands_then_claims_a_huge_message_is_one_line(ti
 @pytest.mark.parametrize(
     ("argv", "fragment"),
     [
-        (("--square-mm", "1000", "--marker-mm", "900", "--dpi", "2400", "--squares", "40x40"), "pixels: lower"),
+        (("--square-mm", "1000", "--marker-mm", "900", "--dpi", "2400", "--squares", "22x22"), "pixels: lower"),
         (("--square-mm", "inf", "--marker-mm", "5"), "--square-mm inf"),
         (("--margin-mm", "1e12"), "pixels: lower"),
+        # more markers than the dictionary has, and a square of no size (the marker was blamed)
+        (("--squares", "23x23", "--square-mm", "20", "--marker-mm", "15"), "needs 264 markers"),
+        (("--square-mm", "0"), "--square-mm 0: must be a positive length"),
     ],
 )
 def test_board_sizes_that_need_terabytes_are_one_line(tmp_path: Path, argv: tuple[str, ...], fragment: str) -> None:
     one_line(rigctl("board", "--out", str(tmp_path / "b"), *argv), EXIT_USAGE, fragment)
+    assert not list(tmp_path.iterdir())
+
+
+def test_an_empty_board_stem_and_an_endless_recording_are_one_line(tmp_path: Path) -> None:
+    one_line(rigctl("board", "--out", "", cwd=tmp_path), EXIT_USAGE, "give a file stem")
+    one_line(rigctl("record", "--take", "X", "--seconds", "inf", cwd=tmp_path), EXIT_USAGE, "--seconds must be")
     assert not list(tmp_path.iterdir())
 
 

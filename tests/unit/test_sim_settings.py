@@ -36,6 +36,14 @@ def test_values_and_per_camera_keys() -> None:
         (["scene=forest"], "--sim scene: "),
         (["subject_distance_m=nan"], "--sim subject_distance_m"),
         (["seed.r0c0=1"], "seed is not a per-camera setting"),
+        # absurd but valid numbers, which hung a recording or crashed its writer (a hostile-user review)
+        (["seed=-1"], "--sim seed: "),
+        (["stagger_ms=1e9"], "--sim stagger_ms: "),
+        (['skew_us={"r1c1": 1e13}'], "--sim skew_us.r1c1: "),
+        (["skew_us.r1c1=-inf"], "--sim skew_us.r1c1: "),
+        (["jitter_us=1e30"], "--sim jitter_us: "),
+        (["noise=1e30"], "--sim noise: "),
+        (["vignetting=5"], "--sim vignetting: "),
     ],
 )
 def test_bad_settings_are_named(pairs: list[str], message: str) -> None:
