@@ -50,8 +50,10 @@ from rigctl.depth.temporal_change import (
     frame_change,
     still_in_every_view,
 )
+from rigctl.errors import ParameterError
 
 F32 = NDArray[np.float32]
+COUNT = np.uint8  # frames in a pixel's running mean (at most max_frames): a byte a pixel and camera, kept twice
 
 
 @dataclass(frozen=True)
@@ -67,6 +69,10 @@ class TemporalParams:
     cost_keep: float = 0.5  # ... and share of the views kept per pixel (the best ones: occlusion-aware)
     hold_changed: bool = True  # changed pixels: the previous depth stays (within the agreement) if it matches better
 
+    def __post_init__(self) -> None:
+        if not 1 <= self.max_frames <= np.iinfo(COUNT).max:
+            raise ParameterError(f"temporal max_frames must be 1 to {np.iinfo(COUNT).max}, got {self.max_frames}")
+
 
 @dataclass
 class Previous:
@@ -78,7 +84,7 @@ class Previous:
     shape: tuple[int, int]
     pictures: HalfPictures
     disparity: dict[str, F32]
-    frames: dict[str, NDArray[np.int16]] = field(default_factory=dict)  # per camera: frames in each pixel's mean
+    frames: dict[str, NDArray[np.uint8]] = field(default_factory=dict)  # per camera: frames in each pixel's mean
 
 
 class Temporal:
@@ -89,7 +95,7 @@ class Temporal:
         self.previous: Previous | None = None
         self.noise: dict[str, NoiseHistory] = {}
         self._change: tuple[Grid, FrameChange] | None = None
-        self._frames: dict[str, NDArray[np.int16]] = {}
+        self._frames: dict[str, NDArray[np.uint8]] = {}
 
     def reset(self) -> None:
         self.previous = None
@@ -103,13 +109,13 @@ class Temporal:
         d_new = result.disparity
         prev = self.previous
         if not p.enabled or prev is None or ref not in prev.disparity or prev.shape != grid.shape:
-            self._frames[ref] = np.isfinite(d_new).astype(np.int16)
+            self._frames[ref] = np.isfinite(d_new).astype(COUNT)
             return result
         change = self._frame_change(prev.pictures, grid)
         d_prev = prev.disparity[ref]
         n_prev = prev.frames.get(ref)
         if n_prev is None:
-            n_prev = np.isfinite(d_prev).astype(np.int16)
+            n_prev = np.isfinite(d_prev).astype(COUNT)
         still = still_in_every_view(change, grid, ref, d_prev) & np.isfinite(d_new)
         with np.errstate(invalid="ignore"):
             delta = np.where(still, d_new - d_prev, 0.0).astype(np.float32)
@@ -137,7 +143,7 @@ class Temporal:
         out = d_new.copy()
         out[agree] = (d_prev + delta / (n + 1.0))[agree]
         out[kept | held] = d_prev[kept | held]
-        frames = np.isfinite(out).astype(np.int16)  # a new estimate starts a new mean
+        frames = np.isfinite(out).astype(COUNT)  # a new estimate starts a new mean
         frames[agree] = np.minimum(n_prev[agree] + 1, p.max_frames)
         frames[kept] = n_prev[kept]
         self._frames[ref] = frames

@@ -14,6 +14,7 @@ from rigctl.depth.estimate import DepthResult
 from rigctl.depth.grid import Grid, grid_from_arrays
 from rigctl.depth.temporal import Temporal, TemporalParams
 from rigctl.depth.temporal_change import NoiseHistory, frame_change, still_in_every_view
+from rigctl.errors import ParameterError
 
 H, W = 96, 128
 D_BACK, D_FRONT = 3.0, 7.0
@@ -166,3 +167,11 @@ def test_the_noise_is_measured_where_the_picture_is_flat_so_a_large_moving_subje
     assert history["r0c0"].sigma() == pytest.approx(1.0, rel=0.3)  # 2 levels at full size, half at half size
     assert change.changed["r0c0"][28:212, 12:244].mean() > 0.95
     assert change.changed["r0c0"][:, 260:].mean() < 0.01
+
+
+def test_a_running_mean_longer_than_a_byte_counts_is_refused() -> None:
+    """The frames in each pixel's mean are counted in a byte a pixel (issue 24: a chunk's memory)."""
+    assert TemporalParams(max_frames=255).max_frames == 255
+    for bad in (0, 256, -1):
+        with pytest.raises(ParameterError, match="max_frames must be 1 to 255"):
+            TemporalParams(max_frames=bad)
