@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.errors import CalibrationError
+from rigctl.regular import read_regular
 from rigctl.rig import CAMERA_NAME
 from rigctl.take.reader import TakeReader
 
@@ -62,14 +63,21 @@ def _grid_names(names: list[str], where: Path) -> dict[str, str]:
     )
 
 
-def _read_grey(path: Path) -> object:
-    def load() -> NDArray[np.uint8] | None:
-        img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-        if img is None:
-            raise CalibrationError(f"{path}: cannot read the image")
-        return np.asarray(img)
+MAX_IMAGE_BYTES = 1 << 30  # an image file larger than this is no camera's picture
 
-    return load
+
+def _imread_grey(path: Path) -> NDArray[np.uint8]:
+    """A picture file as grey: a regular file only (a FIFO would block the read for ever, a device never end),
+    its size bounded before it is read, refused in one line when it does not decode."""
+    data = read_regular(path, MAX_IMAGE_BYTES, CalibrationError, "image")
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise CalibrationError(f"{path}: cannot read the image")
+    return np.asarray(img)
+
+
+def _read_grey(path: Path) -> object:
+    return lambda: _imread_grey(path)
 
 
 def _from_take(folder: Path) -> CalibrationViews:
@@ -125,9 +133,7 @@ def load_views(path: Path) -> CalibrationViews:
     raw_names = sorted({c for c, _ in found})
     names = _grid_names(raw_names, path)
     frames = sorted({f for _, f in found}, key=lambda f: (len(f), f))
-    first = cv2.imread(str(next(iter(found.values()))), cv2.IMREAD_GRAYSCALE)
-    if first is None:
-        raise CalibrationError(f"{next(iter(found.values()))}: cannot read the image")
+    first = _imread_grey(next(iter(found.values())))
     size = (int(first.shape[1]), int(first.shape[0]))
     ordered = sorted(raw_names, key=lambda n: names[n])
     return CalibrationViews(

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from conftest import SHARED
 from hostile_support import one_line  # type: ignore[import-not-found]
 from reliab_support import (  # type: ignore[import-not-found]
     camera_file,
@@ -540,6 +541,18 @@ def test_a_scheduler_that_shakes_hands_then_claims_a_huge_message_is_one_line(ti
 def test_board_sizes_that_need_terabytes_are_one_line(tmp_path: Path, argv: tuple[str, ...], fragment: str) -> None:
     one_line(rigctl("board", "--out", str(tmp_path / "b"), *argv), EXIT_USAGE, fragment)
     assert not list(tmp_path.iterdir())
+
+
+def test_a_fifo_among_the_calibration_pictures_is_refused_not_waited_on(tmp_path: Path) -> None:
+    pictures = tmp_path / "cb"
+    pictures.mkdir()
+    source = SHARED / "data" / "opencv-stereo-chessboard"
+    for name in ("left01.jpg", "left02.jpg", "right01.jpg", "right02.jpg"):
+        (pictures / name).write_bytes((source / name).read_bytes())
+    os.mkfifo(pictures / "right03.jpg")  # a FIFO nobody writes: cv2.imread waited on it for ever
+    run = rigctl("calibrate", str(pictures), "--chessboard", "9x6", "--out", str(tmp_path / "c.yaml"), timeout=120)
+    one_line(run, EXIT_BAD_INPUT, "right03.jpg", "not a regular file")
+    assert not (tmp_path / "c.yaml").exists()
 
 
 def test_an_empty_board_stem_and_an_endless_recording_are_one_line(tmp_path: Path) -> None:
