@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from rigctl.cli.helptext import examples
+from rigctl.errors import ParameterError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -35,6 +37,8 @@ def run(ns: argparse.Namespace) -> int:
     from rigctl.tui.app import ShootApp
     from rigctl.tui.session import Session
 
+    if not (sys.stdin.isatty() and sys.stdout.isatty()):  # it would draw into a file and never stop
+        raise ParameterError("needs a terminal on its input and output (not a pipe, a file or /dev/null)")
     rig = load_rig(ns.rig)
     check_take_name(f"{ns.scene}-{ns.shot}-T01")
 

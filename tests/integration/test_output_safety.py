@@ -555,6 +555,12 @@ def test_a_fifo_among_the_calibration_pictures_is_refused_not_waited_on(tmp_path
     assert not (tmp_path / "c.yaml").exists()
 
 
+def test_the_shoot_ui_without_a_terminal_is_one_line_not_a_screen_drawn_for_ever(tmp_path: Path) -> None:
+    run = rigctl("tui", "--out", str(tmp_path / "takes"), timeout=60)  # input /dev/null, output a pipe
+    one_line(run, EXIT_USAGE, "needs a terminal")
+    assert not (tmp_path / "takes").exists()
+
+
 def test_an_empty_board_stem_and_an_endless_recording_are_one_line(tmp_path: Path) -> None:
     one_line(rigctl("board", "--out", "", cwd=tmp_path), EXIT_USAGE, "give a file stem")
     one_line(rigctl("record", "--take", "X", "--seconds", "inf", cwd=tmp_path), EXIT_USAGE, "--seconds must be")
