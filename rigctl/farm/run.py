@@ -189,8 +189,11 @@ def default_memory_limit(take: Path, cameras: int | None) -> int:
 # since OpenCV has the kernels' threads on a worker: all within the bound), and
 # 18 B more in a chunk, where the temporal stabiliser holds the previous frame set's pictures and results
 # (a chunk of three 1920x1080 frame sets peaked at 1.66 GiB against 1.33 GiB for one, in one script on one
-# day). The worker limit is this with a margin of 25 %: Dask pauses a worker at 80 % of it (above the
-# measured peaks) and restarts it at 95 %.
+# day). Measured over a chunk's later frame sets since the stabiliser keeps only what the next frame set reads
+# (its half-size pictures and final disparities): 1.39 to 1.42 GiB at 1920x1080 and 4.82 and 4.91 GiB at
+# 3840x2160, nine cameras (about 64 B a pixel and camera over the process; 37 B more than one frame set before
+# it, 17 B after). The worker limit is this with a margin of 25 %: Dask pauses a worker at 80 % of it (above
+# the measured peaks) and restarts it at 95 %.
 BASE_BYTES = 600e6
 BYTES_PER_CAMERA_PIXEL = 74.0
 MARGIN = 1.25
