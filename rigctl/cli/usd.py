@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 from pathlib import Path
 
 from rigctl.cli import args
 from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
+from rigctl.publish import utf8_path
 
 log = logging.getLogger(__name__)
 
@@ -36,6 +36,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+NEAREST_M, FARTHEST_M = 1e-3, 1e6  # a clipping range USD's float can hold and a renderer can use
+
+
 def run(ns: argparse.Namespace) -> int:
     from rigctl.calibration_model import load_calibration
     from rigctl.interop.usd import rectified_calibration, write_stage
@@ -43,6 +46,7 @@ def run(ns: argparse.Namespace) -> int:
     from rigctl.rig import load_rig, rig_from_dict
     from rigctl.take.manifest import read_manifest
 
+    utf8_path(ns.out)  # USD writes its layer's path as text
     if (ns.source / "take.yaml").is_file():
         calib = rectified_calibration(ns.source)
         rig = load_rig(ns.rig) if ns.rig else rig_from_dict(read_manifest(ns.source).rig, f"{ns.source}/take.yaml")
@@ -54,8 +58,13 @@ def run(ns: argparse.Namespace) -> int:
     plan = plan_rig(rig)
     near = ns.near if ns.near is not None else plan.near_m
     far = ns.far if ns.far is not None else plan.far_m
-    if not math.isfinite(far):
-        far = 1e6  # background at infinity: as far as a float clipping range goes usefully
+    # the background at infinity, or anything beyond this: as far as a float clipping range goes usefully
+    far = min(far, FARTHEST_M)
+    if not NEAREST_M <= near < far:
+        raise ParameterError(
+            f"--near {near:g} m: a clipping range runs from {NEAREST_M:g} m to {FARTHEST_M:g} m, near below far "
+            f"(far {far:g} m)"
+        )
     note = f"rigctl usd from {ns.source} (rig {rig.name}): metres, Y up; lens values in tenths of a metre"
     write_stage(calib, ns.out, rig.model.lens.focal_length_mm, (near, far), ns.window, note)
     print(f"wrote {len(calib.names)} cameras to {ns.out} (clipping {near:.3f}-{far:.3f} m)")

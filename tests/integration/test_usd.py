@@ -120,3 +120,21 @@ def test_bad_output_is_refused_in_one_line(takes: Path, tmp_path: Path, out: str
     (tmp_path / "exists.usda").write_text("")
     res = run_rigctl("usd", str(takes / "real" / "truth" / "calibration.yaml"), "--out", str(tmp_path / out))
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and message in res.stderr, res.stderr
+
+
+def test_a_clipping_range_beyond_what_a_float_holds_is_bounded_or_refused(takes: Path, tmp_path: Path) -> None:
+    """Absurd but valid distances (a hostile-user review): a far beyond a million metres is that far, as the
+    background at infinity is, not an infinite clipping range; a near below a millimetre is one line."""
+    cal = takes / "real" / "truth" / "calibration.yaml"
+    out = tmp_path / "far.usda"
+    res = run_rigctl("usd", str(cal), "--out", str(out), "--near", "1", "--far", "1e300")
+    assert res.returncode == 0, res.stderr
+    stage = Usd.Stage.Open(str(out))  # held: a prim does not keep its stage
+    clip = UsdGeom.Camera(stage.GetPrimAtPath("/rig/r1c1")).GetClippingRangeAttr().Get()
+    assert tuple(clip) == (1.0, 1e6) and np.isfinite(np.array(clip)).all()
+    res = run_rigctl("usd", str(cal), "--out", str(tmp_path / "near.usda"), "--near", "1e-300", "--far", "1e300")
+    assert res.returncode == 2 and "--near 1e-300 m" in res.stderr and "Traceback" not in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and not (tmp_path / "near.usda").exists()
+    bad = tmp_path / b"bad\xff.usda".decode("utf-8", "surrogateescape")
+    res = run_rigctl("usd", str(cal), "--out", str(bad))
+    assert res.returncode != 0 and "Traceback" not in res.stderr and "UTF-8" in res.stderr
