@@ -112,6 +112,8 @@ def read_content(path: Path) -> MivContent:
         raise RigFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except (ValueError, UnicodeDecodeError) as exc:
         raise RigFileError(f"{path}: not JSON: {exc}") from None
+    except RecursionError:  # nested deeper than Python's parser goes: no camera file is
+        raise RigFileError(f"{path}: not a camera file: its JSON is nested too deep to read") from None
     cams = doc.get("cameras") if isinstance(doc, dict) else None
     if not isinstance(cams, list) or not cams or not all(isinstance(c, dict) for c in cams):
         raise RigFileError(f'{path}: no "cameras" list')

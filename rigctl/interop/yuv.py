@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import os
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -50,10 +51,15 @@ def frame_count(path: Path, width: int, height: int, bits: int, chroma: bool = T
     if width < 1 or height < 1:
         raise YuvError(f"{path}: picture size {width}x{height} is not positive")
     try:
-        size = os.path.getsize(path)
+        st = os.stat(path)
     except OSError as exc:
         raise YuvError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(st.st_mode):  # /dev/zero has no size and never ends; a FIFO would block its read
+        raise YuvError(f"{path}: not a regular file (a folder, device, pipe or socket): refused")
+    size = st.st_size
     per = frame_bytes(width, height, bits, chroma)
+    if size == 0:
+        raise YuvError(f"{path}: empty: not one {width}x{height} {bits}-bit frame")
     if size % per:
         raise YuvError(f"{path}: {size} bytes is not a whole number of {width}x{height} {bits}-bit frames ({per})")
     return size // per

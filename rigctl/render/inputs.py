@@ -245,7 +245,7 @@ def _made_from(disparity_dir: Path) -> Path | None:
     report = disparity_dir / "report.json"
     try:
         source = json.loads(read_regular(report, 1 << 24, TakeError, "report")).get("source")
-    except (TakeError, ValueError, AttributeError):
+    except (TakeError, ValueError, AttributeError, RecursionError):
         return None
     return Path(source) if isinstance(source, str) and source else None
 

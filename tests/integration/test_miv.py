@@ -6,6 +6,7 @@ on our export against rigctl render and against the simulator's view, and the re
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 from collections.abc import Callable
@@ -270,6 +271,7 @@ def test_export_into_an_existing_folder_is_refused(take: Path, content: Path) ->
     ("text", "message"),
     [
         ("{", "not JSON"),
+        ("[" * 100000, "nested too deep"),  # Python's parser gave up with a RecursionError
         ('{"cameras": 3}', 'no "cameras" list'),
         ('{"cameras": [{"Name": "v0", "Resolution": [0, 0]}]}', "Resolution [0, 0]"),
         ('{"cameras": [{"Name": "v0", "Resolution": [64, 48], "Focal": ["a", 1]}]}', "Focal must be 2 finite numbers"),
@@ -294,6 +296,28 @@ def test_content_with_a_missing_or_short_file_is_refused_in_one_line(content: Pa
     res = run_rigctl("miv", "import", str(folder / "cameras.json"), "--out", str(tmp_path / "b"))
     assert res.returncode == 3 and res.stderr.count("\n") == 1 and "r1c1_depth" in res.stderr, res.stderr
     assert not (tmp_path / "b").exists()  # checked before anything is written
+
+
+@pytest.mark.parametrize("kind", ["dev_zero", "fifo", "empty"])
+def test_content_whose_picture_is_no_regular_file_or_empty_is_refused_not_imported_as_nothing(
+    content: Path, tmp_path: Path, kind: str
+) -> None:
+    """A texture swapped for /dev/zero (no size, never ends) or an empty file gave "wrote 0 grid folder(s)" and
+    exit 0; a FIFO is refused before a read blocks on it (a hostile-user review)."""
+    folder = tmp_path / "content"
+    shutil.copytree(content, folder)
+    victim = folder / texture_name("r1c1", W, H)
+    victim.unlink()
+    if kind == "dev_zero":
+        victim.symlink_to("/dev/zero")
+    elif kind == "fifo":
+        os.mkfifo(victim)
+    else:
+        victim.write_bytes(b"")
+    res = run_rigctl("miv", "import", str(folder / "cameras.json"), "--out", str(tmp_path / "out"), timeout=60)
+    assert res.returncode == 3 and res.stderr.count("\n") == 1 and "r1c1_texture" in res.stderr, res.stderr
+    assert ("empty" if kind == "empty" else "not a regular file") in res.stderr
+    assert not (tmp_path / "out").exists()
 
 
 def test_depth_on_imported_content_scores_against_the_content_s_own_depth(imported: Path, tmp_path: Path) -> None:
