@@ -16,6 +16,7 @@ full, read-only) become :class:`~rigctl.errors.OutputError`: one line naming the
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import fcntl
 import io
@@ -249,11 +250,20 @@ class OutputLock:
 @contextmanager
 def output_folder(out: Path, verb: str, what: str = "--out") -> Iterator[Path]:
     """An output folder prepared (:func:`prepare_output`), locked for this run (:class:`OutputLock`) and
-    cleared of the temporary files of an interrupted run: the whole of a writing command's output side."""
+    cleared of the temporary files of an interrupted run: the whole of a writing command's output side. A
+    folder this run made is removed again when the run fails before writing anything into it (a wrong input
+    leaves no empty folder behind); nothing a run wrote is ever removed."""
+    made = not out.exists() and not out.is_symlink()
     prepare_output(out, what)
     with OutputLock(out, verb):
-        remove_stale_temps(out)
-        yield out
+        try:
+            remove_stale_temps(out)
+            yield out
+        except BaseException:
+            if made:
+                with contextlib.suppress(OSError):  # not empty: kept as it is
+                    out.rmdir()
+            raise
 
 
 PARTIAL_SUFFIX = ".rigctl-partial"

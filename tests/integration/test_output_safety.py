@@ -561,6 +561,15 @@ def test_the_shoot_ui_without_a_terminal_is_one_line_not_a_screen_drawn_for_ever
     assert not (tmp_path / "takes").exists()
 
 
+def test_a_run_that_fails_before_writing_leaves_no_folder_it_made_and_keeps_one_it_found(tiny, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    one_line(rigctl("depth", str(tmp_path / "nothing"), "--out", str(tmp_path / "d")), EXIT_USAGE, "not a take")
+    one_line(rigctl("take", "export", str(tiny[0]), "--out", str(tmp_path / "x"), "--frames", "5"), EXIT_USAGE, "5")
+    assert not (tmp_path / "d").exists() and not (tmp_path / "x").exists()  # made by the run, removed again
+    (tmp_path / "mine").mkdir()
+    one_line(rigctl("depth", str(tmp_path / "nothing"), "--out", str(tmp_path / "mine")), EXIT_USAGE, "not a take")
+    assert (tmp_path / "mine").is_dir()  # the user's own (empty) folder stays
+
+
 def test_an_empty_board_stem_and_an_endless_recording_are_one_line(tmp_path: Path) -> None:
     one_line(rigctl("board", "--out", "", cwd=tmp_path), EXIT_USAGE, "give a file stem")
     one_line(rigctl("record", "--take", "X", "--seconds", "inf", cwd=tmp_path), EXIT_USAGE, "--seconds must be")
