@@ -7,6 +7,7 @@ read back (pixels, timings) into ``results``: a queue of (tag, bytes)."""
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import logging
 import queue
@@ -112,10 +113,29 @@ class _Handler(BaseHTTPRequestHandler):
             return None
         return path
 
+    def _foreign_host(self) -> bool:
+        """A request naming another host while we listen on loopback only: a web page whose name was made to
+        resolve to 127.0.0.1 (DNS rebinding) reading the take through the user's browser. Refused (403)."""
+        if not ipaddress.ip_address(str(self.server.server_address[0])).is_loopback:
+            return False  # --bind shares the viewer on a network: any name of the machine is the user's
+        host = self.headers.get("Host")
+        if host is None:
+            return False  # HTTP/1.0 without a Host: no browser (a browser always sends one)
+        name = host[1 : host.find("]")] if host.startswith("[") else host.rsplit(":", 1)[0]
+        if name.lower() == "localhost":
+            return False
+        try:
+            return not ipaddress.ip_address(name).is_loopback
+        except ValueError:
+            return True
+
     def do_HEAD(self) -> None:
         self.do_GET()
 
     def do_GET(self) -> None:
+        if self._foreign_host():
+            self._send(HTTPStatus.FORBIDDEN, b"this viewer answers to localhost and 127.0.0.1 only\n")
+            return
         try:
             path = self._path()
         except UnicodeDecodeError:
@@ -137,7 +157,8 @@ class _Handler(BaseHTTPRequestHandler):
     def do_POST(self) -> None:
         url = urlsplit(self.path)
         length = int(self.headers.get("Content-Length") or 0)
-        if not self.server.accept_results or url.path != "/api/result" or not 0 <= length <= MAX_RESULT:
+        wanted = self.server.accept_results and url.path == "/api/result" and 0 <= length <= MAX_RESULT
+        if self._foreign_host() or not wanted:
             self.close_connection = True  # its body is not read
             self._send(HTTPStatus.NOT_FOUND, b"not found\n")
             return

@@ -101,6 +101,28 @@ def test_nothing_outside_the_page_and_the_take_is_served(served: Served, path: s
     assert b"not for the network" not in body and b"spec:" not in body and b"import" not in body
 
 
+@pytest.mark.parametrize(
+    ("host", "status"),
+    [("evil.example", 403), ("evil.example:80", 403), ("10.0.0.7", 403), ("localhost", 200),
+     ("127.0.0.1:1", 200), ("[::1]:8080", 200), ("LOCALHOST", 200)],
+)  # fmt: skip
+def test_a_request_naming_another_host_is_refused_on_loopback(served: Served, host: str, status: int) -> None:
+    """DNS rebinding (a hostile-user review): a page whose name resolves to 127.0.0.1 would read the take
+    through the user's browser; on loopback the viewer answers only to loopback names."""
+    for path in ("/api/take.json", "/api/frame/0.bin", "/"):
+        conn = http.client.HTTPConnection(served.host, served.port, timeout=30)
+        try:
+            conn.putrequest("GET", path, skip_host=True, skip_accept_encoding=True)
+            conn.putheader("Host", host)
+            conn.endheaders()
+            res = conn.getresponse()
+            body = res.read()
+        finally:
+            conn.close()
+        assert res.status == status, (host, path, res.status)
+        assert status == 200 or (b"frames" not in body and b"RGFS" not in body)
+
+
 def test_results_are_not_accepted_by_rigctl_view(served: Served) -> None:
     assert served.get("/api/result?tag=x", "POST")[0] == 404
 
