@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.errors import CalibrationError
+from rigctl.imagefile import png_size
 from rigctl.regular import read_regular
 from rigctl.rig import CAMERA_NAME
 from rigctl.take.reader import TakeReader
@@ -69,6 +70,8 @@ MAX_IMAGE_BYTES = 1 << 30  # an image file larger than this is no camera's pictu
 def _imread_grey(path: Path) -> NDArray[np.uint8]:
     """A picture file as grey: a regular file only (a FIFO would block the read for ever, a device never end),
     its size bounded before it is read, refused in one line when it does not decode."""
+    if path.suffix.lower() == ".png":  # its header's size checked before OpenCV decodes (and warns about) it
+        png_size(path, CalibrationError)
     data = read_regular(path, MAX_IMAGE_BYTES, CalibrationError, "image")
     img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
     if img is None:
