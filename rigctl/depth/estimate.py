@@ -62,6 +62,20 @@ def choose_views(grid: Grid, ref: str, mode: str) -> list[str]:
     return out or others
 
 
+def seen_range(grid: Grid, ref: str, views: list[str], lo: float, hi: float) -> tuple[float, float]:
+    """``lo..hi`` clipped to the disparities some view can still see: past ``max`` over the views of
+    ``min(w / |dx|, h / |dy|)`` a point of the reference lands outside every view's picture, whatever its
+    position, so a range planned from an absurd distance (``--near 1e-300``) costs no more than the picture.
+    Empty (``hi < lo``) when the whole range lies beyond."""
+    h, w = grid.shape
+    ox, oy = grid.offsets[ref]
+    reach = 0.0
+    for n in views:
+        dx, dy = abs(grid.offsets[n][0] - ox), abs(grid.offsets[n][1] - oy)
+        reach = max(reach, min(w / dx if dx > 1e-9 else math.inf, h / dy if dy > 1e-9 else math.inf))
+    return max(lo, -reach), min(hi, reach)
+
+
 def estimate(
     grid: Grid,
     ref: str,
@@ -104,8 +118,14 @@ def estimate(
         if max(abs(grid.offsets[n][0] - grid.offsets[ref][0]), abs(grid.offsets[n][1] - grid.offsets[ref][1])) > 1e-9
     ]
     stats["views"] = moving
-    if not fg.any() or not moving:
-        stats["note"] = "every pixel keyed as background" if not fg.any() else "no camera at a different position"
+    lo, hi = seen_range(grid, ref, moving, lo, hi)
+    nothing = {
+        "every pixel keyed as background": not fg.any(),
+        "no camera at a different position": not moving,
+        f"the range {d_range[0]:g}..{d_range[1]:g} px lies beyond every view's picture": hi < lo,
+    }
+    if any(nothing.values()):
+        stats["note"] = next(why for why, so in nothing.items() if so)
         stats["seconds"] = time.perf_counter() - t_start
         return empty
     box = subject_box(fg, margin=preset.window)

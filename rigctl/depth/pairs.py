@@ -56,10 +56,11 @@ def neighbour(grid: Grid, ref: str, dx: int, dy: int) -> str | None:
 def _capped(d_range: tuple[float, float], scale: float, extent: int) -> tuple[float, float] | None:
     """The pair's search range in its own pixels, no wider than the image it searches (a wider range cannot
     match anything, and OpenCV fails when its levels, in steps of 16, reach the image width); None when not
-    even 16 levels fit."""
-    lo, hi = d_range[0] * scale, d_range[1] * scale
+    even 16 levels fit. A negative minimum no further than the image allows either (OpenCV asserts that the
+    columns left to match, ``extent + min(lo, 0) - max(lo + levels, 0)``, are not empty)."""
+    lo, hi = max(d_range[0] * scale, BLOCK + 1.0 - extent), d_range[1] * scale
     room = ((extent - BLOCK - 1 - max(math.floor(lo), 0)) // 16) * 16  # a positive minimum shifts the search
-    if room < 16 or hi < -extent:
+    if room < 16 or hi < lo:
         return None
     return lo, min(hi, math.floor(lo) + room - 1)
 

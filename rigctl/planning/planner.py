@@ -13,6 +13,8 @@ seen by two cameras ``dx`` apart.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -175,7 +177,10 @@ def search_range_px(
     ``margin_px`` on both sides: the one conversion from a plan's distances to a range of disparities."""
     if not (near_m > 0 and far_m > near_m):
         raise ParameterError(f"--near must be positive and below --far, got {near_m} and {far_m}")
-    lo, hi = disparity_range_px(focal_px, spacing_m, near_m, far_m)
+    with np.errstate(over="ignore"):  # overflow is refused just below, in one line
+        lo, hi = disparity_range_px(focal_px, spacing_m, near_m, far_m)
+    if not math.isfinite(float(hi)):
+        raise ParameterError(f"--near {near_m} m is too close to plan: its disparity is beyond any number")
     return float(lo) - doffs_px - margin_px, float(hi) - doffs_px + margin_px
 
 

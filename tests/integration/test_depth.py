@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from tests_support import run_rigctl
 
-from rigctl.depth.estimate import estimate
+from rigctl.depth.estimate import estimate, seen_range
 from rigctl.depth.grid import grid_from_arrays
 from rigctl.depth.presets import PRESETS
 from rigctl.errors import ParameterError
@@ -111,6 +111,21 @@ def test_a_one_pixel_image_and_a_range_larger_than_the_image(preset: str) -> Non
     assert r.stats["levels"] <= 4 * 60 and not np.isnan(r.disparity).any()
     with pytest.raises(ParameterError, match="disparity range must be finite"):
         estimate(g, "r1c1", (0.0, float("inf")), PRESETS[preset], keyer=None)
+
+
+def test_a_range_past_every_views_picture_is_cut_at_what_a_view_can_see() -> None:
+    """``--near 1e-300`` plans disparities up to 1e302 px: the search stops where a point of the reference
+    lands outside every view (60 px across, 40 / 0.65 px down), and a range wholly past it finds nothing."""
+    g = plane_grid(3.0, h=40, w=60)
+    views = [n for n in g.names if n != "r1c1"]
+    assert seen_range(g, "r1c1", views, -1e302, 1e302) == pytest.approx((-40 / 0.65, 40 / 0.65))
+    assert seen_range(g, "r1c1", ["r1c2"], 0.0, 1e302) == (0.0, 60.0)
+    assert seen_range(g, "r1c1", views, 2.0, 9.0) == (2.0, 9.0)
+    for preset in PRESETS.values():
+        r = estimate(g, "r1c1", (-1e302, 1e302), preset, keyer=None)
+        assert np.isfinite(r.disparity).any() and not np.isnan(r.disparity).any()
+        beyond = estimate(g, "r1c1", (1e6, 1e302), preset, keyer=None)
+        assert np.isinf(beyond.disparity).all() and "beyond every view" in beyond.stats["note"]
 
 
 @pytest.mark.parametrize("preset", list(PRESETS))
@@ -386,3 +401,18 @@ def test_cli_depth_sequence_layout_carries_linear_rgb_alpha_and_timecode(ideal_t
     assert header["framesPerSecond"] == Fraction(25)
     t = header["timeCode"]
     assert f"{t.hours:02d}:{t.minutes:02d}:{t.seconds:02d}:{t.frame:02d}" == str(reader.set_timecode(fs))
+
+
+def test_cli_depth_from_an_absurd_but_valid_plan(ideal_take: Path, tmp_path: Path) -> None:
+    """``--near 1e-300 --far 1e300`` is a valid plan (the whole range): it searches what the views can see
+    rather than failing on a range of 1e302 px; a nearness whose disparity is no number is one line."""
+    out = tmp_path / "d"
+    argv = ["depth", str(ideal_take), "--out", str(out), "--cameras", "r1c1", "--frames", "0", "--json"]
+    res = run_rigctl(*argv, "--near", "1e-300", "--far", "1e300")
+    assert res.returncode == 0, res.stderr
+    frame = json.loads(res.stdout)["frames"]["0"]
+    assert frame["range_source"].startswith("planned from near 1e-300")
+    assert np.isfinite(frame["cameras"]["r1c1"]["against_truth"]["bad_2.0"])
+    res = run_rigctl(*argv[:3], str(tmp_path / "d2"), *argv[4:], "--near", "5e-324")
+    assert res.returncode == 2 and "--near 5e-324 m is too close" in res.stderr and "Traceback" not in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and not (tmp_path / "d2").exists()
