@@ -160,3 +160,27 @@ def read_disparity(path: Path) -> F32:
     if z is not None and z.shape == d.shape:
         d = np.where((z == 0) & (d == 0), np.inf, d).astype(np.float32)  # no estimate: written as 0, 1/Z 0
     return d
+
+
+def checked_disparity(path: Path, disp: F32, shape: tuple[int, int], source: object) -> F32:
+    """``disp`` as read from ``path``, refused in one line unless it is a disparity of ``source``'s pictures
+    (``shape``: h, w): one channel of that size, no NaN, and nothing past the picture's width but +inf (the
+    one mark of a missing estimate). Whatever reads a disparity from others checks it here."""
+    h, w = shape
+    if disp.ndim != 2:
+        raise TakeError(f"{path}: a disparity is one channel (Pf), this file has three (PF)")
+    if disp.shape != (h, w):
+        raise TakeError(
+            f"{path}: disparity is {disp.shape[1]}x{disp.shape[0]} but {source} has {w}x{h} images: "
+            "the disparity folder does not match the input"
+        )
+    if np.isnan(disp).any():
+        raise TakeError(f"{path}: disparity holds NaN (only +inf may mark a missing estimate)")
+    beyond = (disp != np.inf) & (np.abs(disp) > w)
+    if beyond.any():
+        y, x = np.argwhere(beyond)[0]
+        raise TakeError(
+            f"{path}: disparity {disp[y, x]:g} at x={x}, y={y} is beyond the image's width ({w} px): "
+            "no camera could see that point (only +inf may mark a missing estimate)"
+        )
+    return disp

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from rigctl.disparity_layers import checked_disparity
 from rigctl.errors import ParameterError, TakeError
 from rigctl.interop import yuv
 from rigctl.publish import publish_text, publishing_folder
@@ -106,16 +107,13 @@ def camera_entry(
     }
 
 
-def _disparity(folder: Path, number: int, name: str) -> F32:
+def _disparity(folder: Path, number: int, name: str, shape: tuple[int, int], take: Path) -> F32:
     from rigctl.pfm import read_pfm
 
     path = folder / f"{number:06d}" / f"{name}.pfm"
     if not path.is_file():
         raise TakeError(f"{path}: no disparity for camera {name} of frame {number}")
-    d = read_pfm(path)
-    if d.ndim != 2:
-        raise TakeError(f"{path}: a disparity is one channel (Pf), this file has three (PF)")
-    return d
+    return checked_disparity(path, read_pfm(path), shape, take)
 
 
 def export_miv(take: Path, disparity_dir: Path, out: Path, frames: range | None = None) -> list[Path]:
@@ -150,9 +148,7 @@ def export_miv(take: Path, disparity_dir: Path, out: Path, frames: range | None 
     inv = [np.float64(np.inf), np.float64(0.0)]
     for number in numbers:
         for name in names:
-            d = _disparity(disparity_dir, number, name)
-            if d.shape != (height, width):
-                raise TakeError(f"{disparity_dir}: disparity of {name}, frame {number}, is not {width}x{height}")
+            d = _disparity(disparity_dir, number, name, (height, width), take)
             good = d[np.isfinite(d) & (d > 0)]
             if good.size:
                 inv = [min(inv[0], good.min()), max(inv[1], good.max())]
@@ -187,7 +183,8 @@ def export_miv(take: Path, disparity_dir: Path, out: Path, frames: range | None 
                 for n in names:
                     planes = yuv.rgb_to_yuv420(g.images[n], COLOUR_BITS)
                     yuv.write_frame(handles[texture_name(n, width, height)], planes, COLOUR_BITS)
-                    levels = depth_levels(_disparity(disparity_dir, number, n), focal, spacing, near, far)
+                    d = _disparity(disparity_dir, number, n, (height, width), take)
+                    levels = depth_levels(d, focal, spacing, near, far)
                     yuv.write_frame(handles[depth_name(n, width, height)], [levels, neutral, neutral], DEPTH_BITS)
             for f in handles.values():  # on the device before the folder is renamed to its name
                 f.flush()

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.depth.sources import FrameSource, open_source
-from rigctl.disparity_layers import read_disparity
+from rigctl.disparity_layers import checked_disparity, read_disparity
 from rigctl.errors import ParameterError, TakeError
 from rigctl.keying import Keyer
 from rigctl.pfm import read_pfm
@@ -196,22 +196,7 @@ class RenderInput:
             disp = None
             if n in found:
                 disp = read_disparity(found[n]) if found[n].suffix == ".exr" else read_pfm(found[n])
-                if disp.ndim != 2:
-                    raise TakeError(f"{found[n]}: a disparity is one channel (Pf), this file has three (PF)")
-                if disp.shape != (h, w):
-                    raise TakeError(
-                        f"{found[n]}: disparity is {disp.shape[1]}x{disp.shape[0]} but {self.source} has "
-                        f"{w}x{h} images: the disparity folder does not match the input"
-                    )
-                if np.isnan(disp).any():
-                    raise TakeError(f"{found[n]}: disparity holds NaN (only +inf may mark a missing estimate)")
-                beyond = (disp != np.inf) & (np.abs(disp) > w)
-                if beyond.any():
-                    y, x = np.argwhere(beyond)[0]
-                    raise TakeError(
-                        f"{found[n]}: disparity {disp[y, x]:g} at x={x}, y={y} is beyond the image's width ({w} px): "
-                        "no camera could see that point (only +inf may mark a missing estimate)"
-                    )
+                checked_disparity(found[n], disp, (h, w), self.source)
             rgb = grid.images[n]
             screen = self.keyer.screen_excess(rgb) > 0
             alpha = self.keyer.matte(rgb) if screen else np.ones((h, w), np.float32)

@@ -268,6 +268,25 @@ def test_export_into_an_existing_folder_is_refused(take: Path, content: Path) ->
 
 
 @pytest.mark.parametrize(
+    ("value", "message"), [(np.nan, "holds NaN"), (3e38, "beyond the image's width"), (-3e38, "beyond the image")]
+)
+def test_export_refuses_a_disparity_render_would_refuse(take: Path, tmp_path: Path, value: float, message: str) -> None:
+    """A disparity from others that no camera could have seen (NaN, 3e38) is one line naming the file, as in
+    ``rigctl render``: it was coded into depth levels as if it were the nearest point."""
+    from rigctl.pfm import write_pfm
+
+    bad = tmp_path / "disparity"
+    shutil.copytree(take / "truth" / "disparity", bad)
+    victim = sorted(bad.glob("*/r1c1.pfm"))[0]
+    d = read_pfm(victim)
+    d[d.shape[0] // 2, d.shape[1] // 3] = value
+    write_pfm(victim, d)
+    res = run_rigctl("miv", "export", str(take), str(bad), "--out", str(tmp_path / "miv"))
+    assert res.returncode == 3 and res.stderr.count("\n") == 1, res.stderr
+    assert str(victim) in res.stderr and message in res.stderr and not (tmp_path / "miv").exists()
+
+
+@pytest.mark.parametrize(
     ("text", "message"),
     [
         ("{", "not JSON"),
