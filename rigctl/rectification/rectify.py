@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.calibration_model import ArrayCalibration, load_calibration
-from rigctl.errors import CalibrationError
+from rigctl.errors import CalibrationError, ParameterError
 from rigctl.publish import publishing_folder
 from rigctl.rectification.geometry import RectifiedGrid, calibration_hash, common_plane, rectification_record
 from rigctl.take.manifest import TAKE_SPEC, DamagedFrame, Rectification, write_manifest
@@ -199,6 +199,11 @@ def rectify_take(
     A damaged source frame stops it (naming file and byte; the CLI removes the partial new take), unless
     ``skip_damaged``: then the frame is left out and listed in the new take's ``damaged_skipped``."""
     reader = TakeReader(source, skip_damaged=skip_damaged)
+    if reader.manifest.rectification is not None:  # a second warp would only resample it: nothing to gain
+        raise ParameterError(
+            f"{source}: already rectified (its take.yaml has a rectification section: a rectified take, or an "
+            "ideal simulated one, recorded in the common plane); rigctl depth reads it as it is"
+        )
     t_tables = time.perf_counter()
     rect = rectifier_for_take(reader, calibration)
     t_tables = time.perf_counter() - t_tables

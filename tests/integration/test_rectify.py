@@ -67,6 +67,11 @@ def test_rectified_take_lines_up_with_the_truth(take: Path, tmp_path: Path, run_
     assert np.mean([v[0] for v in unrect.values()]) > 2 * np.mean([v[0] for v in result.values()])
     # the rectified take is a take like any other
     assert run_cli("take", "check", str(out)).returncode == 0
+    # but not one to rectify again: a second warp only resamples (and blurs) what is already in the plane
+    cal = str(take / "truth" / "calibration.yaml")
+    again = run_cli("rectify", str(out), "--calibration", cal, "--out", str(tmp_path / "r2"))
+    assert again.returncode == 2 and again.stderr.count("\n") == 1 and "already rectified" in again.stderr
+    assert not (tmp_path / "r2").exists()
 
 
 def test_tables_are_cached_by_calibration_hash(take: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
