@@ -95,6 +95,9 @@ def temp_name(path: Path) -> Path:
     return path.with_name(f".{path.name}.{os.getpid()}{TEMP_SUFFIX}")
 
 
+_SPECIAL_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"))
+
+
 def refuse_special(path: Path) -> None:
     """An output is published by rename over its final name, which would put a regular file in place of a
     FIFO, a device (``/dev/null`` as root) or a socket there, or fail on a folder: refused in one line first."""
@@ -106,15 +109,7 @@ def refuse_special(path: Path) -> None:
         raise output_error(path, exc) from None
     if stat.S_ISREG(mode) or stat.S_ISLNK(mode):
         return
-    kind = (
-        "a folder"
-        if stat.S_ISDIR(mode)
-        else "a FIFO"
-        if stat.S_ISFIFO(mode)
-        else "a socket"
-        if stat.S_ISSOCK(mode)
-        else "a device"
-    )
+    kind = next((k for test, k in _SPECIAL_KINDS if test(mode)), "a device")
     raise OutputError(f"{path}: exists and is {kind}, not a file: not replaced (choose another output name)")
 
 

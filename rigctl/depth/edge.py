@@ -252,8 +252,10 @@ def occlusion_order(grid: Grid, disparities: dict[str, F32]) -> dict[str, tuple[
         for i, b in enumerate(others):
             rx, ry = grid.offsets[b][0] - ox, grid.offsets[b][1] - oy
             mx, my = gx - dz * np.float32(rx), gy - dz * np.float32(ry)
-            nearest, outside = cv2.INTER_NEAREST, cv2.BORDER_CONSTANT  # NaN: outside b's frame
-            cv2.remap(screen[b], mx, my, nearest, dst=stack[i], borderMode=outside, borderValue=np.nan)
+            # NaN: outside b's frame
+            cv2.remap(
+                screen[b], mx, my, cv2.INTER_NEAREST, dst=stack[i], borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan
+            )
         np.copyto(stack, np.float32(-np.inf), where=np.isinf(stack))  # a view's screen: far
         in_frame = ~np.isnan(stack)
         farther = in_frame & (stack < dz - ORDER_TOL)
