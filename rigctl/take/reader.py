@@ -159,6 +159,8 @@ class TakeReader:
         """A path of the manifest, refused unless it resolves inside the take folder, or is this camera's file
         in the take's folder on another destination (``<dest>/<take>/cameras/<camera>.<kind>``, as the
         recorder writes a take spread over several disks)."""
+        if "\0" in text:  # no file system has such a name (and resolving it raises ValueError)
+            raise TakeError(f"{self.folder / 'take.yaml'}: cameras.{name}.{kind} {text!r} holds a NUL byte: refused")
         p = self.folder / text
         real = p.resolve()
         try:

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from rigctl.calibration_model import load_calibration
@@ -195,6 +195,7 @@ def read_whole_take(folder: Path) -> None:
 
 @PROPERTY
 @given(where=PATHS, value=VALUES)
+@example(where=[34, 0, 0], value="\x00")  # a NUL in a camera's file name (found in a worktree's database)
 def test_take_yaml_one_value_changed(module_tmp: Callable[[str], Path], where: list[int], value: Any) -> None:
     folder = module_tmp("take")
     manifest = small_take(folder)
