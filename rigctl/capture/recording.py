@@ -22,6 +22,7 @@ from rigctl.registry import DeviceSet, open_cameras
 from rigctl.rig import Rig
 from rigctl.take.manifest import Manifest
 from rigctl.take.names import check_take_name
+from rigctl.take.plan import check_buffers
 from rigctl.yuv10 import is_ten_bit
 
 log = logging.getLogger(__name__)
@@ -127,8 +128,8 @@ def record_take(
     name = check_take_name(name)
     if frames is not None and frames <= 0:
         raise ParameterError(f"frames must be a positive number of frame sets, got {frames}")
-    if buffers_per_camera is not None and buffers_per_camera < 2:
-        raise ParameterError(f"--buffers must be at least 2, got {buffers_per_camera}")
+    if buffers_per_camera is not None:  # before the cameras are made: a pool too big is refused, not allocated
+        check_buffers(buffers_per_camera, Recorder.capture_format(rig).bytes_per_frame, len(rig.cameras))
     devices = devices or open_cameras(rig, list(sim or []))
     plan = TakePlan.spread(name, destinations, sorted(devices.cameras, key=rig.camera_names.index))
     buffers = buffers_per_camera or Recorder.default_buffers(Recorder.capture_format(rig))
