@@ -185,7 +185,7 @@ def simulated_array(rig: Rig, sim: list[str]) -> SimulatedArray:
     from rigctl.simulators.array import SimArray
     from rigctl.simulators.settings import parse_sim_args
 
-    return SimArray(rig, parse_sim_args(sim))
+    return SimArray(rig, parse_sim_args(sim, rig=rig))
 
 
 def simulated_view(take: Path, col: float, row: float) -> tuple[NDArray[np.float32], NDArray[np.bool_]] | None:

@@ -39,7 +39,7 @@ def simulated_cameras(
     rig: Rig, sim_args: list[str], addresses: dict[str, Address]
 ) -> tuple[dict[str, Camera], SimTruth, dict[str, Any], str]:
     """The ``sim://`` cameras named in ``addresses`` on one simulated array, its truth, settings and summary."""
-    settings = parse_sim_args(sim_args)
+    settings = parse_sim_args(sim_args, rig=rig)
     array = SimArray(rig, settings)
     array.render_in_background()  # while preflight measures the disk: the cameras stream sooner
     cams: dict[str, SimCamera] = {}
