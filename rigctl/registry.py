@@ -148,8 +148,6 @@ def open_bridge(rig: Rig, url: str, devices: DeviceSet | None = None) -> SdiBrid
         raise DeviceError(f"bridge address {url!r}: the SDI bridge is a serial line, not udp://")
     if address.scheme != "sim":
         return SdiBridge(url)
-    if address.target != "bridge":
-        raise DeviceError(f"bridge address {url!r}: the simulated bridge is sim://bridge")
     from rigctl.camera_control import camera_ids
     from rigctl.simulators.array import SimArray
     from rigctl.simulators.sdi_bridge import SimSdiBridge

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hostile_support import one_line  # type: ignore[import-not-found]
+import pytest
+from hostile_support import SIM_RIG, one_line, write_yaml  # type: ignore[import-not-found]
 
-from rigctl.errors import EXIT_USAGE
+from rigctl.errors import EXIT_DEVICE, EXIT_USAGE
 
 DET = ["--sim", "deterministic=true", "--sim", "motion=false"]
 
@@ -25,3 +26,30 @@ def test_a_sim_fault_for_a_camera_not_in_the_rig_is_refused(run_cli, tmp_path: P
     res = run_cli("record", "--take", "t", "--frames", "2", "--out", "takes", "--sim", "drops.r9c9=[0]", *DET)
     one_line(res, EXIT_USAGE, "--sim drops.r9c9: rig sim-3x3 has no camera r9c9 (its cameras: r0c0,", "r2c2)")
     assert not (tmp_path / "takes").exists()
+
+
+@pytest.mark.parametrize("device", ["sim://../../x", "sim:///dev/video0", "sim://r2c2/../r2c2"])
+def test_a_simulated_camera_address_that_is_not_the_camera_is_refused_alike(
+    run_cli, tmp_path: Path, device: str
+) -> None:  # type: ignore[no-untyped-def]
+    # rigctl devices called sim://../../x a simulated camera (exit 0) where record refused it
+    cameras = [dict(c) for c in SIM_RIG["cameras"]]
+    cameras[8]["device"] = device
+    rig = str(write_yaml(tmp_path / "rig.yaml", {**SIM_RIG, "cameras": cameras}))
+    expected = f"camera r2c2: device address '{device}': a simulated camera is sim://r2c2"
+    assert one_line(run_cli("devices", rig), EXIT_DEVICE, expected) == f"rigctl devices: error: {expected}"
+    one_line(run_cli("devices", rig, "--json"), EXIT_DEVICE, expected)
+    record = run_cli("record", rig, "--take", "t", "--frames", "1", "--out", "takes", *DET)
+    assert one_line(record, EXIT_DEVICE, expected) == f"rigctl record: error: {expected}"
+    assert not (tmp_path / "takes").exists()
+
+
+def test_a_simulated_line_that_is_not_the_bridge_is_refused(run_cli, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    rig = str(
+        write_yaml(tmp_path / "rig.yaml", {**SIM_RIG, "tally": {"protocol": "bmd-embedded", "port": "sim://../x"}})
+    )
+    one_line(
+        run_cli("devices", rig),
+        EXIT_DEVICE,
+        "tally line: device address 'sim://../x': the simulated line is sim://bridge",
+    )
