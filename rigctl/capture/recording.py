@@ -23,6 +23,7 @@ from rigctl.rig import Rig
 from rigctl.take.manifest import Manifest
 from rigctl.take.names import check_take_name
 from rigctl.take.plan import check_buffers
+from rigctl.take.staging import Staging
 from rigctl.yuv10 import is_ten_bit
 
 log = logging.getLogger(__name__)
@@ -134,6 +135,7 @@ def record_take(
     plan = TakePlan.spread(name, destinations, sorted(devices.cameras, key=rig.camera_names.index))
     buffers = buffers_per_camera or Recorder.default_buffers(Recorder.capture_format(rig))
     try:
+        Staging(plan).check()  # the name taken, or a cut-off recording of it in the way: before preflight
         report = preflight_take(rig, plan, frames, buffers)
         for line in report.lines():
             log.info("%s", line)
