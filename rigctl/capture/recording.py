@@ -18,6 +18,7 @@ from typing import Any
 from rigctl.capture.preflight import PreflightReport, WriteSpeed, check_destinations, rate_text
 from rigctl.capture.recorder import Recorder, TakePlan
 from rigctl.errors import ParameterError, PreflightError
+from rigctl.publish import NewFolders
 from rigctl.registry import DeviceSet, open_cameras
 from rigctl.rig import Rig
 from rigctl.take.manifest import Manifest
@@ -131,37 +132,44 @@ def record_take(
         raise ParameterError(f"frames must be a positive number of frame sets, got {frames}")
     if buffers_per_camera is not None:  # before the cameras are made: a pool too big is refused, not allocated
         check_buffers(buffers_per_camera, Recorder.capture_format(rig).bytes_per_frame, len(rig.cameras))
-    devices = devices or open_cameras(rig, list(sim or []))
-    plan = TakePlan.spread(name, destinations, sorted(devices.cameras, key=rig.camera_names.index))
-    buffers = buffers_per_camera or Recorder.default_buffers(Recorder.capture_format(rig))
+    made = NewFolders(*destinations)  # preflight makes the destinations: a run that keeps nothing removes them
+    kept = False
     try:
-        Staging(plan).check()  # the name taken, or a cut-off recording of it in the way: before preflight
-        report = preflight_take(rig, plan, frames, buffers)
-        for line in report.lines():
-            log.info("%s", line)
-        if on_preflight is not None:
-            on_preflight(report)
-        enforce(report, force)
-    except BaseException:
-        devices.close()
-        raise
-    recorder = Recorder(rig, devices, plan, checksum=checksum, buffers_per_camera=buffers)
-    watch = DropWatch(say)
-    previous: Any = None
-    if catch_interrupt:
-        previous = signal.getsignal(signal.SIGINT)
-
-        def on_interrupt(signum: int, frame: FrameType | None) -> None:
-            recorder.stop()
-
-    try:
-        recorder.arm()
+        devices = devices or open_cameras(rig, list(sim or []))
+        plan = TakePlan.spread(name, destinations, sorted(devices.cameras, key=rig.camera_names.index))
+        buffers = buffers_per_camera or Recorder.default_buffers(Recorder.capture_format(rig))
+        try:
+            Staging(plan).check()  # the name taken, or a cut-off recording of it in the way: before preflight
+            report = preflight_take(rig, plan, frames, buffers)
+            for line in report.lines():
+                log.info("%s", line)
+            if on_preflight is not None:
+                on_preflight(report)
+            enforce(report, force)
+        except BaseException:
+            devices.close()
+            raise
+        recorder = Recorder(rig, devices, plan, checksum=checksum, buffers_per_camera=buffers)
+        watch = DropWatch(say)
+        previous: Any = None
         if catch_interrupt:
-            signal.signal(signal.SIGINT, on_interrupt)
-        recorder.start(frames)
-        recorder.wait(progress=progress, watch=watch)
+            previous = signal.getsignal(signal.SIGINT)
+
+            def on_interrupt(signum: int, frame: FrameType | None) -> None:
+                recorder.stop()
+
+        try:
+            recorder.arm()
+            if catch_interrupt:
+                signal.signal(signal.SIGINT, on_interrupt)
+            recorder.start(frames)
+            recorder.wait(progress=progress, watch=watch)
+        finally:
+            if catch_interrupt:
+                signal.signal(signal.SIGINT, previous)
+            manifest = recorder.finish()
+        kept = manifest is not None
     finally:
-        if catch_interrupt:
-            signal.signal(signal.SIGINT, previous)
-        manifest = recorder.finish()
+        if not kept:
+            made.remove_empty()
     return TakeResult(plan.folder, manifest, recorder, report, watch)

@@ -105,3 +105,26 @@ def test_a_recording_killed_mid_take_is_never_published_by_the_next_nor_lost(run
 
     staged.rename(tmp_path / "takes" / "t")  # what the line says to do to keep it
     assert check_take(tmp_path / "takes" / "t").ok
+
+
+@pytest.mark.parametrize(
+    ("camera", "extra", "code", "said"),
+    [  # a camera that is not there (found when arming, after preflight made the destinations)
+        ("v4l2:///dev/video99", ["--frames", "2"], EXIT_DEVICE, "v4l2:///dev/video99: no such device"),
+        # preflight's refusal (it measured the destinations' speed in them)
+        ("sim://r2c2", ["--seconds", "100000", *DET], EXIT_USAGE, "the take needs 1666.7 min"),
+    ],
+)
+def test_a_record_that_fails_leaves_no_folder_it_made(  # type: ignore[no-untyped-def]
+    run_cli, tmp_path: Path, camera: str, extra: list[str], code: int, said: str
+) -> None:
+    """It left empty --out and --dest folders behind (and their parents), for the user to find and clear."""
+    cameras = [dict(c) for c in SIM_RIG["cameras"]]
+    cameras[8]["device"] = camera
+    rig = str(write_yaml(tmp_path / "rig.yaml", {**SIM_RIG, "cameras": cameras}))
+    (tmp_path / "mine").mkdir()  # the user's: stays
+    argv = ["record", rig, "--take", "t", "--out", "a/b", "--dest", "c", "--dest", "mine/d", *extra]
+    res = run_cli(*argv)
+    assert res.returncode == code and said in res.stderr.splitlines()[-1], res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine", "rig.yaml"]
+    assert list((tmp_path / "mine").iterdir()) == []

@@ -53,3 +53,14 @@ def test_a_second_recording_of_a_name_being_recorded_is_refused_and_touches_noth
     first.publish()
     assert (tmp_path / "a" / "t" / "take.yaml").exists() and (tmp_path / "b" / "t").is_dir()
     assert not list(tmp_path.rglob("*.rigctl-recording"))
+
+
+def test_new_folders_are_removed_again_while_empty_and_nothing_else(tmp_path: Path) -> None:
+    from rigctl.publish import NewFolders
+
+    (tmp_path / "old").mkdir()
+    made = NewFolders(tmp_path / "a" / "b", tmp_path / "old" / "c", tmp_path / "old", tmp_path / "a" / "e")
+    for p in (tmp_path / "a" / "b", tmp_path / "old" / "c", tmp_path / "a" / "e" / "kept"):
+        p.mkdir(parents=True)
+    made.remove_empty()  # a/b goes, a stays (a/e holds something), old/c goes, old (there before) stays
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == ["a", "a/e", "a/e/kept", "old"]
