@@ -111,6 +111,8 @@ def _leftovers(dest: Path) -> list[tuple[Path, int]]:
 def cut_off_message(staged: Path, name: str, frames: int, others: list[Path]) -> str:
     """What a recording of ``name`` cut off (killed, power lost) left in ``staged``, and what to do with it."""
     head = f"{staged}: a recording of {name} that was cut off ({frames} frame(s), status: {_status(staged)})"
+    if not frames:
+        return f"{head}; it holds no frame: remove it (recording {name} there again does)"
     if others:
         return (
             f"{head}, with cameras in {', '.join(map(str, others))}; rigctl never publishes nor removes it: rename "
@@ -135,12 +137,14 @@ def check_leftovers(destinations: list[Path], final: TakePlan, dry_run: bool = F
         ours = {staging_folder(final.folder), *(staging_folder(f.parent) for f in final.camera_folders.values())}
         mine = [s for s, _ in held if s in ours]
         primary = staging_folder(final.folder)
-        # the primary's manifest names the take's folders on destinations this run may not record to
-        mine += [s for s, _ in _other_destinations(primary, final.name) if s not in mine] if primary in mine else []
+        if primary in mine:  # its manifest names the take's folders elsewhere (by absolute paths), maybe not here
+            known = {s.resolve() for s in mine}
+            mine += [s for s, _ in _other_destinations(primary, final.name) if s.resolve() not in known]
         for staged, _ in held if not dry_run else []:
             if staged not in ours:
                 name = staged.name[1 : -len(RECORDING_SUFFIX)]
-                log.warning("%s", cut_off_message(staged, name, _frames_in([staged]), []))
+                others = [s for s, _ in _other_destinations(staged, name)]
+                log.warning("%s", cut_off_message(staged, name, _frames_in([staged, *others]), others))
         frames = _frames_in(mine)
         if frames:
             first = primary if primary in mine else mine[0]
