@@ -79,8 +79,17 @@ def parse_address(text: str, role: str, schemes: tuple[str, ...]) -> Address:
 
 
 def camera_address(text: str, camera: str) -> Address:
-    return parse_address(text, f"camera {camera}", CAMERA_SCHEMES)
+    """The address of ``camera``; a simulated one is ``sim://`` and the camera's own name (the simulator makes
+    the rig's cameras, nothing else: a path or another camera's name is refused, as recording refuses it)."""
+    address = parse_address(text, f"camera {camera}", CAMERA_SCHEMES)
+    if address.scheme == "sim" and address.target != camera:
+        raise DeviceError(f"camera {camera}: device address {text!r}: a simulated camera is sim://{camera}")
+    return address
 
 
 def line_address(text: str, role: str) -> Address:
-    return parse_address(text, role, LINE_SCHEMES)
+    """The address of a serial or network line; the one simulated line is the SDI bridge, ``sim://bridge``."""
+    address = parse_address(text, role, LINE_SCHEMES)
+    if address.scheme == "sim" and address.target != "bridge":
+        raise DeviceError(f"{role}: device address {text!r}: the simulated line is sim://bridge")
+    return address

@@ -16,7 +16,6 @@ full, read-only) become :class:`~rigctl.errors.OutputError`: one line naming the
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import fcntl
 import io
@@ -242,22 +241,46 @@ class OutputLock:
             self.fd = None
 
 
+class NewFolders:
+    """Output folders and those of their parents that do not exist yet, noted before a run makes them, so that
+    :meth:`remove_empty` takes away again what the run made and left empty (a run that fails before writing
+    anything leaves no empty folder behind, to be found and cleared by hand). A folder the user made, or one
+    holding anything, stays."""
+
+    def __init__(self, *outs: Path) -> None:
+        self.chains: list[list[Path]] = []  # per output, deepest first
+        for out in outs:
+            chain, p = [], out
+            while not p.exists() and not p.is_symlink() and p != p.parent:
+                chain.append(p)
+                p = p.parent
+            self.chains.append(chain)
+
+    def remove_empty(self) -> None:
+        for chain in self.chains:
+            for folder in chain:
+                try:
+                    folder.rmdir()
+                except FileNotFoundError:
+                    continue  # another output of the run that shares it removed it, or it was never made
+                except OSError:
+                    break  # not empty (or not ours to remove): it stays, and so do its parents
+
+
 @contextmanager
 def output_folder(out: Path, verb: str, what: str = "--out") -> Iterator[Path]:
     """An output folder prepared (:func:`prepare_output`), locked for this run (:class:`OutputLock`) and
     cleared of the temporary files of an interrupted run: the whole of a writing command's output side. A
     folder this run made is removed again when the run fails before writing anything into it (a wrong input
     leaves no empty folder behind); nothing a run wrote is ever removed."""
-    made = not out.exists() and not out.is_symlink()
+    made = NewFolders(out)
     prepare_output(out, what)
     with OutputLock(out, verb):
         try:
             remove_stale_temps(out)
             yield out
         except BaseException:
-            if made:
-                with contextlib.suppress(OSError):  # not empty: kept as it is
-                    out.rmdir()
+            made.remove_empty()
             raise
 
 

@@ -148,8 +148,6 @@ def open_bridge(rig: Rig, url: str, devices: DeviceSet | None = None) -> SdiBrid
         raise DeviceError(f"bridge address {url!r}: the SDI bridge is a serial line, not udp://")
     if address.scheme != "sim":
         return SdiBridge(url)
-    if address.target != "bridge":
-        raise DeviceError(f"bridge address {url!r}: the simulated bridge is sim://bridge")
     from rigctl.camera_control import camera_ids
     from rigctl.simulators.array import SimArray
     from rigctl.simulators.sdi_bridge import SimSdiBridge
@@ -185,7 +183,7 @@ def simulated_array(rig: Rig, sim: list[str]) -> SimulatedArray:
     from rigctl.simulators.array import SimArray
     from rigctl.simulators.settings import parse_sim_args
 
-    return SimArray(rig, parse_sim_args(sim))
+    return SimArray(rig, parse_sim_args(sim, rig=rig))
 
 
 def simulated_view(take: Path, col: float, row: float) -> tuple[NDArray[np.float32], NDArray[np.bool_]] | None:

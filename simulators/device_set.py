@@ -10,7 +10,6 @@ from rigctl.simulators.camera import SimCamera
 from rigctl.simulators.settings import parse_sim_args
 
 from rigctl.address import Address
-from rigctl.errors import DeviceError
 from rigctl.interfaces import Camera
 from rigctl.rectification.geometry import rectification_record
 from rigctl.rig import Rig
@@ -39,13 +38,11 @@ def simulated_cameras(
     rig: Rig, sim_args: list[str], addresses: dict[str, Address]
 ) -> tuple[dict[str, Camera], SimTruth, dict[str, Any], str]:
     """The ``sim://`` cameras named in ``addresses`` on one simulated array, its truth, settings and summary."""
-    settings = parse_sim_args(sim_args)
+    settings = parse_sim_args(sim_args, rig=rig)
     array = SimArray(rig, settings)
     array.render_in_background()  # while preflight measures the disk: the cameras stream sooner
     cams: dict[str, SimCamera] = {}
-    for name, address in addresses.items():
-        if address.target != name:
-            raise DeviceError(f"{rig.source}: camera {name} has device {address}; expected sim://{name}")
+    for name in addresses:  # each sim://<its name> (rigctl.address.camera_address)
         cams[name] = SimCamera(name, array)
     out: dict[str, Camera] = dict(cams)
     return out, SimTruth(array, cams), settings.model_dump(mode="json"), array.describe()

@@ -13,7 +13,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from rigctl.errors import ParameterError
-from rigctl.rig import CAMERA_NAME
+from rigctl.rig import CAMERA_NAME, Rig
 
 NonNeg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 
@@ -140,8 +140,9 @@ def _value(text: str) -> Any:
         return text
 
 
-def parse_sim_args(pairs: list[str], base: dict[str, Any] | None = None) -> SimSettings:
-    """``["seed=7", "drops.r0c1=[5,6]"]`` -> validated settings; errors name the key."""
+def parse_sim_args(pairs: list[str], base: dict[str, Any] | None = None, rig: Rig | None = None) -> SimSettings:
+    """``["seed=7", "drops.r0c1=[5,6]"]`` -> validated settings; errors name the key. With ``rig``, a setting
+    naming a camera the rig does not have is refused too (a fault meant for it would silently not happen)."""
     data: dict[str, Any] = dict(base or {})
     for pair in pairs:
         if "=" not in pair:
@@ -158,7 +159,7 @@ def parse_sim_args(pairs: list[str], base: dict[str, Any] | None = None) -> SimS
         else:
             data[key] = value
     try:
-        return SimSettings.model_validate(data)
+        settings = SimSettings.model_validate(data)
     except ValidationError as exc:
         err = exc.errors()[0]
         loc = ".".join(str(p) for p in err["loc"])
@@ -166,6 +167,19 @@ def parse_sim_args(pairs: list[str], base: dict[str, Any] | None = None) -> SimS
             raise ParameterError(f"--sim {loc}: unknown setting (rigctl record --help lists them)") from None
         msg = str(err["msg"]).removeprefix("Value error, ")
         raise ParameterError(f"--sim {loc}: {msg}, got {err.get('input')!r}") from None
+    if rig is not None:
+        check_cameras(settings, rig)
+    return settings
+
+
+def check_cameras(settings: SimSettings, rig: Rig) -> None:
+    """Every camera a per-camera setting (or ``unlocked``) names is one of ``rig``'s, else one line naming it."""
+    for key in (*PER_CAMERA, "unlocked"):
+        for camera in getattr(settings, key):
+            if camera not in rig.camera_names:
+                loc = f"{key}.{camera}" if key in PER_CAMERA else f"{key}={camera}"
+                known = ", ".join(rig.camera_names)
+                raise ParameterError(f"--sim {loc}: rig {rig.name} has no camera {camera} (its cameras: {known})")
 
 
 def describe_settings() -> str:

@@ -18,10 +18,13 @@ from typing import Any
 from rigctl.capture.preflight import PreflightReport, WriteSpeed, check_destinations, rate_text
 from rigctl.capture.recorder import Recorder, TakePlan
 from rigctl.errors import ParameterError, PreflightError
+from rigctl.publish import NewFolders
 from rigctl.registry import DeviceSet, open_cameras
 from rigctl.rig import Rig
 from rigctl.take.manifest import Manifest
 from rigctl.take.names import check_take_name
+from rigctl.take.plan import check_buffers
+from rigctl.take.staging import Staging
 from rigctl.yuv10 import is_ten_bit
 
 log = logging.getLogger(__name__)
@@ -127,38 +130,46 @@ def record_take(
     name = check_take_name(name)
     if frames is not None and frames <= 0:
         raise ParameterError(f"frames must be a positive number of frame sets, got {frames}")
-    if buffers_per_camera is not None and buffers_per_camera < 2:
-        raise ParameterError(f"--buffers must be at least 2, got {buffers_per_camera}")
-    devices = devices or open_cameras(rig, list(sim or []))
-    plan = TakePlan.spread(name, destinations, sorted(devices.cameras, key=rig.camera_names.index))
-    buffers = buffers_per_camera or Recorder.default_buffers(Recorder.capture_format(rig))
+    if buffers_per_camera is not None:  # before the cameras are made: a pool too big is refused, not allocated
+        check_buffers(buffers_per_camera, Recorder.capture_format(rig).bytes_per_frame, len(rig.cameras))
+    made = NewFolders(*destinations)  # preflight makes the destinations: a run that keeps nothing removes them
+    kept = False
     try:
-        report = preflight_take(rig, plan, frames, buffers)
-        for line in report.lines():
-            log.info("%s", line)
-        if on_preflight is not None:
-            on_preflight(report)
-        enforce(report, force)
-    except BaseException:
-        devices.close()
-        raise
-    recorder = Recorder(rig, devices, plan, checksum=checksum, buffers_per_camera=buffers)
-    watch = DropWatch(say)
-    previous: Any = None
-    if catch_interrupt:
-        previous = signal.getsignal(signal.SIGINT)
-
-        def on_interrupt(signum: int, frame: FrameType | None) -> None:
-            recorder.stop()
-
-    try:
-        recorder.arm()
+        devices = devices or open_cameras(rig, list(sim or []))
+        plan = TakePlan.spread(name, destinations, sorted(devices.cameras, key=rig.camera_names.index))
+        buffers = buffers_per_camera or Recorder.default_buffers(Recorder.capture_format(rig))
+        try:
+            Staging(plan).check()  # the name taken, or a cut-off recording of it in the way: before preflight
+            report = preflight_take(rig, plan, frames, buffers)
+            for line in report.lines():
+                log.info("%s", line)
+            if on_preflight is not None:
+                on_preflight(report)
+            enforce(report, force)
+        except BaseException:
+            devices.close()
+            raise
+        recorder = Recorder(rig, devices, plan, checksum=checksum, buffers_per_camera=buffers)
+        watch = DropWatch(say)
+        previous: Any = None
         if catch_interrupt:
-            signal.signal(signal.SIGINT, on_interrupt)
-        recorder.start(frames)
-        recorder.wait(progress=progress, watch=watch)
+            previous = signal.getsignal(signal.SIGINT)
+
+            def on_interrupt(signum: int, frame: FrameType | None) -> None:
+                recorder.stop()
+
+        try:
+            recorder.arm()
+            if catch_interrupt:
+                signal.signal(signal.SIGINT, on_interrupt)
+            recorder.start(frames)
+            recorder.wait(progress=progress, watch=watch)
+        finally:
+            if catch_interrupt:
+                signal.signal(signal.SIGINT, previous)
+            manifest = recorder.finish()
+        kept = manifest is not None
     finally:
-        if catch_interrupt:
-            signal.signal(signal.SIGINT, previous)
-        manifest = recorder.finish()
+        if not kept:
+            made.remove_empty()
     return TakeResult(plan.folder, manifest, recorder, report, watch)

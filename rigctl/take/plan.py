@@ -4,9 +4,43 @@
 from __future__ import annotations
 
 import mmap
+import os
 import queue
 from dataclasses import dataclass
 from pathlib import Path
+
+from rigctl.errors import ParameterError
+
+# a pool is one mapping per buffer, and a process has at most vm.max_map_count (65530) of them: nine cameras of
+# 1024 buffers (41 s at 25 fps) stay far below it
+MAX_BUFFERS = 1024
+
+
+def physical_memory() -> int:
+    """Bytes of memory this machine has (0 where it cannot tell)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (OSError, ValueError):
+        return 0
+
+
+def check_buffers(buffers: int, frame_bytes: int, cameras: int, memory: int | None = None) -> int:
+    """``buffers`` frame buffers a camera, refused in one line naming ``--buffers`` before any is allocated unless
+    it is at least 2 (one written while one is filled), at most :data:`MAX_BUFFERS`, and every camera's pool
+    fits in half of the machine's ``memory`` (the pools are preallocated; beyond that the allocation fails, or
+    the kernel kills the recorder mid-take as the pages fill)."""
+    memory = physical_memory() if memory is None else memory
+    fit = memory // 2 // max(frame_bytes * cameras, 1) if memory > 0 else MAX_BUFFERS
+    most = max(2, min(MAX_BUFFERS, fit))
+    if not 2 <= buffers <= most:
+        why = (
+            f"the pools of {cameras} camera(s) of {frame_bytes / 1e6:.1f} MB frames within half of this machine's "
+            f"{memory / 1e9:.1f} GB of memory"
+            if fit < MAX_BUFFERS
+            else "a camera's pool is one memory mapping a buffer"
+        )
+        raise ParameterError(f"--buffers must be 2 to {most} ({why}), got {buffers}")
+    return buffers
 
 
 class FramePool:

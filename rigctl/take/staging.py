@@ -7,10 +7,12 @@ renamed to ``NAME`` first, the primary one last: that rename publishes the take.
 frame at all publishes nothing and its folders are removed.
 
 A recorder killed on the way (SIGKILL, power loss) leaves its frames in the hidden folders, readable as they
-are (``rigctl take check .<NAME>.rigctl-recording``): nothing recorded is lost. The next recording on that
-destination finds them (their lock is free: nobody records them) and publishes them under their name as the
-take they are (``status: recording``, every indexed frame readable), in one line; a leftover without a frame
-is removed, also in one line; one that cannot be published (its name is taken) is named and left alone.
+are (``rigctl take check .<NAME>.rigctl-recording``): nothing recorded is lost. No later run publishes them
+(a cut-off recording under the take's name would pass for the take) nor removes a frame of them: a recording
+of the same name is refused in one line naming the leftover and what to do (rename it to ``NAME`` to keep it,
+or remove it); a recording of another name records, with a warning naming the leftover. Only a leftover of
+the same name without a frame anywhere (cut off before its first) is removed, in one line. A leftover is one
+whose lock is free: nobody records it.
 """
 
 from __future__ import annotations
@@ -71,15 +73,29 @@ def _other_destinations(staged: Path, name: str) -> list[tuple[Path, Path]]:
 
 
 def _frames_in(folders: list[Path]) -> int:
-    return sum(p.stat().st_size // RECORD_SIZE for f in folders for p in (f / "cameras").glob("*.index") if p.is_file())
+    """Frames the index files under ``folders`` hold; 1 for a folder with essence bytes and no index record yet
+    (a frame written, its record not): what is recorded there is never removed."""
+    frames = 0
+    for f in folders:
+        cams = [p for p in (f / "cameras").glob("*") if p.is_file() and not p.is_symlink()]
+        indexed = sum(p.stat().st_size // RECORD_SIZE for p in cams if p.suffix == ".index")
+        frames += indexed or int(any(p.stat().st_size for p in cams if p.suffix == ".essence"))
+    return frames
 
 
-def recover_leftovers(dest: Path) -> list[Path]:
-    """Publish (or, holding no frame, remove) what recorders killed on ``dest`` left; returns the takes
-    published. A leftover a live recorder holds is not touched."""
-    published: list[Path] = []
+def _status(staged: Path) -> str:
+    try:
+        return read_manifest(staged).status
+    except RigctlError:
+        return "no manifest here" if not (staged / "take.yaml").exists() else "unreadable manifest"
+
+
+def _leftovers(dest: Path) -> list[tuple[Path, int]]:
+    """Every hidden take folder on ``dest`` no live recorder holds, each with its lock taken (the caller closes
+    every descriptor)."""
+    out: list[tuple[Path, int]] = []
     if not dest.is_dir():
-        return published
+        return out
     for staged in sorted(dest.glob(f".*{RECORDING_SUFFIX}")):
         if staged.is_symlink() or not staged.is_dir():
             continue
@@ -87,53 +103,59 @@ def recover_leftovers(dest: Path) -> list[Path]:
             fd = _try_lock(staged)
         except OSError:
             continue
-        if fd is None:
-            continue  # being recorded now
-        try:
-            final = dest / staged.name[1 : -len(RECORDING_SUFFIX)]
-            others = _other_destinations(staged, final.name)
-            frames = _frames_in([staged, *(s for s, _ in others)])
-            if frames and not (staged / "take.yaml").is_file():  # cameras of a take whose manifest is elsewhere
-                log.warning(
-                    "%s: %d frame(s) of cameras of a recording of %s that was cut off; they are published with the "
-                    "folder that holds its take.yaml (on the first destination), else left here",
-                    staged,
-                    frames,
-                    final.name,
-                )
-            elif frames == 0:
-                for s in [staged, *(s for s, _ in others)]:
-                    shutil.rmtree(s, ignore_errors=True)
-                log.warning("%s: removed what a recording cut off before its first frame left", staged)
-            elif final.exists() or final.is_symlink() or any(f.exists() for _, f in others):
-                log.warning(
-                    "%s: %d frame(s) of a recording of %s that was cut off; %s exists, so they stay here (rename "
-                    "the folder to keep them as a take, or remove it)",
-                    staged,
-                    frames,
-                    final.name,
-                    final,
-                )
-            else:
-                for s, f in others:
-                    os.rename(s, f)
-                    fsync_dir(f.parent)
-                os.rename(staged, final)
-                fsync_dir(dest)
-                published.append(final)
-                log.warning(
-                    "%s: the %d frame(s) of a recording that was cut off are kept as take %s (status: recording; "
-                    "rigctl take check %s)",
-                    final,
-                    frames,
-                    final.name,
-                    final,
-                )
-        except OSError as exc:
-            log.warning("%s: left as it is, a recording that was cut off: %s", staged, exc.strerror or exc)
-        finally:
+        if fd is not None:  # None: being recorded now
+            out.append((staged, fd))
+    return out
+
+
+def cut_off_message(staged: Path, name: str, frames: int, others: list[Path]) -> str:
+    """What a recording of ``name`` cut off (killed, power lost) left in ``staged``, and what to do with it."""
+    head = f"{staged}: a recording of {name} that was cut off ({frames} frame(s), status: {_status(staged)})"
+    if not frames:
+        return f"{head}; it holds no frame: remove it (recording {name} there again does)"
+    if others:
+        return (
+            f"{head}, with cameras in {', '.join(map(str, others))}; rigctl never publishes nor removes it: rename "
+            f"each folder to {name} beside it to keep it as that take, or remove them"
+        )
+    return (
+        f"{head}; rigctl never publishes nor removes it: 'rigctl take check {staged}' reads it; rename it to "
+        f"{staged.parent / name} to keep it as that take, or remove it"
+    )
+
+
+def check_leftovers(destinations: list[Path], final: TakePlan, dry_run: bool = False) -> None:
+    """What recorders killed on ``destinations`` left, before recording ``final`` there. No run publishes
+    another's interrupted recording, nor removes a frame of it: a leftover of this take's name that holds a frame
+    refuses the recording in one line naming it; one without a frame anywhere (cut off before its first) is
+    removed, in one line; a leftover of another name is named in a warning and left as it is. ``dry_run``: the
+    refusal only, nothing said or removed."""
+    held: list[tuple[Path, int]] = []
+    try:
+        for dest in destinations:
+            held.extend(_leftovers(dest))
+        ours = {staging_folder(final.folder), *(staging_folder(f.parent) for f in final.camera_folders.values())}
+        mine = [s for s, _ in held if s in ours]
+        primary = staging_folder(final.folder)
+        if primary in mine:  # its manifest names the take's folders elsewhere (by absolute paths), maybe not here
+            known = {s.resolve() for s in mine}
+            mine += [s for s, _ in _other_destinations(primary, final.name) if s.resolve() not in known]
+        for staged, _ in held if not dry_run else []:
+            if staged not in ours:
+                name = staged.name[1 : -len(RECORDING_SUFFIX)]
+                others = [s for s, _ in _other_destinations(staged, name)]
+                log.warning("%s", cut_off_message(staged, name, _frames_in([staged, *others]), others))
+        frames = _frames_in(mine)
+        if frames:
+            first = primary if primary in mine else mine[0]
+            others = [s for s in mine if s != first]
+            raise TakeError(cut_off_message(first, final.name, frames, others))
+        for staged in (s for s, _ in held if s in mine and not dry_run):  # under our lock: nobody records it
+            shutil.rmtree(staged, ignore_errors=True)
+            log.warning("%s: removed what a recording cut off before its first frame left", staged)
+    finally:
+        for _, fd in held:
             os.close(fd)
-    return published
 
 
 class Staging:
@@ -154,22 +176,29 @@ class Staging:
         primary = (self.plan.folder, self.final.folder)
         return [*sorted(pairs - {primary}), primary]
 
+    def check(self) -> None:
+        """Refuse in one line, before anything is made, a take whose name is taken or that a cut-off recording
+        of the name is in the way of (:meth:`create` decides again, and says what it finds of other names)."""
+        self._check(dry_run=True)
+
+    def _check(self, dry_run: bool) -> None:
+        check_leftovers([final.parent for _, final in reversed(self.take_folders())], self.final, dry_run)
+        if self.final.folder.exists() or self.final.folder.is_symlink():
+            raise TakeError(f"{self.final.folder}: a take of that name exists already; takes are never overwritten")
+
     def create(self) -> None:
-        """Publish what killed recorders left on the destinations, then make this recording's hidden folders
-        (locked); refused in one line when the name is taken or being recorded."""
-        for _, final in reversed(self.take_folders()):  # the primary first: it takes its other folders along
-            recover_leftovers(final.parent)
+        """Check what killed recorders left on the destinations (:func:`check_leftovers`), then make this
+        recording's hidden folders (locked); refused in one line when the name is taken, being recorded, or a
+        cut-off recording of it is in the way."""
+        self._check(dry_run=False)
         folder = self.final.folder
-        if folder.exists() or folder.is_symlink():
-            raise TakeError(f"{folder}: a take of that name exists already; takes are never overwritten")
         for staged, _ in reversed(self.take_folders()):  # the primary first: it decides who records the name
             try:
                 staged.mkdir(parents=True)
             except FileExistsError:
                 self.discard()
                 raise TakeError(
-                    f"{folder}: {staged} is in the way: another rigctl run is recording a take of that name, or "
-                    "a recording of it was cut off (see the line above)"
+                    f"{folder}: {staged} is in the way: another rigctl run is recording a take of that name"
                 ) from None
             fd = _try_lock(staged)
             if fd is None:  # made and locked between our mkdir and lock: never ours

@@ -53,7 +53,8 @@ def test_sigkill_mid_take_leaves_a_readable_take(tmp_path: Path) -> None:
     proc.wait(timeout=10)
     folder = tmp_path / "crash"
     assert not folder.exists(), "a take cut off carries the name before anyone looked at it"
-    # the frames are readable where they are, and the next recording on the destination publishes them
+    # the frames are readable where they are; the next recording of the name is refused, naming them, and
+    # leaves them as they are (test_hostile_record.py); renamed to the name, as that line says, they are the take
     assert yaml.safe_load((staged / "take.yaml").read_text())["status"] == "recording"
     check = subprocess.run([*rigctl_exe(), "take", "check", str(staged)], capture_output=True, text=True)
     assert check.returncode == 0, check.stderr
@@ -61,10 +62,9 @@ def test_sigkill_mid_take_leaves_a_readable_take(tmp_path: Path) -> None:
         [*rigctl_exe(), "record", "--take", "crash", "--frames", "2", "--out", str(tmp_path), *STEADY],
         capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL,
     )  # fmt: skip
-    assert again.returncode == 3, again.stderr  # the name is the cut-off take's now: never overwritten
-    recovered = [ln for ln in again.stderr.splitlines() if "cut off are kept as take crash" in ln]
-    assert len(recovered) == 1 and "exists already" in again.stderr.splitlines()[-1], again.stderr
-    assert not staged.exists()
+    assert again.returncode == 3 and "a recording of crash that was cut off" in again.stderr.splitlines()[-1]
+    assert not folder.exists()
+    staged.rename(folder)
     assert yaml.safe_load((folder / "take.yaml").read_text())["status"] == "recording"
     check = subprocess.run([*rigctl_exe(), "take", "check", str(folder)], capture_output=True, text=True)
     assert check.returncode == 0, check.stderr
@@ -249,7 +249,8 @@ def test_a_record_killed_before_its_first_frame_leaves_the_name_free(tmp_path: P
 
 def test_a_record_killed_as_it_publishes_keeps_its_whole_take(tmp_path: Path) -> None:
     """Killed at the rename that publishes the take (everything written, the final manifest too): the next
-    recording on the destination publishes it under its name, complete, and is refused that name."""
+    recording of the name is refused in one line naming it (complete), which leaves it as it is; another name
+    records beside it; renamed to its name, it is the whole take."""
     killed = _record(tmp_path, "t", runner=("replace", "23", "KILL"))
     assert killed.returncode == -9, killed.stderr
     takes = tmp_path / "takes"
@@ -257,10 +258,12 @@ def test_a_record_killed_as_it_publishes_keeps_its_whole_take(tmp_path: Path) ->
     assert not (takes / "t").exists()
     assert yaml.safe_load((staged / "take.yaml").read_text())["status"] == "complete", "killed elsewhere"
     res = _record(tmp_path, "t")
-    assert res.returncode == 3 and "exists already" in res.stderr.splitlines()[-1], res.stderr
-    assert not staged.exists() and check_take(takes / "t").ok
-    assert len(TakeReader(takes / "t").complete_sets()) == 3
+    assert res.returncode == 3, res.stderr
+    assert f"{staged}: a recording of t that was cut off (" in res.stderr.splitlines()[-1], res.stderr
+    assert "status: complete" in res.stderr.splitlines()[-1] and not (takes / "t").exists()
     assert _record(tmp_path, "u").returncode == 0  # and the destination records on
+    staged.rename(takes / "t")
+    assert check_take(takes / "t").ok and len(TakeReader(takes / "t").complete_sets()) == 3
 
 
 def test_a_record_that_keeps_no_frame_leaves_nothing(small_fs: Path) -> None:
@@ -282,10 +285,11 @@ def small_fs_free(folder: Path) -> int:
     return st.f_bavail * st.f_frsize
 
 
-def test_a_record_killed_mid_take_over_two_destinations_is_published_whole_on_both(tmp_path: Path) -> None:
+def test_a_record_killed_mid_take_over_two_destinations_is_kept_whole_on_both(tmp_path: Path) -> None:
     """Killed while writing frames (SIGKILL at an essence write) with cameras on two destinations: nothing
-    under the name on either; the next recording publishes both folders under the name, every indexed frame
-    readable through the manifest's paths, and records its own take beside it."""
+    under the name on either; the next recording of another name records beside them, naming them in a
+    warning, and leaves them as they are; one of the name is refused naming both; renamed to the name, as
+    that line says, every indexed frame reads through the manifest's paths."""
     other = tmp_path / "other"
     killed = _record(tmp_path, "t", "--dest", str(other), runner=("write", "60", "KILL"))
     assert killed.returncode == -9, killed.stderr
@@ -294,8 +298,16 @@ def test_a_record_killed_mid_take_over_two_destinations_is_published_whole_on_bo
     assert (other / ".t.rigctl-recording" / "cameras").is_dir()
     res = _record(tmp_path, "u", "--dest", str(other))
     assert res.returncode == 0, res.stderr
-    assert len([ln for ln in res.stderr.splitlines() if "are kept as take t" in ln]) == 1, res.stderr
-    assert not list(tmp_path.rglob("*.rigctl-recording"))
+    warned = [ln for ln in res.stderr.splitlines() if "a recording of t that was cut off" in ln]
+    assert len(warned) == 2, res.stderr  # one line for each destination's folder
+    assert (takes / ".t.rigctl-recording").is_dir() and (other / ".t.rigctl-recording").is_dir()
+    res = _record(tmp_path, "t", "--dest", str(other))
+    assert res.returncode == 3, res.stderr
+    line = res.stderr.splitlines()[-1]
+    assert f"{takes / '.t.rigctl-recording'}: a recording of t that was cut off" in line, line
+    assert f"with cameras in {other / '.t.rigctl-recording'}" in line, line
+    for dest in (takes, other):
+        (dest / ".t.rigctl-recording").rename(dest / "t")
     report = check_take(takes / "t")
     assert report.ok, report.errors
     reader = TakeReader(takes / "t")

@@ -14,7 +14,7 @@ from rigctl.rig import load_rig, rig_from_dict
 @pytest.mark.parametrize(
     ("text", "scheme", "target"),
     [
-        ("sim://r1c1", "sim", "r1c1"),
+        ("sim://r0c0", "sim", "r0c0"),
         ("v4l2:///dev/video3", "v4l2", "/dev/video3"),
         ("/dev/video0", "v4l2", "/dev/video0"),
         ("/dev/v4l/by-id/usb-x-video-index0", "v4l2", "/dev/v4l/by-id/usb-x-video-index0"),
@@ -54,6 +54,12 @@ def test_query_options_are_parsed_once() -> None:
         ("video0", "unknown scheme"),
         ("v4l2://dev/video0", "absolute path"),
         ("sim://", "names no device"),
+        # a simulated camera is the camera of the rig it names, never a path or another camera (a hostile-user
+        # review: rigctl devices called sim://../../x a simulated camera, which record refused)
+        ("sim://../../x", "'sim://../../x': a simulated camera is sim://r2c1"),
+        ("sim:///dev/video0", "a simulated camera is sim://r2c1"),
+        ("sim://r0c0", "a simulated camera is sim://r2c1"),
+        ("sim://bridge", "a simulated camera is sim://r2c1"),
         ("", "empty"),
         ("   ", "empty"),
     ],
@@ -61,6 +67,12 @@ def test_query_options_are_parsed_once() -> None:
 def test_bad_camera_addresses_name_the_camera(text: str, why: str) -> None:
     with pytest.raises(DeviceError, match=f"camera r2c1: .*{why}"):
         camera_address(text, "r2c1")
+
+
+@pytest.mark.parametrize("text", ["sim://../../x", "sim://r0c0", "sim://bridge/../x"])
+def test_the_one_simulated_line_is_the_bridge(text: str) -> None:
+    with pytest.raises(DeviceError, match=f"tally port: device address '{text}': the simulated line is sim://bridge"):
+        line_address(text, "tally port")
 
 
 def test_a_line_scheme_is_not_a_camera() -> None:

@@ -6,6 +6,8 @@ import pytest
 from rigctl.simulators.settings import describe_settings, parse_sim_args
 
 from rigctl.errors import ParameterError
+from rigctl.registry import open_cameras
+from rigctl.rig import load_rig
 
 
 def test_values_and_per_camera_keys() -> None:
@@ -49,6 +51,26 @@ def test_values_and_per_camera_keys() -> None:
 def test_bad_settings_are_named(pairs: list[str], message: str) -> None:
     with pytest.raises(ParameterError, match=message.replace(".", r"\.").replace("[", r"\[")):
         parse_sim_args(pairs)
+
+
+@pytest.mark.parametrize(
+    ("pairs", "message"),
+    [
+        (["drops.r9c9=[0]"], "--sim drops.r9c9: rig sim-3x3 has no camera r9c9 (its cameras: r0c0, r0c1,"),
+        (["skew_us.r3c0=10"], "--sim skew_us.r3c0: rig sim-3x3 has no camera r3c0"),
+        (["signal_loss.r0c3=[1,2]"], "--sim signal_loss.r0c3: rig sim-3x3 has no camera r0c3"),
+        (["unlocked=[r1c1,r7c7]"], "--sim unlocked=r7c7: rig sim-3x3 has no camera r7c7"),
+    ],
+)
+def test_a_fault_for_a_camera_the_rig_lacks_is_refused(pairs: list[str], message: str) -> None:
+    """A hostile-user review: ``drops.r9c9=[0]`` on a 3x3 rig was accepted and injected nothing."""
+    rig = load_rig("sim-3x3")
+    assert parse_sim_args(pairs).model_dump()  # a valid camera name: the settings alone cannot tell
+    with pytest.raises(ParameterError) as caught:
+        parse_sim_args(pairs, rig=rig)
+    assert message in str(caught.value) and str(caught.value).endswith("r2c2)")
+    with pytest.raises(ParameterError, match="no camera r9c9"):
+        open_cameras(rig, ["drops.r9c9=[0]"])  # where record, the shoot UI and the demo get their cameras
 
 
 def test_help_lists_every_setting() -> None:

@@ -11,10 +11,11 @@ import pytest
 import yaml
 
 from rigctl.depth.grid import FrameImages, TakeGrid
-from rigctl.errors import TakeError
+from rigctl.errors import ParameterError, TakeError
 from rigctl.interfaces import Frame, FrameFlags
 from rigctl.pixfmt import from_rgb, rgb_to_uyvy, to_bgr8, to_gray8, to_rgb, to_u8
 from rigctl.take.manifest import Manifest, read_manifest, write_manifest
+from rigctl.take.plan import MAX_BUFFERS, check_buffers
 from rigctl.take.reader import TakeReader
 from rigctl.take.writer import CameraWriter, TakeWriter
 from rigctl.timecode import Timecode
@@ -210,3 +211,17 @@ def test_the_grid_gives_the_matcher_8_bit_without_making_float_first(tmp_path: P
     assert images._float == {}  # no float picture was made on the way to the matcher
     assert np.array_equal(images["r0c0"], to_rgb(packed, "UYVY", W, H))  # the float picture, unquantised
     assert images.shape() == (H, W)
+
+
+def test_a_frame_pool_is_bounded_by_count_and_memory() -> None:
+    """``--buffers 999999999`` was an ENOMEM traceback from the pool's mmap; now one line before allocating."""
+    assert check_buffers(2, 1 << 20, 9, memory=64 << 30) == 2
+    assert check_buffers(MAX_BUFFERS, 1 << 20, 9, memory=64 << 30) == MAX_BUFFERS
+    with pytest.raises(ParameterError, match=r"--buffers must be 2 to 1024 .*got 1025"):
+        check_buffers(MAX_BUFFERS + 1, 1 << 20, 9, memory=64 << 30)
+    with pytest.raises(ParameterError, match=r"got 1$"):
+        check_buffers(1, 1 << 20, 9)
+    # nine UHD cameras (16.6 MB frames) on a 16 GB machine: 53 buffers each fill half of its memory
+    with pytest.raises(ParameterError, match=r"2 to 53 \(the pools of 9 camera\(s\) of 16.6 MB frames .*16.0 GB"):
+        check_buffers(54, 3840 * 2160 * 2, 9, memory=16 * 10**9)
+    assert check_buffers(53, 3840 * 2160 * 2, 9, memory=16 * 10**9) == 53

@@ -53,3 +53,54 @@ def test_a_second_recording_of_a_name_being_recorded_is_refused_and_touches_noth
     first.publish()
     assert (tmp_path / "a" / "t" / "take.yaml").exists() and (tmp_path / "b" / "t").is_dir()
     assert not list(tmp_path.rglob("*.rigctl-recording"))
+
+
+def test_new_folders_are_removed_again_while_empty_and_nothing_else(tmp_path: Path) -> None:
+    from rigctl.publish import NewFolders
+
+    (tmp_path / "old").mkdir()
+    made = NewFolders(tmp_path / "a" / "b", tmp_path / "old" / "c", tmp_path / "old", tmp_path / "a" / "e")
+    for p in (tmp_path / "a" / "b", tmp_path / "old" / "c", tmp_path / "a" / "e" / "kept"):
+        p.mkdir(parents=True)
+    made.remove_empty()  # a/b goes, a stays (a/e holds something), old/c goes, old (there before) stays
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == ["a", "a/e", "a/e/kept", "old"]
+
+
+def test_leftovers_are_never_published_nor_their_frames_removed(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """What killed recorders left (their locks free): one of another name is named in a warning and left as it
+    is; one of the name holding a frame (indexed, or essence bytes before the first record) refuses the name;
+    only one of the name without a frame is removed."""
+    from rigctl.errors import TakeError
+    from rigctl.take.index import RECORD_SIZE
+    from rigctl.take.plan import TakePlan
+    from rigctl.take.staging import Staging
+
+    def killed(name: str, index: int, essence: int) -> Path:
+        staging = Staging(TakePlan.spread(name, [tmp_path], ["r0c0"]))
+        staging.create()
+        cameras = staging.plan.camera_folders["r0c0"]
+        cameras.mkdir(parents=True)
+        (cameras / "r0c0.index").write_bytes(b"\1" * index)
+        (cameras / "r0c0.essence").write_bytes(b"\2" * essence)
+        staging.release()  # its lock goes with the process
+        return staging.plan.folder
+
+    indexed, unindexed, empty = killed("t", 2 * RECORD_SIZE, 100), killed("w", 0, 100), killed("e", 0, 0)
+    files = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    u = Staging(TakePlan.spread("u", [tmp_path], ["r0c0"]))
+    with caplog.at_level("WARNING"):
+        u.create()
+    said = " ".join(caplog.messages)
+    assert "a recording of t that was cut off (2 frame(s)" in said and "a recording of w that was cut off (1 " in said
+    assert "a recording of e that was cut off (0 frame(s), status: no manifest here); it holds no frame" in said
+    u.discard()
+    for name, folder in (("t", indexed), ("w", unindexed)):
+        with pytest.raises(TakeError, match=f"{folder}: a recording of {name} that was cut off .*never publishes"):
+            Staging(TakePlan.spread(name, [tmp_path], ["r0c0"])).create()
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == files
+    e = Staging(TakePlan.spread("e", [tmp_path], ["r0c0"]))
+    e.create()  # the frame-less leftover of its own name is removed, and the name recorded
+    assert empty.is_dir() and list(empty.iterdir()) == [] and e.plan.folder == empty
+    e.discard()
