@@ -22,7 +22,7 @@ from pathlib import Path
 
 from rigctl import __version__
 from rigctl.allocator import limit_arenas
-from rigctl.cli import args
+from rigctl.cli import args, stdout
 from rigctl.cli.helptext import examples
 from rigctl.errors import EXIT_INTERRUPTED, EXIT_USAGE, RigctlError
 from rigctl.publish import output_error
@@ -78,17 +78,7 @@ def _take_debug(argv: list[str]) -> tuple[list[str], bool]:
     return head + argv[end:], len(head) != end
 
 
-def _quiet_closed_pipe() -> None:
-    """The reader of our stdout went away: send what is left to /dev/null so nothing more is reported."""
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, sys.stdout.fileno())
-    finally:
-        os.close(devnull)
-
-
-def main(argv: list[str] | None = None) -> int:
-    argv, debug = _take_debug(list(sys.argv[1:] if argv is None else argv))
+def _run(argv: list[str], debug: bool) -> int:
     parser = build_parser(_verb(argv))
     ns = parser.parse_args(argv)
     ns.debug = debug
@@ -101,27 +91,38 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     if ns.verb in DEPTH_VERBS:
         limit_arenas()  # before any of the verb's threads allocate (recording keeps glibc's default)
+    return int(ns.func(ns))
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv, debug = _take_debug(list(sys.argv[1:] if argv is None else argv))
+    verb = _verb(argv)
+    prog = f"rigctl {verb}" if verb else "rigctl"
+    # a stdout that is full, failing or closed is one line wherever it is written, help and parser included
+    saved, sys.stdout = sys.stdout, stdout.guard(sys.stdout)
     try:
-        code = int(ns.func(ns))
-        sys.stdout.flush()  # a closed pipe shows here, inside the handler, not at interpreter exit
+        code = _run(argv, debug)
+        sys.stdout.flush()  # a closed pipe or a full stdout shows here, inside the handler, not at interpreter exit
         return code
     except BrokenPipeError:
-        _quiet_closed_pipe()
+        stdout.to_devnull(1)  # the reader went away: what is left goes nowhere and nothing more is reported
         return 0
     except RigctlError as exc:
-        if ns.debug:
+        if debug:
             raise
-        sys.stderr.write(f"rigctl {ns.verb}: error: {exc}\n")
+        sys.stderr.write(f"{prog}: error: {exc}\n")
         return exc.exit_code
     except OSError as exc:  # the output side's last line of defence: a file that could not be written or read
-        if ns.debug or exc.filename is None:
+        if debug or exc.filename is None:
             raise
         error = output_error(Path(os.fsdecode(exc.filename)), exc)
-        sys.stderr.write(f"rigctl {ns.verb}: error: {error}\n")
+        sys.stderr.write(f"{prog}: error: {error}\n")
         return error.exit_code
     except KeyboardInterrupt:
-        sys.stderr.write(f"rigctl {ns.verb}: interrupted\n")
+        sys.stderr.write(f"{prog}: interrupted\n")
         return EXIT_INTERRUPTED
+    finally:
+        sys.stdout = saved
 
 
 if __name__ == "__main__":

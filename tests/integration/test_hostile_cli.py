@@ -200,6 +200,20 @@ def test_closed_pipe_is_quiet(tmp_path: Path) -> None:
     assert res.stdout.startswith("{\n{") and res.stderr == ""
 
 
+@pytest.mark.parametrize(
+    ("redirect", "fragment"),
+    [("> /dev/full", "stdout (/dev/full): cannot write the output: no space left on the device"),
+     (">&-", "stdout is closed")],
+)  # fmt: skip
+@pytest.mark.parametrize("argv", ["plan", "plan --json", "--help", "board --help"])
+def test_a_full_or_closed_stdout_is_one_line(tmp_path: Path, redirect: str, fragment: str, argv: str) -> None:
+    exe = " ".join(rigctl_exe())
+    res = subprocess.run(
+        f"{exe} {argv} {redirect}", shell=True, capture_output=True, text=True, cwd=tmp_path, timeout=120
+    )
+    one_line(res, EXIT_DEVICE, fragment)
+
+
 def test_python_dash_m_and_debug_anywhere(tmp_path: Path) -> None:
     res = subprocess.run(
         [sys.executable, "-m", "rigctl", "plan", "--near", "3", "--far", "2"],
