@@ -25,7 +25,7 @@ import os
 import shutil
 import stat
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
@@ -67,7 +67,7 @@ def prepare_output(out: Path, what: str = "--out") -> Path:
     writable. Returns ``out``."""
     utf8_path(out, what)
     if out.exists() and not out.is_dir():
-        raise OutputError(f"{what} {out}: is a file, not a folder")
+        raise OutputError(f"{what} {out}: is {kind(out.stat().st_mode)}, not a folder")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -94,7 +94,9 @@ def temp_name(path: Path) -> Path:
     return path.with_name(f".{path.name}.{os.getpid()}{TEMP_SUFFIX}")
 
 
-_SPECIAL_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"))
+_KINDS = (
+    (stat.S_ISREG, "a file"), (stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket")
+)  # fmt: skip
 
 
 def refuse_special(path: Path) -> None:
@@ -108,8 +110,13 @@ def refuse_special(path: Path) -> None:
         raise output_error(path, exc) from None
     if stat.S_ISREG(mode) or stat.S_ISLNK(mode):
         return
-    kind = next((k for test, k in _SPECIAL_KINDS if test(mode)), "a device")
-    raise OutputError(f"{path}: exists and is {kind}, not a file: not replaced (choose another output name)")
+    raise OutputError(f"{path}: exists and is {kind(mode)}, not a file: not replaced (choose another output name)")
+
+
+def kind(mode: int) -> str:
+    """What a file of ``st_mode`` is, for a message: ``a file``, ``a folder``, ``a FIFO``, ``a socket``,
+    ``a device``."""
+    return next((k for test, k in _KINDS if test(mode)), "a device")
 
 
 @contextmanager
@@ -137,11 +144,18 @@ def publishing(path: Path, durable: bool = True) -> Iterator[Path]:
         if durable:
             fsync_dir(path.parent)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
+        _discard(tmp)
         raise output_error(path, exc) from None
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        _discard(tmp)
         raise
+
+
+def _discard(tmp: Path) -> None:
+    """Remove a temporary that may never have been made: on a read-only file system unlink fails with EROFS
+    rather than ENOENT, and that must not hide why the write failed."""
+    with suppress(OSError):
+        tmp.unlink()
 
 
 def move_into(staged: Path, final: Path) -> list[Path]:

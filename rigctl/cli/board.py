@@ -11,6 +11,7 @@ from PIL import Image
 from rigctl.board import DICTIONARIES, BoardSpec
 from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
+from rigctl.publish import publishing, refuse_special, utf8_path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -74,19 +75,20 @@ def run(ns: argparse.Namespace) -> int:
         )
     if px_per_square < 20:
         raise ParameterError(f"{ns.square_mm} mm at {ns.dpi} dpi is {px_per_square} px per square: raise --dpi")
+    png, yml = ns.out.with_suffix(".png"), ns.out.with_suffix(".yaml")
+    for path in (png, yml):  # a name held by a folder, FIFO or device is refused before any drawing
+        utf8_path(path)
+        refuse_special(path)
     margin = round(ns.margin_mm / 25.4 * ns.dpi)
     image = spec.image(px_per_square, margin)
-    ns.out.parent.mkdir(parents=True, exist_ok=True)
-    png, yml = ns.out.with_suffix(".png"), ns.out.with_suffix(".yaml")
     # the PNG states its physical resolution (pHYs, whole pixels per metre): the one at which a square of
     # px_per_square pixels is square_mm, so "print at 100 %" gives the board's size whatever the tool
     px_per_m = round(px_per_square / (ns.square_mm / 1000))
     dpi = px_per_m * 0.0254  # what the print gives exactly (--dpi rounded to whole pixels per square)
-    try:
+    # published whole like every output: a read-only or full destination is one line with exit 4 (OutputError)
+    with publishing(png) as tmp:
         # OpenCV cannot write pHYs; Pillow writes dpi as round(dpi / 0.0254) pixels per metre
-        Image.fromarray(image).save(png, format="PNG", dpi=(dpi, dpi), optimize=True)
-    except OSError as exc:
-        raise ParameterError(f"{png}: cannot write the image: {exc.strerror or exc}") from None
+        Image.fromarray(image).save(tmp, format="PNG", dpi=(dpi, dpi), optimize=True)
     # the printed square size follows from the DPI: record it so a user can check the print with a ruler
     spec.save(yml)
     h, w = image.shape

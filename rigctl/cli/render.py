@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING, Any
 from rigctl.cli.args import distance
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
-from rigctl.errors import ParameterError
-from rigctl.publish import output_folder, utf8_path
+from rigctl.errors import OutputError, ParameterError
+from rigctl.publish import kind, output_folder, utf8_path
 
 if TYPE_CHECKING:
     from rigctl.render.views import LeaveOneOutRow
@@ -122,14 +122,14 @@ def _check_out(out: Path) -> None:
     that then fails on its input leaves nothing behind)."""
     utf8_path(out)
     if out.exists():
-        if not out.is_dir():
-            raise ParameterError(f"{out}: cannot make the output folder: a file of that name exists")
+        if not out.is_dir():  # a file, or a device such as /dev/null: exit 4 like any unusable destination
+            raise OutputError(f"--out {out}: cannot make the output folder: it is {kind(out.stat().st_mode)}")
         return
     parent = out.parent
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
     if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
-        raise ParameterError(f"{out}: cannot make the output folder: {parent} is not a writable folder")
+        raise OutputError(f"--out {out}: cannot make the output folder: {parent} is not a writable folder")
 
 
 def run(ns: argparse.Namespace) -> int:

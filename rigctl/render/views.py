@@ -14,7 +14,7 @@ import numpy as np
 import OpenEXR
 from numpy.typing import NDArray
 
-from rigctl.errors import ParameterError, RigctlError
+from rigctl.errors import OutputError, ParameterError, RigctlError
 from rigctl.exr import picture, picture_attributes, write_exr
 from rigctl.layout import inside
 from rigctl.publish import publish_png
@@ -124,7 +124,7 @@ def write_view(folder: Path, stem: str, rgba: F32, attrs: dict[str, object]) -> 
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise ParameterError(f"{folder}: cannot make the output folder: {exc.strerror}") from None
+        raise OutputError(f"{folder}: cannot make the output folder: {exc.strerror}") from None
     png = np.clip(rgba * 255.0 + 0.5, 0, 255).astype(np.uint8)
     publish_png(folder / f"{stem}.png", cv2.cvtColor(png, cv2.COLOR_RGBA2BGRA))
     write_exr(

@@ -576,11 +576,24 @@ def test_an_empty_board_stem_and_an_endless_recording_are_one_line(tmp_path: Pat
     assert not list(tmp_path.iterdir())
 
 
-def test_any_verb_writing_to_a_read_only_place_is_one_line(tmp_path: Path) -> None:
-    res = in_mount(tmp_path / "mnt", "ro", "board", "--out", str(tmp_path / "mnt" / "b"))
+@pytest.mark.parametrize(("options", "fragment"), [("ro", "b.png: the file system is read-only"),
+                                                    ("size=16k", "no space left on the device")])  # fmt: skip
+def test_board_on_a_read_only_or_full_disk_is_a_destination_error(tmp_path: Path, options: str, fragment: str) -> None:
+    """Exit 4 like every other writer (it was 2, a usage error, and named the temporary file on a read-only one)."""
+    res = in_mount(tmp_path / "mnt", options, "board", "--out", str(tmp_path / "mnt" / "b"))
     if res is None:
         pytest.skip("mounting a tmpfs needs root or user namespaces")
-    one_line(res, EXIT_USAGE, "Read-only file system")
+    assert TEMP_SUFFIX not in one_line(res, EXIT_DEVICE, fragment)
+
+
+def test_render_into_a_device_or_a_file_is_a_destination_error(tmp_path: Path) -> None:
+    """An --out that exists and is no folder is refused (exit 4, as publish refuses a device elsewhere) before
+    the input is read."""
+    (tmp_path / "afile").write_text("mine")
+    for out, what in (("/dev/null", "it is a device"), (str(tmp_path / "afile"), "it is a file")):
+        res = rigctl("render", str(tmp_path / "none"), "--disparity", str(tmp_path), "--at", "1,1", "--out", out)
+        one_line(res, EXIT_DEVICE, f"--out {out}: cannot make the output folder: {what}")
+    assert (tmp_path / "afile").read_text() == "mine"
 
 
 @pytest.mark.parametrize(("errno_", "code", "fragment"), [(30, EXIT_DEVICE, "read-only"), (28, 4, "no space left")])
