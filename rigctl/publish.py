@@ -80,6 +80,38 @@ def prepare_output(out: Path, what: str = "--out") -> Path:
     return out
 
 
+def check_creatable(path: Path, what: str = "--out", noun: str = "file") -> None:
+    """Refuse, before any work, a ``path`` that cannot be made: its nearest existing ancestor must be a folder
+    this process can write (nothing is created here, so a run that then fails on its input leaves nothing)."""
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise OutputError(
+            f"{what} {path}: cannot make the output {noun}: {parent} is {kind(parent.stat().st_mode)}, not a folder"
+        )
+    if not os.access(parent, os.W_OK | os.X_OK):
+        ro = os.statvfs(parent).f_flag & os.ST_RDONLY
+        raise OutputError(
+            f"{what} {path}: cannot make the output {noun}: {parent} is {'read-only' if ro else 'not writable'}"
+        )
+
+
+def check_output_file(path: Path, what: str = "--out") -> None:
+    """Refuse, before any work, an output file that could not be published: not UTF-8, a name held by a folder,
+    device, FIFO or socket, or in a place that cannot be written. A regular file there is replaced."""
+    utf8_path(path, what)
+    try:
+        mode: int | None = os.lstat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):  # the latter: a parent is a file, said below
+        mode = None
+    except OSError as exc:
+        raise output_error(path, exc) from None
+    if mode is not None and not (stat.S_ISREG(mode) or stat.S_ISLNK(mode)):
+        raise OutputError(f"{what} {path}: is {kind(mode)}, not a file (give a file name)")
+    check_creatable(path, what)
+
+
 def fsync_dir(folder: Path) -> None:
     """Make a folder's entries (a rename, a new file) durable: what a rename publishes survives a power cut."""
     fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)

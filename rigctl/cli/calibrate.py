@@ -9,7 +9,8 @@ from pathlib import Path
 
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
-from rigctl.errors import CalibrationError, ParameterError
+from rigctl.errors import CalibrationError, OutputError, ParameterError
+from rigctl.publish import check_creatable, check_output_file, kind, utf8_path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -55,6 +56,15 @@ def run(ns: argparse.Namespace) -> int:
     from rigctl.calib.report import format_table, write_plots
     from rigctl.calib.run import Options, calibrate
 
+    # the outputs are written after corner detection and the solve (minutes): proven writable first
+    check_output_file(ns.out)
+    if ns.opencv:
+        check_output_file(ns.opencv, "--opencv")
+    if ns.colmap:
+        utf8_path(ns.colmap, "--colmap")
+        if ns.colmap.exists() and not ns.colmap.is_dir():
+            raise OutputError(f"--colmap {ns.colmap}: is {kind(ns.colmap.stat().st_mode)}, not a folder")
+        check_creatable(ns.colmap, "--colmap", noun="folder")
     if ns.chessboard:
         try:
             cols, rows = (int(v) for v in ns.chessboard.lower().split("x"))

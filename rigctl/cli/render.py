@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -13,7 +12,7 @@ from rigctl.cli.args import distance
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
 from rigctl.errors import OutputError, ParameterError
-from rigctl.publish import kind, output_folder, utf8_path
+from rigctl.publish import check_creatable, kind, output_folder, utf8_path
 
 if TYPE_CHECKING:
     from rigctl.render.views import LeaveOneOutRow
@@ -125,11 +124,7 @@ def _check_out(out: Path) -> None:
         if not out.is_dir():  # a file, or a device such as /dev/null: exit 4 like any unusable destination
             raise OutputError(f"--out {out}: cannot make the output folder: it is {kind(out.stat().st_mode)}")
         return
-    parent = out.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
-        raise OutputError(f"--out {out}: cannot make the output folder: {parent} is not a writable folder")
+    check_creatable(out, noun="folder")
 
 
 def run(ns: argparse.Namespace) -> int:

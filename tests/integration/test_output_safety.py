@@ -596,6 +596,22 @@ def test_render_into_a_device_or_a_file_is_a_destination_error(tmp_path: Path) -
     assert (tmp_path / "afile").read_text() == "mine"
 
 
+def test_calibrate_refuses_its_outputs_before_reading_the_input(tmp_path: Path) -> None:
+    """Corner detection and the solve take minutes: an --out (or --opencv, --colmap) that cannot be written is
+    refused first, so even a missing input is not reached (the old code failed on the input, or after the solve)."""
+    (tmp_path / "afile").write_text("mine")
+    missing = str(tmp_path / "no-take")
+    for argv, fragment in (
+        (["--out", str(tmp_path)], f"--out {tmp_path}: is a folder, not a file"),
+        (["--out", "/dev/null"], "--out /dev/null: is a device, not a file"),
+        (["--out", str(tmp_path / "afile" / "c.yaml")], "afile is a file, not a folder"),
+        (["--out", str(tmp_path / "c.yaml"), "--opencv", str(tmp_path)], "--opencv"),
+        (["--out", str(tmp_path / "c.yaml"), "--colmap", str(tmp_path / "afile")], "--colmap"),
+    ):
+        one_line(rigctl("calibrate", missing, *argv), EXIT_DEVICE, fragment)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
+
+
 @pytest.mark.parametrize(("errno_", "code", "fragment"), [(30, EXIT_DEVICE, "read-only"), (28, 4, "no space left")])
 def test_an_os_error_no_verb_caught_is_still_one_line(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], errno_: int, code: int, fragment: str
