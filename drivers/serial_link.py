@@ -10,6 +10,7 @@ from __future__ import annotations
 import errno
 import logging
 import os
+import stat
 import termios
 from typing import Any
 
@@ -53,6 +54,27 @@ def _settings(kwargs: dict[str, Any]) -> str:
     )
 
 
+def _not_a_device(path: str) -> str | None:
+    """Why ``path`` cannot be a serial port when it plainly is none (missing, a folder, a file, a FIFO, a
+    socket); None for a device node, whose own error says more."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return "no such serial port"
+    except OSError:
+        return None
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return None
+    what = (
+        "a folder"
+        if stat.S_ISDIR(mode)
+        else "a FIFO"
+        if stat.S_ISFIFO(mode)
+        else ("a socket" if stat.S_ISSOCK(mode) else "a regular file")
+    )
+    return f"exists but is {what}, not a serial port (give a device such as /dev/ttyUSB0)"
+
+
 def open_link(url: str, settings: dict[str, Any], timeout_s: float = 1.0) -> serial.SerialBase:
     """Open ``url`` with ``settings`` (baudrate, bytesize, parity, stopbits); exclusive for real ports, so two
     processes cannot drive the same line."""
@@ -64,6 +86,8 @@ def open_link(url: str, settings: dict[str, Any], timeout_s: float = 1.0) -> ser
         return _open(url, kwargs)
     except serial.SerialException as exc:
         text = str(exc)
+        if "://" not in url and (problem := _not_a_device(url)):
+            raise DeviceError(f"{url}: {problem}") from None
         if "Resource temporarily unavailable" in text or "exclusively lock" in text:
             raise DeviceError(f"{url}: port is busy (another process drives this line)") from None
         if "No such file" in text or "could not open port" in text:

@@ -27,6 +27,20 @@ def test_tally_transport_failures_are_device_errors_naming_the_port(run_cli, tmp
     one_line(run_cli("tally", str(rig), "--program", "r0c0"), EXIT_DEVICE, f"{port}: ")
 
 
+@pytest.mark.parametrize("kind", ["a folder", "a regular file", "a FIFO"])
+def test_a_tally_port_that_exists_but_is_no_device_says_what_it_is(run_cli, tmp_path: Path, kind: str) -> None:  # type: ignore[no-untyped-def]
+    """It said 'no such serial port' for a folder, which exists."""
+    port = tmp_path / "port"
+    if kind == "a folder":
+        port.mkdir()
+    elif kind == "a FIFO":
+        os.mkfifo(port)
+    else:
+        port.write_text("")
+    rig = rig_with(tmp_path, tally={"protocol": "tsl-umd-3.1", "port": str(port)})
+    one_line(run_cli("tally", str(rig), "--program", "r0c0"), EXIT_DEVICE, f"{port}: exists but is {kind}, not a")
+
+
 def test_control_with_unknown_bridge_scheme_is_a_device_error(run_cli, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     rig = rig_with(tmp_path, camera_control={"bridge": "foo://bar"})
     expected = "bridge: device address 'foo://bar': unknown scheme"
