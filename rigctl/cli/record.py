@@ -141,7 +141,8 @@ def format_summary(s: dict) -> str:
         lost = {
             k: c[k] for k in ("source_drops", "error_frames", "writer_drops", "not_written", "torn_excluded") if c[k]
         }
-        lines.append(f"  {name}: {c['frames']} frames" + (f", {lost}" if lost else ""))
+        lost_text = "".join(f", {k.replace('_', ' ')} {n}" for k, n in lost.items())
+        lines.append(f"  {name}: {c['frames']} frames{lost_text}")
     if s.get("end"):
         end = s["end"]
         lines.append(f"ended: {end.get('reason', '')}" + (f": {end['message']}" if end.get("message") else ""))
