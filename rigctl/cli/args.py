@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from collections.abc import Callable
 from typing import TYPE_CHECKING, NoReturn
 
 from rigctl.cli.helptext import HelpFormatter
@@ -54,12 +55,21 @@ def far_distance(text: str) -> float:
     return value
 
 
-def depth(text: str) -> float:
-    """A non-negative extent in metres (zero is a flat subject)."""
-    value = _number(text)
-    if not (value >= 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"must be a depth >= 0 in metres, got {text!r}")
-    return value
+def extent(what: str) -> Callable[[str], float]:
+    """The type of a non-negative, finite extent in metres whose refusal names it: ``extent("width")`` says
+    "must be a width >= 0 in metres"."""
+
+    def parse(text: str) -> float:
+        value = _number(text)
+        if not (value >= 0 and math.isfinite(value)):
+            raise argparse.ArgumentTypeError(f"must be a {what} >= 0 in metres, got {text!r}")
+        return value
+
+    parse.__name__ = what
+    return parse
+
+
+depth = extent("depth")  # zero is a flat subject
 
 
 def fraction(text: str) -> float:

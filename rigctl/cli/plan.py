@@ -33,8 +33,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--near", type=args.distance, metavar="M", help="nearest point of the subject, metres")
     p.add_argument("--far", type=args.far_distance, metavar="M", help="farthest point, metres ('inf' allowed)")
     p.add_argument("--budget", type=args.fraction, metavar="F", help="parallax budget, fraction of the image")
-    p.add_argument("--subject-width", type=args.depth, metavar="M", help="check the subject fits every view")
-    p.add_argument("--subject-height", type=args.depth, metavar="M", help="check the subject fits every view")
+    p.add_argument("--subject-width", type=args.extent("width"), metavar="M", help="check the subject fits every view")
+    p.add_argument(
+        "--subject-height", type=args.extent("height"), metavar="M", help="check the subject fits every view"
+    )
     p.add_argument("--json", action="store_true", help="print the plan as JSON")
     p.set_defaults(func=run)
 

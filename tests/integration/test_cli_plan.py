@@ -89,6 +89,8 @@ BAD = [
     (["--subject-depth", "0"], "is a flat subject"),
     (["--subject-depth", "nan"], "--subject-depth: not a number"),
     (["--subject-depth", "inf"], "--subject-depth: must be a depth >= 0"),
+    (["--subject-width", "-1"], "--subject-width: must be a width >= 0 in metres"),  # it said "a depth"
+    (["--subject-height", "inf"], "--subject-height: must be a height >= 0 in metres"),
     (["--budget", "0"], "--budget: must be a fraction in (0, 1]"),
     (["--budget", "1.5"], "--budget: must be a fraction in (0, 1]"),
     (["--budget", "nan"], "--budget: must be a fraction"),
