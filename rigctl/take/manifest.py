@@ -36,6 +36,7 @@ from pydantic.main import IncEx
 
 from rigctl.errors import TakeError
 from rigctl.layout import SAFE_CAMERA
+from rigctl.publish import kind
 from rigctl.timecode import Timecode, TimecodeError, rate_of
 from rigctl.yamlfile import check_spec, describe_validation_error, load_yaml_with_lines
 
@@ -269,6 +270,8 @@ def read_manifest(folder: Path) -> Manifest:
     """The validated manifest; errors name file, line and field."""
     path = folder / MANIFEST
     if not folder.is_dir():
+        if folder.exists():  # /dev/null, a file: it is there, it is just no folder
+            raise TakeError(f"{folder}: exists but is {kind(folder.stat().st_mode)}, not a take folder")
         raise TakeError(f"{folder}: no such take folder")
     if not path.exists():
         raise TakeError(f"{path}: missing: {folder} is not a take (no manifest)")

@@ -41,6 +41,14 @@ def test_a_tally_port_that_exists_but_is_no_device_says_what_it_is(run_cli, tmp_
     one_line(run_cli("tally", str(rig), "--program", "r0c0"), EXIT_DEVICE, f"{port}: exists but is {kind}, not a")
 
 
+def test_a_take_path_that_exists_but_is_no_folder_says_what_it_is(run_cli, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """It said 'no such take folder' for /dev/null, which exists."""
+    (tmp_path / "afile").write_text("")
+    for path, what in (("/dev/null", "a device"), (str(tmp_path / "afile"), "a file")):
+        one_line(run_cli("take", "info", path), EXIT_BAD_INPUT, f"{path}: exists but is {what}, not a take folder")
+    one_line(run_cli("take", "info", str(tmp_path / "none")), EXIT_BAD_INPUT, "none: no such take folder")
+
+
 def test_control_with_unknown_bridge_scheme_is_a_device_error(run_cli, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     rig = rig_with(tmp_path, camera_control={"bridge": "foo://bar"})
     expected = "bridge: device address 'foo://bar': unknown scheme"
