@@ -14,6 +14,8 @@ the limit.
 from __future__ import annotations
 
 import difflib
+import re
+import sys
 import types
 import typing
 from collections.abc import Mapping, Sequence
@@ -80,7 +82,7 @@ def _construct(node: yaml.Node, loader: _Loader, path: Loc, lines: dict[Loc, int
                 raise RigFileError(
                     f"{{file}}:{key_node.start_mark.line + 1}: a key must be a plain value, not a list or mapping"
                 )
-            key = loader.construct_object(key_node, deep=True)
+            key = _scalar(loader, key_node, path)
             if key in out:
                 raise RigFileError(f"{{file}}:{key_node.start_mark.line + 1}: duplicate key {key!r}")
             lines[(*path, key)] = key_node.start_mark.line + 1
@@ -90,7 +92,22 @@ def _construct(node: yaml.Node, loader: _Loader, path: Loc, lines: dict[Loc, int
         return out
     if isinstance(node, yaml.SequenceNode):
         return [_construct(item, loader, (*path, i), lines) for i, item in enumerate(node.value)]
-    return loader.construct_object(node, deep=True)
+    return _scalar(loader, node, path)
+
+
+def _scalar(loader: _Loader, node: yaml.Node, path: Loc) -> Any:
+    """A plain value; one PyYAML cannot turn into its type (a whole number of more digits than Python converts,
+    a date with month 13) is one line naming the file, line and field, not Python's words."""
+    try:
+        return loader.construct_object(node, deep=True)
+    except ValueError as exc:
+        where = f"{{file}}:{node.start_mark.line + 1}: {dotted(path) + ': ' if path else ''}"
+        text = str(node.value)
+        digits = sum(c.isdigit() for c in text)
+        if node.tag.endswith(":int") and digits > sys.get_int_max_str_digits() > 0:
+            raise RigFileError(f"{where}a whole number of {digits:,} digits is too long for any value") from None
+        shown = text if len(text) <= 40 else text[:37] + "..."
+        raise RigFileError(f"{where}cannot read {shown!r}: {exc}") from None
 
 
 def load_yaml_with_lines(path: Path, text: str | None = None) -> tuple[Any, dict[Loc, int]]:
@@ -176,13 +193,28 @@ def _phrase(err: Mapping[str, Any]) -> str:
     if kind in ("int_type", "int_from_float"):
         return f"must be a whole number, got {got!r}"
     if kind == "float_type":
-        return f"must be a number, got {got!r}"
+        return f"must be a number, got {got!r}{_yaml11_float_hint(got)}"
     if kind == "finite_number":
         return f"must be a finite number, got {got!r}"
     message = str(err["msg"])
     message = message.removeprefix("Value error, ").removeprefix("Assertion failed, ")
     message = message[0].lower() + message[1:] if message else message
     return f"{message}, got {got!r}" if "got" not in message and not isinstance(got, dict | list) else message
+
+
+# what a YAML 1.2 reader takes for a number in exponent form and YAML 1.1 (PyYAML) reads as text: a mantissa
+# without a dot (12e-2) or an exponent without a sign (1.2e5)
+_EXPONENT = re.compile(r"([-+]?)(\d*)(?:\.(\d*))?[eE]([-+]?)(\d+)")
+
+
+def _yaml11_float_hint(got: Any) -> str:
+    """For ``12e-2``: why it was read as text, and the spelling that is read as a number (``12.0e-2``)."""
+    m = _EXPONENT.fullmatch(got) if isinstance(got, str) else None
+    if m is None or not (m[2] or m[3]):
+        return ""
+    sign, whole, frac, exp_sign, exp = m.groups()
+    fixed = f"{sign}{whole or '0'}.{frac or '0'}e{exp_sign or '+'}{exp}"
+    return f" (read as text: YAML 1.1 needs a dot and a signed exponent in a number, so write {fixed})"
 
 
 def _models_in(annotation: Any) -> list[type[BaseModel]]:

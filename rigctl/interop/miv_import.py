@@ -104,10 +104,23 @@ def _field(path: Path, cam: dict[str, Any], key: str, n: int | None = None) -> A
     return v
 
 
+MAX_INT_DIGITS = 100  # no field of a camera file needs more; Python itself stops at 4300 and names its own knob
+
+
+def _whole(path: Path, digits: str) -> int:
+    if len(digits.lstrip("-")) > MAX_INT_DIGITS:
+        raise RigFileError(
+            f"{path}: not a camera file: a whole number of {len(digits.lstrip('-')):,} digits "
+            f"(at most {MAX_INT_DIGITS} are read)"
+        )
+    return int(digits)
+
+
 def read_content(path: Path) -> MivContent:
     """The camera JSON at ``path`` (its YUV files beside it), checked to be a planar grid."""
     try:  # a regular file of bounded size, checked on the open descriptor (/dev/zero or a FIFO is refused)
-        doc = json.loads(read_regular(path, MAX_JSON, RigFileError, "camera file").decode("utf-8"))
+        text = read_regular(path, MAX_JSON, RigFileError, "camera file").decode("utf-8")
+        doc = json.loads(text, parse_int=lambda digits: _whole(path, digits))
     except OSError as exc:
         raise RigFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except (ValueError, UnicodeDecodeError) as exc:

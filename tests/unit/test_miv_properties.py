@@ -72,3 +72,17 @@ def test_any_text(tmp_path: Path, text: str) -> None:
     path = tmp_path / "cameras.json"
     path.write_text(text)
     read(path)
+
+
+def test_a_number_of_thousands_of_digits_is_our_line_not_pythons(tmp_path: Path) -> None:
+    """Python refuses to convert more than 4300 digits with a message naming sys.set_int_max_str_digits; the
+    reader says what it refuses and names the file instead."""
+    import pytest
+
+    from rigctl.errors import RigFileError
+
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps(valid()).replace('"BitDepthColor": 10', '"BitDepthColor": ' + "1" * 5000, 1))
+    with pytest.raises(RigFileError) as info:
+        read_content(path)
+    assert str(info.value) == f"{path}: not a camera file: a whole number of 5,000 digits (at most 100 are read)"

@@ -68,6 +68,15 @@ def test_round_trip_through_snapshot() -> None:
         ("    device: sim://r2c2", "    device: sim://r2c1", r"sim://r2c1 is used by two cameras"),
         ("lens:\n  focal_length_mm: 25.0\n", "", r"x\.yaml:\d+: lens is required"),
         ("  fps: 25", "  fps: [25", r"x\.yaml:\d+: not valid YAML"),
+        # YAML 1.1 reads 12e-2 as text: the message says why and how to write it (it said only "must be a number")
+        (
+            "  spacing_x_m: 0.120",
+            "  spacing_x_m: 12e-2",
+            r"x\.yaml:20: grid\.spacing_x_m .*'12e-2' \(read as text:.*write 12\.0e-2\)",
+        ),
+        # Python's own words (sys.set_int_max_str_digits) and tracebacks once came out of these
+        ("  width_px: 960", "  width_px: " + "9" * 5000, r"x\.yaml:11: format\.width_px: a whole number of 5,000"),
+        ("spec: 1", "spec: 1\ncreated: 2001-13-45", r"x\.yaml:\d+: created: cannot read '2001-13-45': month must be"),
     ],
 )
 def test_mistakes_are_named(tmp_path: Path, old: str, new: str, expect: str) -> None:
@@ -108,3 +117,16 @@ def test_optional_sections_validate_camera_names(tmp_path: Path) -> None:
         load_rig(write(tmp_path, text))
     ok = SIM + "tally:\n  protocol: tsl-umd-3.1\n  port: loop://\n"
     assert load_rig(write(tmp_path, ok)).model.tally is not None
+
+
+@pytest.mark.parametrize("text", ["12e-2", "1.2e5", "-3E2", ".5e1", "1e+2", "7e0"])
+def test_the_spelling_the_yaml_hint_suggests_is_read_as_that_number(text: str) -> None:
+    import re
+
+    import yaml
+
+    from rigctl.yamlfile import _yaml11_float_hint
+
+    assert isinstance(yaml.safe_load(text), str)  # what the hint is about
+    fixed = re.search(r"so write (\S+)\)$", _yaml11_float_hint(text))
+    assert fixed is not None and yaml.safe_load(fixed[1]) == pytest.approx(float(text))
