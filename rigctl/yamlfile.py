@@ -243,6 +243,16 @@ def _known_fields(model: type[BaseModel] | None, parent: Loc) -> list[str]:
     return sorted({name for m in models for name in m.model_fields})
 
 
+def refuse_unknown_keys(path: Path, data: Mapping[Any, Any], known: Sequence[str], lines: Mapping[Loc, int]) -> None:
+    """For a file read without a model (``grid.yaml``): the first key not in ``known`` refused as a model would
+    refuse it, ``path:line: key is not a known field; did you mean ...?``."""
+    for key in data:
+        if key not in known:
+            close = difflib.get_close_matches(str(key), known, n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else f" (known: {', '.join(known)})"
+            raise RigFileError(f"{path}:{line_of(lines, (key,))}: {key} is not a known field{hint}")
+
+
 def _unknown_key(first: Mapping[str, Any], errors: list[Any], model: type[BaseModel] | None) -> str:
     loc = tuple(first["loc"])
     key, parent = str(loc[-1]), loc[:-1]

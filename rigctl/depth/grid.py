@@ -30,7 +30,7 @@ from rigctl.pixfmt import bgr8_to_rgb, to_bgr8, to_rgb, to_u8
 from rigctl.rig import CAMERA_NAME
 from rigctl.take.reader import TakeReader
 from rigctl.timecode import Timecode
-from rigctl.yamlfile import load_yaml
+from rigctl.yamlfile import load_yaml_with_lines, refuse_unknown_keys
 
 log = logging.getLogger(__name__)
 
@@ -238,9 +238,10 @@ def _png_picture(img: NDArray[Any]) -> NDArray[Any]:
 
 def load_grid_folder(folder: Path) -> Grid:
     path = folder / "grid.yaml"
-    spec = load_yaml(path)
+    spec, lines = load_yaml_with_lines(path)
     if not isinstance(spec, dict):
         raise RigFileError(f"{path}: expected spacing_x, spacing_y, focal_px")
+    refuse_unknown_keys(path, spec, GRID_KEYS, lines)  # a misspelt key is not silently left out, as in a rig file
     for key in ("spacing_x", "focal_px"):
         if key not in spec:
             raise RigFileError(f"{path}: {key} is required")
@@ -346,6 +347,7 @@ def _disparity_range(path: Path, rng: object) -> tuple[float, float] | None:
 
 
 MAX_GRID_PIXELS = 1 << 28  # all pictures of a grid folder together (nine UHD pictures are 75 million)
+GRID_KEYS = ("spacing_x", "spacing_y", "focal_px", "doffs", "disparity_range_px")  # what grid.yaml may hold
 
 
 class SkippedFrameSet(Exception):

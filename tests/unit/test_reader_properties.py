@@ -332,3 +332,16 @@ def test_a_grid_yaml_value_out_of_range_is_named(tmp_path: Path, line: str, says
     cv2.imwrite(str(tmp_path / "r0c0.png"), np.zeros((4, 6, 3), np.uint8))
     with pytest.raises(RigFileError, match=re.escape(says)):
         load_grid_folder(tmp_path)
+
+
+def test_grid_yaml_refuses_an_unknown_key_as_a_rig_file_does(tmp_path: Path) -> None:
+    """A misspelt key (spacng_y) was silently ignored, the grid then read with spacing_y = spacing_x."""
+    from rigctl.errors import RigFileError
+
+    (tmp_path / "grid.yaml").write_text("spacing_x: 0.12\nfocal_px: 100\nspacng_y: 0.078\n")
+    with pytest.raises(RigFileError) as info:
+        load_grid_folder(tmp_path)
+    assert str(info.value) == f"{tmp_path / 'grid.yaml'}:3: spacng_y is not a known field; did you mean 'spacing_y'?"
+    (tmp_path / "grid.yaml").write_text("spacing_x: 0.12\nfocal_px: 100\ncolour: red\n")
+    with pytest.raises(RigFileError, match=r"grid\.yaml:3: colour is not a known field \(known: spacing_x, "):
+        load_grid_folder(tmp_path)
