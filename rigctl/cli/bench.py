@@ -37,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="every depth preset and the OpenCV baselines on the simulated presenter, Middlebury Motorcycle and "
         "the stratified light-field scenes, as a light field and as parallel cameras see them (+60 px)",
     )
-    d.add_argument("--repeats", type=int, default=1, help="runs per method (the median time is kept)")
+    d.add_argument("--repeats", type=int, help="runs per method (the median time is kept; default 1)")
     d.add_argument("--plot", type=Path, default=Path("bench-depth.png"), metavar="PNG")
     d.add_argument("--json", action="store_true")
     d.add_argument("--quick", action="store_true", help="without the ideal presenter")
@@ -52,13 +52,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="instead: depth over time on a still and a moving realistic presenter take, temporal stabilisation "
         "off and on (flicker, change error, bad 1.0, time per frame)",
     )
-    d.add_argument("--frames", type=int, default=10, metavar="N", help="with --video: frame sets per take")
-    d.add_argument("--preset", default="best", help="with --size or --video: the depth preset")
+    d.add_argument("--frames", type=int, metavar="N", help="with --video: frame sets per take (default 10)")
+    d.add_argument("--preset", help="with --size or --video: the depth preset (default best)")
     d.add_argument("--cameras", nargs="+", metavar="CAM", help="with --size: cameras to compute (default: all)")
     d.add_argument(
         "--workers",
         type=int,
-        default=10,
         metavar="N",
         help="with --size: the farm's workers for the real-time factor (default 10)",
     )
@@ -80,10 +79,12 @@ def run_depth_bench(ns: argparse.Namespace) -> int:
     from rigctl.errors import ParameterError
     from rigctl.simulated_presenter import presenter
 
+    check_bench_options(ns)
     if ns.size:
         return run_size_bench(ns)
     if ns.video:
         return run_video_bench(ns)
+    ns.repeats = 1 if ns.repeats is None else ns.repeats
     if ns.repeats < 1:
         raise ParameterError(f"--repeats must be at least 1, got {ns.repeats}")
     with Progress("bench depth", "runs", ns.quiet) as bar:
@@ -97,6 +98,26 @@ def run_depth_bench(ns: argparse.Namespace) -> int:
         print(format_table(result))
         print(f"plot: {ns.plot}")
     return 0
+
+
+# each option and the benches that read it (None: the preset table, neither --size nor --video)
+APPLIES = {
+    "repeats": (None,), "quick": (None,), "frames": ("--video",), "preset": ("--size", "--video"),
+    "cameras": ("--size",), "workers": ("--size",), "fps": ("--size",),
+}  # fmt: skip
+
+
+def check_bench_options(ns: argparse.Namespace) -> None:
+    """One bench at a time, and no option the chosen bench would ignore (``--video`` with ``--size`` once ran the
+    size bench alone; ``--repeats 0`` with ``--size`` was accepted)."""
+    if ns.size and ns.video:
+        raise ParameterError("--size and --video are two different benches: give one of them")
+    mode = "--size" if ns.size else "--video" if ns.video else None
+    for name, modes in APPLIES.items():
+        given = getattr(ns, name)
+        if given is not None and given is not False and mode not in modes:  # 0 is given: not `in (None, False)`
+            where = " or ".join(m or "the preset table (without --size and --video)" for m in modes)
+            raise ParameterError(f"--{name} applies to {where}, not to {mode or 'the preset table'}")
 
 
 def check_depth_bench_memory(size: tuple[int, int], cameras: int, free: int | None) -> None:
@@ -122,6 +143,8 @@ def run_size_bench(ns: argparse.Namespace) -> int:
     from rigctl.simulated_presenter import presenter
 
     w, h = parse_size(ns.size)
+    ns.workers = 10 if ns.workers is None else ns.workers
+    ns.preset = ns.preset or "best"
     if ns.workers < 1:
         raise ParameterError(f"--workers must be at least 1, got {ns.workers}")
     fps = ns.fps if ns.fps is not None else load_rig("bmd-micro-studio-4k-3x3").fps
@@ -146,6 +169,8 @@ def run_video_bench(ns: argparse.Namespace) -> int:
     from rigctl.errors import ParameterError
     from rigctl.simulated_presenter import presenter_video
 
+    ns.frames = 10 if ns.frames is None else ns.frames
+    ns.preset = ns.preset or "best"
     if not 2 <= ns.frames <= 1000:
         raise ParameterError(f"--frames: a video bench needs 2 to 1000 frame sets per take, got {ns.frames}")
     if ns.preset not in PRESETS:

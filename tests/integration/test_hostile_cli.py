@@ -236,6 +236,24 @@ def test_a_full_or_closed_stdout_is_one_line(tmp_path: Path, redirect: str, frag
     one_line(res, EXIT_DEVICE, fragment)
 
 
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["--size", "64x36", "--repeats", "0"], "--repeats applies to the preset table"),  # ran, ignoring it
+        (["--size", "64x36", "--video"], "--size and --video are two different benches"),  # ran --size alone
+        (["--video", "--cameras", "r1c1"], "--cameras applies to --size, not to --video"),
+        (["--frames", "4"], "--frames applies to --video, not to the preset table"),
+        (["--repeats", "0"], "--repeats must be at least 1, got 0"),
+    ],
+)
+def test_bench_depth_refuses_what_the_chosen_bench_would_ignore(tmp_path: Path, argv: list[str], says: str) -> None:
+    res = subprocess.run(
+        [*rigctl_exe(), "bench", "depth", *argv], capture_output=True, text=True, cwd=tmp_path, timeout=300
+    )
+    one_line(res, EXIT_USAGE, says)
+    assert not list(tmp_path.iterdir())  # refused before any work: no plot
+
+
 def test_python_dash_m_and_debug_anywhere(tmp_path: Path) -> None:
     res = subprocess.run(
         [sys.executable, "-m", "rigctl", "plan", "--near", "3", "--far", "2"],
