@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import struct
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -47,8 +48,38 @@ def read_png(path: Path, error: type[RigctlError] = RigFileError) -> Any:
     import numpy as np
 
     width, height = png_size(path, error)
-    data = read_regular(path, MAX_FILE_BYTES, error, "image")
+    data = png_chunks(path, read_regular(path, MAX_FILE_BYTES, error, "image"), error)
     img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None or img.shape[:2] != (height, width):
         raise error(f"{path}: cannot decode the PNG image")
     return img
+
+
+# what decoding needs; every other chunk (colour profile, text, gamma, time) is metadata OpenCV does not apply
+DECODED_CHUNKS = (b"IHDR", b"PLTE", b"tRNS", b"IDAT", b"IEND")
+
+
+def png_chunks(path: Path, data: bytes, error: type[RigctlError] = RigFileError) -> bytes:
+    """``data`` (a PNG) with its chunks proven whole before libpng sees them, which otherwise prints its own
+    ``libpng error: IDAT: CRC error`` or ``libpng warning: iCCP: ...`` lines on stderr beside ours: a chunk of a
+    wrong checksum or cut short is refused naming its byte offset; the chunks decoding does not need are left
+    out (their warnings with them; the pixels are the same)."""
+    out, pos = [data[:8]], 8
+    while pos < len(data):
+        if pos + 12 > len(data):
+            raise error(f"{path}: PNG cut short at byte {pos:,} (no whole chunk, no IEND)")
+        (length,) = struct.unpack(">I", data[pos : pos + 4])
+        kind, end = data[pos + 4 : pos + 8], pos + 12 + length
+        if end > len(data):
+            raise error(
+                f"{path}: PNG cut short: chunk {kind.decode('latin-1')!r} at byte {pos:,} needs {length:,} bytes"
+            )
+        if kind in DECODED_CHUNKS:
+            (crc,) = struct.unpack(">I", data[end - 4 : end])
+            if zlib.crc32(data[pos + 4 : end - 4]) != crc:
+                raise error(f"{path}: PNG chunk {kind.decode('latin-1')} at byte {pos:,} fails its checksum (damaged)")
+            out.append(data[pos:end])
+        pos = end
+        if kind == b"IEND":
+            return b"".join(out)
+    raise error(f"{path}: PNG cut short at byte {pos:,} (no IEND chunk)")

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.errors import CalibrationError
-from rigctl.imagefile import png_size
+from rigctl.imagefile import png_chunks, png_size
 from rigctl.regular import read_regular
 from rigctl.rig import CAMERA_NAME
 from rigctl.take.reader import TakeReader
@@ -70,9 +70,12 @@ MAX_IMAGE_BYTES = 1 << 30  # an image file larger than this is no camera's pictu
 def _imread_grey(path: Path) -> NDArray[np.uint8]:
     """A picture file as grey: a regular file only (a FIFO would block the read for ever, a device never end),
     its size bounded before it is read, refused in one line when it does not decode."""
-    if path.suffix.lower() == ".png":  # its header's size checked before OpenCV decodes (and warns about) it
+    png = path.suffix.lower() == ".png"
+    if png:  # its header's size checked before OpenCV decodes (and warns about) it
         png_size(path, CalibrationError)
     data = read_regular(path, MAX_IMAGE_BYTES, CalibrationError, "image")
+    if png:  # its chunks proven whole: a damaged one is our line, not libpng's on stderr
+        data = png_chunks(path, data, CalibrationError)
     img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
     if img is None:
         raise CalibrationError(f"{path}: cannot read the image")

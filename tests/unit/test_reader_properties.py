@@ -345,3 +345,36 @@ def test_grid_yaml_refuses_an_unknown_key_as_a_rig_file_does(tmp_path: Path) -> 
     (tmp_path / "grid.yaml").write_text("spacing_x: 0.12\nfocal_px: 100\ncolour: red\n")
     with pytest.raises(RigFileError, match=r"grid\.yaml:3: colour is not a known field \(known: spacing_x, "):
         load_grid_folder(tmp_path)
+
+
+def _png_with(img: np.ndarray, extra: bytes = b"") -> bytes:
+    import cv2
+
+    data = cv2.imencode(".png", img)[1].tobytes()
+    return data[:33] + extra + data[33:]  # after the signature and IHDR
+
+
+def _chunk(kind: bytes, body: bytes) -> bytes:
+    return len(body).to_bytes(4, "big") + kind + body + zlib.crc32(kind + body).to_bytes(4, "big")
+
+
+def test_a_damaged_png_is_our_line_and_libpng_says_nothing(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    """libpng printed 'libpng error: IDAT: CRC error' (and warnings for a bad colour profile) on stderr beside our
+    'cannot decode' line; chunks are now proven before it decodes, and the ones it does not need left out."""
+    img = (np.random.default_rng(0).random((16, 24, 3)) * 255).astype(np.uint8)
+    (tmp_path / "grid.yaml").write_text("spacing_x: 1\nfocal_px: 100\n")
+    good = _png_with(img)
+    damaged = bytearray(good)
+    damaged[good.find(b"IDAT") + 8] ^= 0xFF
+    for data, says in (
+        (bytes(damaged), "r0c0.png: PNG chunk IDAT at byte 33 fails its checksum (damaged)"),
+        (good[: len(good) // 2], "r0c0.png: PNG cut short: chunk 'IDAT' at byte 33"),
+    ):
+        (tmp_path / "r0c0.png").write_bytes(data)
+        with pytest.raises(RigctlError, match=re.escape(says)):
+            load_grid_folder(tmp_path)
+    # a colour profile libpng warns about ("iCCP: too short"): left out, the same pixels, nothing said
+    (tmp_path / "r0c0.png").write_bytes(_png_with(img, _chunk(b"iCCP", b"bad\0\0" + zlib.compress(b"x"))))
+    grid = load_grid_folder(tmp_path)
+    assert np.array_equal(grid.bgr8("r0c0"), img)
+    assert "libpng" not in capfd.readouterr().err
