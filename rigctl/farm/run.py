@@ -233,7 +233,10 @@ def dask_client(options: FarmOptions) -> Iterator[Any]:
     limit = options.memory_limit
     if limit == "auto":
         limit = default_memory_limit(options.take, len(options.depth.cameras or ()) or None)
+    from rigctl.farm.quiet import quiet_nannies
+
     with (
+        quiet_nannies(),  # an interrupted run: Dask's shutdown notices kept off stderr (rigctl.farm.quiet)
         LocalCluster(
             n_workers=options.workers,
             threads_per_worker=1,
@@ -242,6 +245,7 @@ def dask_client(options: FarmOptions) -> Iterator[Any]:
             host="127.0.0.1",
             dashboard_address=None,
             scheduler_kwargs={"dashboard": False},
+            preload=["rigctl.farm.quiet"],  # each worker: SIGINT ignored, its shutdown notice dropped
         ) as cluster,
         Client(cluster) as client,
     ):

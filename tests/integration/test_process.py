@@ -124,6 +124,36 @@ def test_a_rerun_after_an_interruption_computes_only_the_missing_frames(take: Pa
     assert again.computed == 1 and again.skipped_done == 0
 
 
+def test_ctrl_c_ends_with_one_line_and_nothing_from_dask(take: Path, tmp_path: Path) -> None:
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) while chunks run: our one line, exit
+    130. It printed each worker's 'Async instruction ... ended with CancelledError', the nanny's 'Worker process
+    still alive after 4.0 seconds, killing' and each worker's own KeyboardInterrupt traceback."""
+    out = tmp_path / "p"
+    with open(tmp_path / "stderr", "w") as err:
+        proc = subprocess.Popen(
+            [*rigctl_exe(), "process", str(take), "--out", str(out), "--workers", "2", *FAST],
+            stdout=subprocess.DEVNULL, stderr=err, stdin=subprocess.DEVNULL, start_new_session=True,
+        )  # fmt: skip
+        try:
+            deadline = time.monotonic() + 240
+            while time.monotonic() < deadline and proc.poll() is None:  # until a chunk is done, others running
+                ledger = out / "process.json"
+                if ledger.exists() and '"done"' in ledger.read_text():
+                    break
+                time.sleep(0.2)
+            assert proc.poll() is None, "the run ended before it could be interrupted"
+            os.killpg(proc.pid, signal.SIGINT)
+            assert proc.wait(timeout=120) == 130
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+    time.sleep(1)  # anything a worker still had to say
+    lines = (tmp_path / "stderr").read_text().splitlines()
+    assert lines[-1:] == ["rigctl process: interrupted"], lines
+    noise = [ln for ln in lines if re.search(r"CancelledError|Traceback|KeyboardInterrupt|distributed|Worker", ln)]
+    assert not noise, lines
+
+
 def test_a_failed_frame_is_reported_and_the_others_complete(take: Path, tmp_path: Path) -> None:
     (tmp_path / "depth").mkdir()
     (tmp_path / "depth" / frame_name(1)).write_text("not a folder")  # frame 1 cannot be published
