@@ -58,6 +58,7 @@ class SdiBridge:
             seq = self._seq
             self._seq = (self._seq + 1) % 256
             data = proto.encode(proto.BridgeFrame(ftype, seq, payload))
+            garbage = self._decoder.skipped
             for attempt in range(self.tries):
                 if attempt:
                     self.retries += 1
@@ -72,6 +73,13 @@ class SdiBridge:
                         f"{self.url}: bridge refused {proto.TYPES[ftype]}: {proto.describe_nak(reply.payload)}"
                     )
                 return reply
+        garbage = self._decoder.skipped - garbage
+        if garbage:  # something answers, but not in the bridge's frames: not silence, say so
+            raise DeviceError(
+                f"{self.url}: no bridge frame in what the line sent back to {proto.TYPES[ftype]} ({garbage} bytes "
+                f"of something else in {self.tries} tries): another device on this port, or another baud rate "
+                f"than {SERIAL['baudrate']}?"
+            )
         raise DeviceError(
             f"{self.url}: no reply from the SDI bridge to {proto.TYPES[ftype]} within "
             f"{self.reply_timeout_s:.2f} s ({self.tries} tries)"

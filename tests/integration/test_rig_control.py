@@ -277,3 +277,34 @@ def test_a_new_host_session_is_not_taken_for_a_retry() -> None:
         assert len(sim.packets) == 2 and sim.state["r0c0"][(1, 5)] == (2000,)
     finally:
         sim.close()
+
+
+def test_a_line_that_answers_in_something_else_than_bridge_frames_is_not_called_silent() -> None:
+    """Another device on the port (or another baud rate) answers every frame with bytes of its own: that is
+    said, not 'no reply', which sends the crew to look for a dead bridge."""
+    import os
+    import threading
+
+    master, slave = os.openpty()
+    stop = threading.Event()
+
+    def chatter() -> None:
+        while not stop.is_set():
+            try:
+                if os.read(master, 256):
+                    os.write(master, b"OK\r\nERROR 17\r\n" * 4)
+            except OSError:
+                return
+
+    talker = threading.Thread(target=chatter, daemon=True)
+    talker.start()
+    try:
+        with pytest.raises(DeviceError) as caught:
+            SdiBridge(os.ttyname(slave), reply_timeout_s=0.1)
+        text = str(caught.value)
+        assert "no bridge frame in what the line sent back to HELLO" in text and "no reply" not in text, text
+        assert "bytes of something else in 3 tries" in text and "baud rate" in text
+    finally:
+        stop.set()
+        os.close(master)
+        os.close(slave)
