@@ -83,7 +83,7 @@ def register_bench(what: argparse._SubParsersAction) -> None:
         ), help="time a stereo pair from the four nearest cameras; quality on the simulated take"
     )
     b.add_argument("--size", type=size, default=(1920, 1080), metavar="WxH", help="default 1920x1080")
-    b.add_argument("--repeats", type=int, default=10, help="timed pairs (the median is kept)")
+    b.add_argument("--repeats", type=int, default=10, help="timed pairs, 1 to 1000 (the median is kept)")
     b.add_argument("--json", action="store_true")
     add_quiet(b)
     b.set_defaults(func=run_bench)
@@ -192,12 +192,15 @@ def run(ns: argparse.Namespace) -> int:
     return 0
 
 
+MAX_REPEATS = 1000
+
+
 def run_bench(ns: argparse.Namespace) -> int:
     from rigctl.render.bench import bench_render, format_bench
     from rigctl.simulated_presenter import presenter_render
 
-    if ns.repeats < 1:
-        raise ParameterError(f"--repeats must be at least 1, got {ns.repeats}")
+    if not 1 <= ns.repeats <= MAX_REPEATS:  # 1,000 pairs is a minute at 4K; more only runs until killed
+        raise ParameterError(f"--repeats must be 1 to {MAX_REPEATS}, got {ns.repeats}")
     check_bench_memory(ns.size, _available_memory())
     with Progress("bench render", "stages", ns.quiet) as bar:
         result = bench_render(presenter_render(), ns.size, ns.repeats, bar.update)

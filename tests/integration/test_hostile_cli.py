@@ -254,6 +254,16 @@ def test_bench_depth_refuses_what_the_chosen_bench_would_ignore(tmp_path: Path, 
     assert not list(tmp_path.iterdir())  # refused before any work: no plot
 
 
+@pytest.mark.parametrize("repeats", ["0", "1001", "99999999999999999999"])
+def test_bench_render_repeats_are_bounded(tmp_path: Path, repeats: str) -> None:
+    """An absurd --repeats ran until killed (the pairs are timed one after the other)."""
+    res = subprocess.run(
+        [*rigctl_exe(), "bench", "render", "--size", "64x36", "--repeats", repeats],
+        capture_output=True, text=True, cwd=tmp_path, timeout=300,
+    )  # fmt: skip
+    one_line(res, EXIT_USAGE, f"--repeats must be 1 to 1000, got {repeats}")
+
+
 def test_python_dash_m_and_debug_anywhere(tmp_path: Path) -> None:
     res = subprocess.run(
         [sys.executable, "-m", "rigctl", "plan", "--near", "3", "--far", "2"],
