@@ -79,6 +79,11 @@ def run(ns: argparse.Namespace) -> int:
     for path in (png, yml):  # a name held by a folder, FIFO or device is refused before any drawing
         utf8_path(path)
         refuse_special(path)
+    for path in (png, yml):  # never replaced: a printed board measured by another description calibrates wrong
+        if path.exists() or path.is_symlink():
+            raise ParameterError(
+                f"{path}: already exists; a board is never replaced: choose another --out or remove it"
+            )
     margin = round(ns.margin_mm / 25.4 * ns.dpi)
     image = spec.image(px_per_square, margin)
     # the PNG states its physical resolution (pHYs, whole pixels per metre): the one at which a square of

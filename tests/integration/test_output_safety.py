@@ -357,6 +357,20 @@ def test_an_output_name_held_by_a_fifo_or_a_device_is_not_replaced(tmp_path: Pat
     assert not any(p.name.endswith(TEMP_SUFFIX) for p in tmp_path.iterdir())  # no temporary left behind
 
 
+def test_board_never_replaces_an_existing_board(tmp_path: Path) -> None:
+    """A second ``board`` on the same --out would leave a printed board measured by another description (and
+    calibration using the wrong square size): refused in one line naming the file, as usd and miv refuse."""
+    first = rigctl("board", "--out", str(tmp_path / "b"), "--squares", "5x4", "--square-mm", "30",
+                   "--marker-mm", "22", "--dpi", "300", timeout=60)  # fmt: skip
+    assert first.returncode == 0, first.stderr
+    png, yml = (tmp_path / "b.png").read_bytes(), (tmp_path / "b.yaml").read_bytes()
+    one_line(rigctl("board", "--out", str(tmp_path / "b"), timeout=60), EXIT_USAGE, "b.png", "already exists")
+    assert (tmp_path / "b.png").read_bytes() == png and (tmp_path / "b.yaml").read_bytes() == yml
+    (tmp_path / "c.yaml").write_text("mine")  # either file alone is enough to refuse, and nothing is written
+    one_line(rigctl("board", "--out", str(tmp_path / "c"), timeout=60), EXIT_USAGE, "c.yaml", "already exists")
+    assert (tmp_path / "c.yaml").read_text() == "mine" and not (tmp_path / "c.png").exists()
+
+
 # 4. numbers bounded to physical ranges; the machine bounds the workers
 
 
