@@ -13,7 +13,7 @@ import threading
 import time
 from collections.abc import Callable
 
-from rigctl.errors import RigctlError, RigFileError
+from rigctl.errors import ParameterError, RigctlError, RigFileError
 from rigctl.interfaces import TallyOutput, TallyState
 from rigctl.rig import Rig
 
@@ -27,6 +27,27 @@ def tsl_addresses(rig: Rig) -> dict[str, int]:
         raise RigFileError(f"{rig.source}: rig {rig.name} has no tally section")
     given = tally.addresses or {}
     return {name: given.get(name, i + 1) for i, name in enumerate(rig.camera_names)}
+
+
+def tally_state(rig: Rig, program: list[str], preview: list[str]) -> TallyState:
+    """The state asked for, checked: every camera in ``rig``, none named twice, none on program and preview at
+    once (the outputs cannot show both: TSL 5.0 lights it red, the shoot UI says PGM, so the preview asked for
+    would be dropped without a word). Refused with :class:`ParameterError` naming the camera and options."""
+    known = set(rig.camera_names)
+    for cam in [*program, *preview]:
+        if cam not in known:
+            raise ParameterError(f"camera {cam!r} is not in rig {rig.name} (it has {', '.join(rig.camera_names)})")
+    for option, cams in (("--program", program), ("--preview", preview)):
+        twice = next((cam for i, cam in enumerate(cams) if cam in cams[:i]), None)
+        if twice is not None:
+            raise ParameterError(f"{option}: camera {twice} is named twice")
+    both = [cam for cam in program if cam in preview]
+    if both:
+        raise ParameterError(
+            f"{'cameras' if len(both) > 1 else 'camera'} {', '.join(both)} on --program and --preview at once: "
+            "a camera is on one of them (or neither)"
+        )
+    return TallyState(frozenset(program), frozenset(preview))
 
 
 class TallyService:

@@ -5,10 +5,9 @@ from __future__ import annotations
 import argparse
 
 from rigctl.cli.helptext import examples
-from rigctl.errors import ParameterError
 from rigctl.registry import open_tally
 from rigctl.rig import load_rig
-from rigctl.tally import TallyState
+from rigctl.tally import tally_state
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -29,13 +28,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     rig = load_rig(ns.rig)
-    known = set(rig.camera_names)
-    for cam in [*ns.program, *ns.preview]:
-        if cam not in known:
-            raise ParameterError(f"camera {cam!r} is not in rig {rig.name} (it has {', '.join(rig.camera_names)})")
+    state = tally_state(rig, ns.program, ns.preview)  # refused before the line is opened
     out = open_tally(rig)
     try:
-        out.send(TallyState(frozenset(ns.program), frozenset(ns.preview)))
+        out.send(state)
     finally:
         out.close()
     print(

@@ -21,6 +21,26 @@ from rigctl.errors import EXIT_BAD_INPUT, EXIT_DEVICE, EXIT_USAGE
 # ---- 4. serial lines and services ----------------------------------------------------------------------------
 
 
+@pytest.mark.parametrize(
+    ("argv", "fragment"),
+    [
+        (("--program", "r1c1", "--preview", "r1c1"), "camera r1c1 on --program and --preview at once"),
+        (("--program", "r1c1", "r1c2", "--preview", "r1c2", "r1c1"), "cameras r1c1, r1c2 on --program and --pre"),
+        (("--program", "r1c1", "r1c1"), "--program: camera r1c1 is named twice"),
+        (("--preview", "r0c0", "r1c0", "r0c0"), "--preview: camera r0c0 is named twice"),
+    ],
+)
+def test_tally_refuses_a_camera_on_program_and_preview_or_named_twice(  # type: ignore[no-untyped-def]
+    run_cli, tmp_path: Path, argv: tuple[str, ...], fragment: str
+) -> None:
+    """The outputs show one state a camera (TSL 5.0 lights it red, the shoot UI says PGM): a preview asked for
+    with program would be dropped silently. Refused on the shipped rig, and before the line is opened (a rig
+    whose port is missing says the same, not a device error)."""
+    one_line(run_cli("tally", "sim-3x3", *argv), EXIT_USAGE, fragment)
+    rig = rig_with(tmp_path, tally={"protocol": "tsl-umd-3.1", "port": "/nonexistent/ttyUSB9"})
+    one_line(run_cli("tally", str(rig), *argv), EXIT_USAGE, fragment)
+
+
 @pytest.mark.parametrize("port", ["foo://bar", "/dev/null", "/nonexistent/ttyUSB9"])
 def test_tally_transport_failures_are_device_errors_naming_the_port(run_cli, tmp_path: Path, port: str) -> None:  # type: ignore[no-untyped-def]
     rig = rig_with(tmp_path, tally={"protocol": "tsl-umd-3.1", "port": port})
