@@ -19,6 +19,12 @@ CAMERA_DESTS = ("cameras", "camera", "program", "preview")
 # $1 is the word being completed; COMP_WORDS the line. Names containing "_file" make shtab's script ask bash
 # for file-name treatment (a slash after a folder).
 _BASH = r"""
+_rigctl_compgen_files() {  # shtab's own pass $1 unquoted: "a b/" became the words "a" and "b/"
+  compgen -f -- "$1"
+}
+_rigctl_compgen_dirs() {
+  compgen -d -- "$1"
+}
 _rigctl_rig_or_file() {
   compgen -W "__RIGS__" -- "$1"
   compgen -f -- "$1"
@@ -95,9 +101,9 @@ def _mark(parser: argparse.ArgumentParser) -> None:
         elif action.dest in CAMERA_DESTS:
             action.complete = {"bash": "_rigctl_cameras", "zsh": "_rigctl_cameras"}  # type: ignore[attr-defined]
         elif action.metavar in ("DIR", "OUT", "RECTIFIED_TAKE"):
-            action.complete = shtab.DIRECTORY  # type: ignore[attr-defined]
+            action.complete = {**shtab.DIRECTORY, "bash": "_rigctl_compgen_dirs"}  # type: ignore[attr-defined]
         elif action.type is Path:
-            action.complete = shtab.FILE  # type: ignore[attr-defined]
+            action.complete = {**shtab.FILE, "bash": "_rigctl_compgen_files"}  # type: ignore[attr-defined]
 
 
 def script(shell: str) -> str:

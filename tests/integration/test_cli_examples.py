@@ -99,6 +99,22 @@ def test_bash_completion_script_is_accepted_and_completes_commands_rigs_and_came
     assert _complete(script, ["rigctl", "take", "info", "T"], tmp_path) == ["T9"]
 
 
+def test_bash_completes_inside_a_folder_whose_name_has_a_space(tmp_path: Path) -> None:
+    """``rigctl take info "cdir/a b/"`` offers the folder's contents: the file and folder completions passed the
+    word unquoted to compgen, which completed "cdir/a" and "b/" and offered "cdir/a b" itself."""
+    res = subprocess.run([*rigctl_command(), "completion", "bash"], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    script = tmp_path / "rigctl.bash"
+    script.write_text(res.stdout)
+    (tmp_path / "cdir" / "a b" / "T 1").mkdir(parents=True)
+    (tmp_path / "cdir" / "a b" / "c.yaml").write_text("")
+    inside = ["cdir/a b/T 1", "cdir/a b/c.yaml"]
+    assert _complete(script, ["rigctl", "take", "info", "cdir/a b/"], tmp_path) == inside  # a file argument
+    assert _complete(script, ["rigctl", "rectify", "T", "--calibration", "cdir/a b/c"], tmp_path) == inside[1:]
+    assert _complete(script, ["rigctl", "depth", "T", "--out", "cdir/a b/"], tmp_path) == inside[:1]  # a folder
+    assert _complete(script, ["rigctl", "plan", "cdir/a b/"], tmp_path) == inside  # a rig or a rig file
+
+
 def test_zsh_and_tcsh_scripts_are_generated() -> None:
     for shell, marker in (("zsh", "#compdef rigctl"), ("tcsh", "complete rigctl")):
         res = subprocess.run([*rigctl_command(), "completion", shell], capture_output=True, text=True, timeout=120)
