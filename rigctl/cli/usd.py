@@ -36,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-NEAREST_M, FARTHEST_M = 1e-3, 1e6  # a clipping range USD's float can hold and a renderer can use
+NEAREST_M, FARTHEST_M = args.NEAREST_M, args.FARTHEST_M  # a clipping range USD's float holds, a renderer uses
 
 
 def run(ns: argparse.Namespace) -> int:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -97,6 +98,13 @@ BAD = [
     (["--near", "2"], "near_m given without far_m"),
     (["--far", "2", "--subject-depth", "3"], "subject_depth_m 3.0 is not less than far_m 2.0"),
     (["--near", "1", "--far", "2", "--subject-depth", "1"], "not all three"),
+    # distances no camera can be planned for: they printed hundreds of digits, or near = far = 0.000 m
+    (["--near", "1e-300", "--far", "1e-299"], "--near 1e-300 m: a plan's distances run from 0.001 m to 1e+06 m"),
+    (["--near", "1", "--far", "1e155"], "--far 1e+155 m: a plan's distances run from 0.001 m to 1e+06 m (inf for"),
+    (["--near", "0.0009", "--far", "1", "--json"], "--near 0.0009 m: a plan's distances run from 0.001 m"),
+    (["--subject-depth", "1e200"], "--subject-depth 1e+200 m: at most 1e+06 m"),
+    (["--subject-depth", "1e-300"], "--subject-depth 1e-300 m: the subject's near side would be 2.4e-150 m"),
+    (["--far", "2", "--subject-depth", "1.99999"], "--far 2 m and --subject-depth 1.99999 m: the subject's near"),
 ]
 
 
@@ -109,6 +117,29 @@ def test_bad_input_is_one_line_and_exit_2(run_cli, argv: list[str], message: str
     assert len(lines) == 1, out.stderr
     assert message in lines[0]
     assert "Traceback" not in out.stderr
+
+
+def test_the_text_report_stays_readable_at_its_extremes(run_cli) -> None:  # type: ignore[no-untyped-def]
+    """At the edges of the distances a plan holds (1 mm to 1,000 km) the report's numbers keep a readable width
+    (a far depth error printed 1133333333333.33 mm); the JSON keeps them whole."""
+    out = run_cli("plan", "--near", "0.001", "--far", "1e6")
+    assert out.returncode == 0, out.stderr
+    assert "1.133e+12 mm at far" in out.stdout
+    assert not re.search(r"[0-9]{11}", out.stdout), out.stdout
+    whole = json.loads(run_cli("plan", "--near", "0.001", "--far", "1e6", "--json").stdout)
+    assert whole["depth_error_mm"]["at_far"] == pytest.approx(1133333333333.33, rel=1e-6)
+
+
+def test_the_report_never_prints_hundreds_of_digits() -> None:
+    """The library still plans what the CLI refuses; its text report stays in columns whatever the numbers."""
+    from rigctl.planning.report import format_plan, plan_rig
+    from rigctl.rig import load_rig
+
+    rig = load_rig("sim-3x3")
+    text = format_plan(plan_rig(rig, near_m=1e-300, far_m=1e-299), rig)
+    assert not re.search(r"[0-9]{11}", text) and max(map(len, text.splitlines())) < 130, text
+    table = [ln for ln in text.splitlines() if ln.startswith(("vertical", "horizontal", "diagonal"))]
+    assert table and all(len(ln.split()) == 10 for ln in table), table  # every column apart from its neighbour
 
 
 def test_bad_rig_file_names_file_line_field(run_cli, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
@@ -134,7 +165,7 @@ def test_debug_shows_the_traceback(run_cli) -> None:  # type: ignore[no-untyped-
 def test_json_numbers_are_always_finite(run_cli) -> None:  # type: ignore[no-untyped-def]
     for argv in (
         ["--near", "0.01", "--far", "10000"],
-        ["--subject-depth", "1e-9"],
+        ["--subject-depth", "1e-6"],  # the smallest a plan holds (1e-9 is now refused: near 0.07 mm)
         ["--near", "5", "--far", "inf"],
     ):
         out = run_cli("plan", PAPER, *argv, "--json")
