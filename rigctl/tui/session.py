@@ -28,7 +28,7 @@ from rigctl.registry import DeviceSet, open_cameras, open_control, open_tally
 from rigctl.rig import Rig
 from rigctl.take.manifest import read_manifest, write_manifest
 from rigctl.take.names import next_take_number, take_name
-from rigctl.tally import TallyService
+from rigctl.tally import TallyService, tally_state
 from rigctl.timecode import start_timecode
 
 log = logging.getLogger(__name__)
@@ -251,7 +251,7 @@ class Session:
     def set_tally(self, program: list[str], preview: list[str]) -> None:
         if self.recording:
             raise RigctlError("tally follows the take while recording")
-        self._set_tally(TallyState(frozenset(program), frozenset(preview)))
+        self._set_tally(tally_state(self.rig, program, preview, ("program", "preview")))
 
     def apply_settings(self, values: dict[str, float | str]) -> list[SettingResult]:
         checked = check_settings(values)

@@ -438,6 +438,27 @@ def test_in_a_real_terminal(tmp_path: Path) -> None:
     assert len(take.names) == 9 and len(take.complete_sets()) >= 20
 
 
+def test_tally_from_the_ui_refuses_what_rigctl_tally_refuses(fast_out: Path) -> None:
+    """The tally prompt takes the same state as ``rigctl tally``: a camera on program and preview at once, one
+    named twice or not in the rig is refused (the app shows it in a notice), and the state is left as it was."""
+    from rigctl.errors import RigctlError
+
+    session = Session(RIG, fast_out, SIM)
+    try:
+        session.set_tally(["r1c1"], ["r1c0", "r1c2"])
+        before = session.tally_state
+        for program, preview, fragment in (
+            (["r1c1"], ["r1c1"], "camera r1c1 on program and preview at once"),
+            (["r0c0", "r0c0"], [], "program: camera r0c0 is named twice"),
+            (["r9c9"], [], "camera 'r9c9' is not in rig"),
+        ):
+            with pytest.raises(RigctlError, match=fragment):
+                session.set_tally(program, preview)
+            assert session.tally_state == before
+    finally:
+        session.close()
+
+
 def test_quit_while_a_take_is_stopping_finishes_it_once(fast_out: Path) -> None:
     """The stop key's worker and the quit can meet: the take is finalised once, the cameras closed once, and
     the session does not arm again after it was closed."""
