@@ -180,6 +180,26 @@ def test_corrupt_frame_refused_by_export_rectify_and_depth(run_cli, tiny: Path, 
     one_line(res, EXIT_DAMAGED, f"{ress}: byte 0: frame", "fails its checksum")
 
 
+@pytest.mark.parametrize("layout", ["frames", "sequence"])
+def test_a_failed_export_leaves_no_half_written_frame_set(run_cli, tiny: Path, tmp_path: Path, layout: str) -> None:  # type: ignore[no-untyped-def]
+    """The last camera's frame of frame set 1 is damaged: frame set 0 stays whole, nothing of frame set 1 is left
+    (its eight good pictures were once published, the ninth refused), and no hidden staging folder either."""
+    take = copy_take(tiny, tmp_path)
+    ess = essence(take, "r2c2")
+    frame = ess.stat().st_size // 3
+    corrupt(ess, frame + 100)
+    out = tmp_path / "x"
+    res = run_cli("take", "export", str(take), "--out", str(out), "--layout", layout)
+    one_line(res, EXIT_DAMAGED, f"{ess}: byte {frame}: frame", "fails its checksum")
+    files = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+    cams = [f"r{r}c{c}" for r in range(3) for c in range(3)]
+    if layout == "frames":
+        assert files == [f"000000/{c}.png" for c in cams]
+    else:
+        assert files == [f"{c}/{c}.000000.png" for c in cams]
+    assert not [p for p in out.rglob(".*")], "a staging folder or temporary file is left"
+
+
 def test_skip_damaged_leaves_out_lists_and_exits_5(run_cli, tiny: Path, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     take = copy_take(tiny, tmp_path)
     ess = essence(take, "r1c1")
