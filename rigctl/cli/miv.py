@@ -10,6 +10,7 @@ import logging
 import re
 from pathlib import Path
 
+from rigctl.cli.args import non_negative_int
 from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
 
@@ -61,7 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     iv.add_argument("test", type=Path, help="raw .yuv file (the synthesised or compressed picture)")
     iv.add_argument("--size", type=_size, required=True, metavar="WxH")
     iv.add_argument("--pix-fmt", default="yuv420p", help="yuv420p (8 bits) or yuv420p10le, 12le, 14le")
-    iv.add_argument("--frame", type=int, default=0, help="frame index in both files (default 0)")
+    iv.add_argument("--frame", type=non_negative_int, default=0, help="frame index in both files (default 0)")
     iv.add_argument("--mask", type=Path, help="raw 8-bit 4:2:0 .yuv: compare only where its luma is non-zero")
     iv.add_argument("--json", action="store_true")
     iv.set_defaults(func=cmd_ivpsnr)

@@ -335,3 +335,19 @@ def test_rectify_names_the_camera_that_makes_the_common_plane_degenerate(run_cli
     ok = _calibration(tiny, tmp_path, lambda c: _yaw(c, "r2c0", 0.02))
     res = run_cli("rectify", str(tiny / "t"), "--calibration", str(ok), "--out", str(tmp_path / "r2"))
     assert res.returncode == 0, res.stderr
+
+
+@pytest.mark.parametrize(
+    ("frame", "code", "said"),
+    [
+        ("9999999999999", EXIT_BAD_INPUT, "frame 9999999999999 is past the end of the file"),  # beyond an offset
+        ("99999999999999999999999", EXIT_BAD_INPUT, "is past the end of the file"),
+        ("2", EXIT_BAD_INPUT, "frame 2 is past the end of the file"),
+        ("-1", 2, "--frame: must be at least 0, got '-1'"),
+    ],
+)
+def test_ivpsnr_frame_out_of_the_file_is_one_line(run_cli, tmp_path: Path, frame: str, code: int, said: str) -> None:  # type: ignore[no-untyped-def]
+    pic = tmp_path / "a.yuv"
+    pic.write_bytes(bytes(16 * 8 * 3 // 2 * 2) * 2)  # two 16x8 10-bit 4:2:0 frames of zeros
+    res = run_cli("miv", "ivpsnr", str(pic), str(pic), "--size", "16x8", "--pix-fmt", "yuv420p10le", "--frame", frame)
+    one_line(res, code, said)
