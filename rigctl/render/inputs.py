@@ -22,6 +22,7 @@ from rigctl.keying import Keyer
 from rigctl.pfm import read_pfm
 from rigctl.regular import read_regular
 from rigctl.rig import CAMERA_NAME
+from rigctl.take.framesets import check_frames, ranges
 from rigctl.timecode import Timecode
 
 log = logging.getLogger(__name__)
@@ -122,16 +123,14 @@ class RenderInput:
             if len(chosen) < len(self.numbers):
                 log.warning(
                     "%s has disparities for %d of the %d complete frame sets of %s: rendering those (%s)",
-                    self.disparity_dir, len(chosen), len(self.numbers), self.source, _ranges(chosen),
+                    self.disparity_dir, len(chosen), len(self.numbers), self.source, ranges(chosen),
                 )  # fmt: skip
             return chosen
-        missing = [f for f in frames if f not in self.numbers]
-        if missing:
-            raise ParameterError(f"{self.source}: frame set(s) {missing} are not complete frame sets of the take")
-        for f in frames:
+        chosen = check_frames(frames, self.numbers, self.source)
+        for f in chosen:
             if not self._has_disparity(f):
                 self._no_disparity(f)
-        return list(frames)
+        return chosen
 
     def _names(self) -> list[str]:
         return list(self.frames.names)
@@ -205,20 +204,6 @@ class RenderInput:
         if missing:
             log.warning("frame %d: no disparity for %s: not used as sources", number, ", ".join(missing))
         return FrameViews(number, views, grid.focal_px, grid.spacing)
-
-
-def _ranges(numbers: list[int]) -> str:
-    """1, 2, 3, 7 -> '1-3, 7'."""
-    out: list[str] = []
-    start = prev = numbers[0]
-    for n in [*numbers[1:], None]:
-        if n is not None and n == prev + 1:
-            prev = n
-            continue
-        out.append(f"{start}" if start == prev else f"{start}-{prev}")
-        if n is not None:
-            start = prev = n
-    return ", ".join(out)
 
 
 def _made_from(disparity_dir: Path) -> Path | None:

@@ -25,25 +25,8 @@ from rigctl.exr import picture, picture_attributes, to_colour, write_exr
 from rigctl.keying import Keyer
 from rigctl.layout import check_layout, inside, output_path
 from rigctl.publish import PARTIAL_SUFFIX, fsync_dir, move_into, output_error, publish_json, publish_png
+from rigctl.take.framesets import check_frames, parse_frames
 from rigctl.take.reader import TakeReader
-
-
-def parse_range(text: str | None, count: int) -> range:
-    """``N`` or ``A-B`` (inclusive, frame-set numbers from 0) -> range; None -> every set."""
-    if text is None:
-        return range(count)
-    try:
-        if "-" in text:
-            a, b = (int(v) for v in text.split("-", 1))
-        else:
-            a = b = int(text)
-    except ValueError:
-        raise ParameterError(f"--frames {text!r}: expected N or A-B, e.g. 0-24") from None
-    if a < 0 or b < a:
-        raise ParameterError(f"--frames {text!r}: need 0 <= A <= B")
-    if a >= count:
-        raise ParameterError(f"--frames {text!r}: the take has {count} frame sets (0-{count - 1})")
-    return range(a, min(b, count - 1) + 1)
 
 
 def export_take(
@@ -68,7 +51,8 @@ def export_take(
     sets = reader.frame_sets
     if not sets:
         raise TakeError(f"{reader.folder}: the take holds no frames")
-    chosen = parse_range(frames, len(sets))
+    asked = parse_frames(frames) if frames is not None else None
+    chosen = check_frames(asked, range(len(sets)), reader.folder, "frame set")
     keyer = Keyer()
     remove_stale_staging(out)
     written = missing = 0
