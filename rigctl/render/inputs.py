@@ -50,6 +50,7 @@ class FrameViews:
     views: dict[str, View]
     focal_px: float
     spacing: float  # horizontal spacing (metres for takes; the grid folder's unit otherwise)
+    estimated: set[str] | None = None  # the cameras whose disparity has an estimate somewhere (None: not known)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -94,8 +95,13 @@ def _row_col(name: str) -> tuple[int, int]:
 class RenderInput:
     """A grid's frames together with their disparities from ``disparity_dir``."""
 
-    def __init__(self, source: Path, disparity_dir: Path, keyer: Keyer | None = None) -> None:
+    def __init__(
+        self, source: Path, disparity_dir: Path, keyer: Keyer | None = None, refuse_unestimated: bool = True
+    ) -> None:
+        """``refuse_unestimated``: a frame set none of whose disparities holds an estimate is refused in one
+        line when read (a render or score of it is empty); the web viewer shows it as it is, empty."""
         self.source = source
+        self.refuse_unestimated = refuse_unestimated
         self.disparity_dir = disparity_dir
         self.keyer = keyer or Keyer()
         if not disparity_dir.is_dir():
@@ -190,20 +196,26 @@ class RenderInput:
         found = {n: p for n, p in files.items() if p.exists()}
         if not found:
             self._no_disparity(number)
+        disps: dict[str, F32] = {}
+        for n, path in found.items():
+            disp = read_disparity(path) if path.suffix == ".exr" else read_pfm(path)
+            disps[n] = checked_disparity(path, disp, (h, w), self.source)
+        estimated = {n for n, d in disps.items() if bool(np.isfinite(d).any())}
+        if not estimated and self.refuse_unestimated:  # every view would be empty, every score one of nothing
+            raise TakeError(
+                f"{self.disparity_dir}: frame {number}: no camera's disparity holds an estimate (every value is "
+                "+inf, no estimate): nothing to render from"
+            )
         views = {}
         for n in grid.names:
-            disp = None
-            if n in found:
-                disp = read_disparity(found[n]) if found[n].suffix == ".exr" else read_pfm(found[n])
-                checked_disparity(found[n], disp, (h, w), self.source)
             rgb = grid.images[n]
             screen = self.keyer.screen_excess(rgb) > 0
             alpha = self.keyer.matte(rgb) if screen else np.ones((h, w), np.float32)
-            views[n] = View(n, grid.offsets[n], rgb, alpha, disp, screen)
+            views[n] = View(n, grid.offsets[n], rgb, alpha, disps.get(n), screen)
         missing = sorted(set(files) - set(found))
         if missing:
             log.warning("frame %d: no disparity for %s: not used as sources", number, ", ".join(missing))
-        return FrameViews(number, views, grid.focal_px, grid.spacing)
+        return FrameViews(number, views, grid.focal_px, grid.spacing, estimated)
 
 
 def _made_from(disparity_dir: Path) -> Path | None:
