@@ -45,11 +45,11 @@ def depth_grid(grid: Grid, opt: DepthOptions) -> dict[str, DepthResult]:
 
 
 def select_frames(source: FrameSource, frames: Sequence[int] | None) -> list[int]:
-    """The frame sets to process: those asked for (each a complete frame set), or every complete one."""
-    numbers = source.frame_numbers()
+    """The frame sets to process: those asked for (each a complete frame set), or every complete one. A grid
+    folder is one frame set, 0, as ``rigctl render`` reads it: --frames asks for that one or is refused."""
+    numbers = check_frames(frames, source.frame_numbers(), source.name)
     if isinstance(source, OneGrid):
         return numbers
-    numbers = check_frames(frames, numbers, source.name)
     if not numbers:
         raise ParameterError(f"{source.name}: the take has no complete frame set")
     return numbers

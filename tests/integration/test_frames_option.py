@@ -62,3 +62,27 @@ def test_frames_within_the_take_still_work(ideal: Path, tmp_path: Path) -> None:
     res = run_rigctl(*argv("take export", ideal, tmp_path / "e", "1-2"))
     assert res.returncode == 0, res.stderr
     assert sorted(p.name for p in (tmp_path / "e").iterdir()) == ["000001", "000002"]
+
+
+@pytest.fixture(scope="module")
+def grid_folder(ideal: Path) -> Path:
+    """Frame set 1 of the ideal take as a grid folder (one picture per camera), through MIV content."""
+    content, grids = ideal.parent / "miv", ideal.parent / "grids"
+    res = run_rigctl("miv", "export", str(ideal), str(ideal / "truth" / "disparity"), "--out", str(content))
+    assert res.returncode == 0, res.stderr
+    res = run_rigctl("miv", "import", str(content / "cameras.json"), "--out", str(grids), "--frames", "1")
+    assert res.returncode == 0, res.stderr
+    return grids / "000001"
+
+
+@pytest.mark.parametrize("verb", ["depth", "render"])
+def test_a_grid_folder_is_frame_set_0_for_depth_as_for_render(grid_folder: Path, tmp_path: Path, verb: str) -> None:
+    """A grid folder is one frame set: depth ignored --frames 5 on it where render refused it."""
+    out = tmp_path / "out"
+    disparity = str(grid_folder / "truth")
+    cmd = {
+        "depth": ["depth", str(grid_folder), "--out", str(out), "--preset", "fast", "--cameras", "r1c1"],
+        "render": ["render", str(grid_folder), "--disparity", disparity, "--at", "1,1", "--out", str(out)],
+    }[verb]
+    one_line(run_rigctl(*cmd, "--frames", "5"), EXIT_USAGE, "--frames 5:", "frame sets: 0)")
+    assert not out.exists()
