@@ -14,7 +14,7 @@ from rigctl.depth.presets import PRESETS
 from rigctl.depth.run import run_depth
 from rigctl.errors import ParameterError
 from rigctl.publish import output_folder, publish_json
-from rigctl.take.export import parse_range
+from rigctl.take.framesets import parse_frames
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -57,10 +57,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(ns: argparse.Namespace) -> int:
-    frames = None
-    if ns.frames:
-        r = parse_range(ns.frames, 1_000_000)
-        frames = list(r)
+    frames = parse_frames(ns.frames) if ns.frames else None
     opt = depth_options(ns)
     if ns.check and ns.cameras is not None and len(set(ns.cameras)) < 2:
         raise ParameterError(

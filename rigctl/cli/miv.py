@@ -10,8 +10,10 @@ import logging
 import re
 from pathlib import Path
 
+from rigctl.cli.args import non_negative_int
 from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
+from rigctl.take.framesets import parse_frames
 
 log = logging.getLogger(__name__)
 
@@ -23,13 +25,6 @@ def _size(text: str) -> tuple[int, int]:
     if m is None or int(m[1]) < 1 or int(m[2]) < 1:
         raise argparse.ArgumentTypeError(f"size must be WIDTHxHEIGHT, e.g. 1920x1080, got {text!r}")
     return int(m[1]), int(m[2])
-
-
-def _frames(text: str) -> range:
-    m = re.fullmatch(r"(\d+)(?:-(\d+))?", text)
-    if m is None or (m[2] is not None and int(m[2]) < int(m[1])):
-        raise argparse.ArgumentTypeError(f"frames must be A or A-B with A <= B, got {text!r}")
-    return range(int(m[1]), int(m[2] or m[1]) + 1)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -61,7 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     iv.add_argument("test", type=Path, help="raw .yuv file (the synthesised or compressed picture)")
     iv.add_argument("--size", type=_size, required=True, metavar="WxH")
     iv.add_argument("--pix-fmt", default="yuv420p", help="yuv420p (8 bits) or yuv420p10le, 12le, 14le")
-    iv.add_argument("--frame", type=int, default=0, help="frame index in both files (default 0)")
+    iv.add_argument("--frame", type=non_negative_int, default=0, help="frame index in both files (default 0)")
     iv.add_argument("--mask", type=Path, help="raw 8-bit 4:2:0 .yuv: compare only where its luma is non-zero")
     iv.add_argument("--json", action="store_true")
     iv.set_defaults(func=cmd_ivpsnr)
@@ -79,7 +74,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     ex.add_argument("take", type=Path, help="a rectified take (or an ideal=true simulated take)")
     ex.add_argument("disparity", type=Path, help="disparity folder: <frame>/<camera>.pfm (a depth output, truth)")
     ex.add_argument("--out", type=Path, required=True, help="new folder for the content")
-    ex.add_argument("--frames", type=_frames, help="frame sets A-B (default: every one with a disparity)")
+    ex.add_argument("--frames", metavar="A-B", help="frame sets A-B (default: every one with a disparity)")
     ex.set_defaults(func=cmd_export)
 
     im = verbs.add_parser(
@@ -95,7 +90,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     im.add_argument(
         "--out", type=Path, required=True, help="new folder: <frame>/grid.yaml, images, truth/ (the content's depth)"
     )
-    im.add_argument("--frames", type=_frames, help="frames A-B (default: every frame of the content)")
+    im.add_argument("--frames", metavar="A-B", help="frames A-B (default: every frame of the content)")
     im.set_defaults(func=cmd_import)
     p.set_defaults(func=lambda ns: p.print_help() or 2)
 
@@ -131,7 +126,7 @@ def cmd_ivpsnr(ns: argparse.Namespace) -> int:
 def cmd_export(ns: argparse.Namespace) -> int:
     from rigctl.interop.miv import export_miv
 
-    files = export_miv(ns.take, ns.disparity, ns.out, ns.frames)
+    files = export_miv(ns.take, ns.disparity, ns.out, parse_frames(ns.frames) if ns.frames else None)
     print(f"wrote {len(files)} files of MIV content to {ns.out} (listed in {ns.out / 'README.txt'})")
     return 0
 
@@ -139,6 +134,6 @@ def cmd_export(ns: argparse.Namespace) -> int:
 def cmd_import(ns: argparse.Namespace) -> int:
     from rigctl.interop.miv_import import import_miv
 
-    folders = import_miv(ns.cameras, ns.out, ns.frames)
+    folders = import_miv(ns.cameras, ns.out, parse_frames(ns.frames) if ns.frames else None)
     print(f"wrote {len(folders)} grid folder(s) to {ns.out}")
     return 0

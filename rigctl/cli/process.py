@@ -16,7 +16,7 @@ from rigctl.cli.progress import Progress, add_quiet
 from rigctl.depth.presets import PRESETS
 from rigctl.errors import DeviceError
 from rigctl.publish import output_folder
-from rigctl.take.export import parse_range
+from rigctl.take.framesets import parse_frames
 
 WORKERS_PER_CORE = 4  # local workers beyond this only queue for the cores (and each holds a frame set)
 MIN_MEMORY = 256 << 20
@@ -142,7 +142,7 @@ def run(ns: argparse.Namespace) -> int:
         out=ns.out,
         depth=depth_options(ns),
         calibration=ns.calibration,
-        frames=list(parse_range(ns.frames, 1_000_000)) if ns.frames else None,
+        frames=parse_frames(ns.frames) if ns.frames else None,
         redo=ns.redo,
         scheduler=scheduler_url(ns.scheduler) if ns.scheduler else None,
         workers=ns.workers,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -104,7 +105,7 @@ def simulator_hooks(source: Path, width: int) -> tuple[Any, Any]:
 
 
 def leave_one_out_report(
-    source: Path, disparity: Path, frames: list[int] | None, cameras: list[str] | None
+    source: Path, disparity: Path, frames: Sequence[int] | None, cameras: list[str] | None
 ) -> list[LeaveOneOutRow]:
     """Leave-one-out rows for ``rigctl depth --check``: the cameras just computed, scored from the others."""
     from rigctl.render.inputs import RenderInput
@@ -130,7 +131,7 @@ def _check_out(out: Path) -> None:
 def run(ns: argparse.Namespace) -> int:
     from rigctl.render.inputs import RenderInput
     from rigctl.render.views import eyes_for, format_table, leave_one_out, path_positions, render_views
-    from rigctl.take.export import parse_range
+    from rigctl.take.framesets import parse_frames
 
     modes = sum(bool(x) for x in (ns.at, ns.path, ns.leave_one_out))
     if modes != 1:
@@ -152,7 +153,7 @@ def run(ns: argparse.Namespace) -> int:
         _check_out(ns.out)
     points = path_positions(ns.path, 9 if ns.steps is None else ns.steps) if ns.path else []
     inp = RenderInput(ns.input, ns.disparity)
-    numbers = inp.select(parse_range(ns.frames, max(inp.numbers) + 1) if ns.frames else None)
+    numbers = inp.select(parse_frames(ns.frames) if ns.frames else None)
     first = inp.frame(numbers[0])
     truth, box = simulator_hooks(ns.input, first.shape[1])
     if ns.leave_one_out:

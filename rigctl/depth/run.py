@@ -7,7 +7,7 @@ the bound hits summed and, when the take has a truth, the flicker figures of eve
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +24,7 @@ from rigctl.depth.video_metrics import VideoMetrics
 from rigctl.errors import ParameterError
 from rigctl.exr import to_colour
 from rigctl.layout import check_layout
+from rigctl.take.framesets import check_frames
 
 __all__ = [
     "DEFAULT_CHUNK",
@@ -43,16 +44,12 @@ def depth_grid(grid: Grid, opt: DepthOptions) -> dict[str, DepthResult]:
     return TakeProcessor(OneGrid(grid), opt).depth(grid)
 
 
-def select_frames(source: FrameSource, frames: list[int] | None) -> list[int]:
-    """The frame sets to process: those asked for (each a complete frame set), or every complete one."""
-    numbers = source.frame_numbers()
+def select_frames(source: FrameSource, frames: Sequence[int] | None) -> list[int]:
+    """The frame sets to process: those asked for (each a complete frame set), or every complete one. A grid
+    folder is one frame set, 0, as ``rigctl render`` reads it: --frames asks for that one or is refused."""
+    numbers = check_frames(frames, source.frame_numbers(), source.name)
     if isinstance(source, OneGrid):
         return numbers
-    if frames is not None:
-        missing = [f for f in frames if f not in numbers]
-        if missing:
-            raise ParameterError(f"{source.name}: frame set(s) {missing} are not complete frame sets of the take")
-        numbers = list(frames)
     if not numbers:
         raise ParameterError(f"{source.name}: the take has no complete frame set")
     return numbers
@@ -81,7 +78,7 @@ def run_depth(
     source: Path,
     out: Path,
     opt: DepthOptions,
-    frames: list[int] | None = None,
+    frames: Sequence[int] | None = None,
     formats: tuple[str, ...] = ("exr", "pfm", "png"),
     progress: Callable[[int, int, str], None] | None = None,
     skip_damaged: bool = False,

@@ -56,7 +56,7 @@ class FarmOptions:
     out: Path
     depth: DepthOptions = field(default_factory=DepthOptions)
     calibration: Path | None = None
-    frames: list[int] | None = None
+    frames: range | None = None  # --frames as asked, checked against the take's complete frame sets
     redo: bool = False
     scheduler: str | None = None
     workers: int = 2
@@ -104,6 +104,7 @@ class Work:
 
 def frames_to_do(options: FarmOptions) -> Work:
     """The chunks to compute and the frame sets already done, checked on the client."""
+    from rigctl.take.framesets import check_frames
     from rigctl.take.reader import TakeReader
 
     take = options.take
@@ -124,11 +125,7 @@ def frames_to_do(options: FarmOptions) -> Work:
     if unknown:
         raise ParameterError(f"--cameras: no camera {', '.join(unknown)} in {take} (it has {', '.join(reader.names)})")
     numbers = [s.number for s in reader.complete_sets()]
-    if options.frames is not None:
-        missing = [f for f in options.frames if f not in numbers]
-        if missing:
-            raise ParameterError(f"{take}: frame set(s) {missing} are not complete frame sets of the take")
-        numbers = list(options.frames)
+    numbers = check_frames(options.frames, numbers, take)
     if not numbers:
         raise ParameterError(f"{take}: the take has no complete frame set")
     ledger = Ledger(options.out)

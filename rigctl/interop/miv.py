@@ -32,6 +32,7 @@ from rigctl.disparity_layers import checked_disparity
 from rigctl.errors import ParameterError, TakeError
 from rigctl.interop import yuv
 from rigctl.publish import publish_text, publishing_folder
+from rigctl.take.framesets import check_frames
 
 log = logging.getLogger(__name__)
 
@@ -136,10 +137,7 @@ def export_miv(take: Path, disparity_dir: Path, out: Path, frames: range | None 
         if not numbers:
             raise TakeError(f"{disparity_dir}: no disparity for any complete frame set of {take}")
     else:
-        numbers = list(frames)
-        missing = [n for n in numbers if n not in available]
-        if missing:
-            raise ParameterError(f"{take}: frame set(s) {missing} are not complete frame sets of the take")
+        numbers = check_frames(frames, available, take)
     names = list(grid.names)
     width, height = int(rect.image_size[0]), int(rect.image_size[1])
     focal, spacing = float(rect.focal_px), float(rect.spacing_x_m)

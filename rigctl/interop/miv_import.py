@@ -25,6 +25,7 @@ from rigctl.errors import ParameterError, RigFileError
 from rigctl.interop import yuv
 from rigctl.interop.miv import levels_disparity, omaf_to_cv
 from rigctl.regular import read_regular
+from rigctl.take.framesets import check_frames
 
 log = logging.getLogger(__name__)
 
@@ -241,10 +242,7 @@ def import_miv(cameras_json: Path, out: Path, frames: range | None = None) -> li
         raise ParameterError(f"{out}: already exists; the import goes into a new folder")
     content = read_content(cameras_json)
     count = content.frame_count()
-    numbers = list(frames) if frames is not None else list(range(count))
-    beyond = [n for n in numbers if n >= count]
-    if beyond:
-        raise ParameterError(f"{cameras_json}: the content has {count} frame(s); frame {beyond[0]} is beyond it")
+    numbers = check_frames(frames, range(count), cameras_json, "frame")
     # built under a hidden partial name beside ``out`` and renamed once whole, every file published whole: a
     # killed import leaves no half grid under ``out``, and the same command run again starts over
     with publishing_folder(out, "miv import", "already exists; the import goes into a new folder") as partial:

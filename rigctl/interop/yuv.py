@@ -71,7 +71,11 @@ def read_frame(
     """Y, Cb, Cr planes of frame ``frame`` (Cb and Cr are None for 4:0:0). A file that is not a whole
     number of such frames is refused (the size or format given is not the file's)."""
     per = frame_bytes(width, height, bits, chroma)
-    frame_count(path, width, height, bits, chroma)
+    count = frame_count(path, width, height, bits, chroma)
+    if frame < 0:
+        raise YuvError(f"{path}: frame {frame}: frames are numbered from 0")
+    if frame >= count:  # said here, whatever its size: a seek past an offset's range fails on its own
+        raise YuvError(f"{path}: frame {frame} is past the end of the file ({count} frame(s) of {per} bytes)")
     dtype = np.dtype("<u2") if _sample_bytes(bits) == 2 else np.dtype(np.uint8)
     try:
         with open(path, "rb") as f:

@@ -22,6 +22,7 @@ from rigctl.keying import Keyer
 from rigctl.pfm import read_pfm
 from rigctl.regular import read_regular
 from rigctl.rig import CAMERA_NAME
+from rigctl.take.framesets import check_frames, ranges
 from rigctl.timecode import Timecode
 
 log = logging.getLogger(__name__)
@@ -49,6 +50,7 @@ class FrameViews:
     views: dict[str, View]
     focal_px: float
     spacing: float  # horizontal spacing (metres for takes; the grid folder's unit otherwise)
+    estimated: set[str] | None = None  # the cameras whose disparity has an estimate somewhere (None: not known)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -93,8 +95,13 @@ def _row_col(name: str) -> tuple[int, int]:
 class RenderInput:
     """A grid's frames together with their disparities from ``disparity_dir``."""
 
-    def __init__(self, source: Path, disparity_dir: Path, keyer: Keyer | None = None) -> None:
+    def __init__(
+        self, source: Path, disparity_dir: Path, keyer: Keyer | None = None, refuse_unestimated: bool = True
+    ) -> None:
+        """``refuse_unestimated``: a frame set none of whose disparities holds an estimate is refused in one
+        line when read (a render or score of it is empty); the web viewer shows it as it is, empty."""
         self.source = source
+        self.refuse_unestimated = refuse_unestimated
         self.disparity_dir = disparity_dir
         self.keyer = keyer or Keyer()
         if not disparity_dir.is_dir():
@@ -122,16 +129,14 @@ class RenderInput:
             if len(chosen) < len(self.numbers):
                 log.warning(
                     "%s has disparities for %d of the %d complete frame sets of %s: rendering those (%s)",
-                    self.disparity_dir, len(chosen), len(self.numbers), self.source, _ranges(chosen),
+                    self.disparity_dir, len(chosen), len(self.numbers), self.source, ranges(chosen),
                 )  # fmt: skip
             return chosen
-        missing = [f for f in frames if f not in self.numbers]
-        if missing:
-            raise ParameterError(f"{self.source}: frame set(s) {missing} are not complete frame sets of the take")
-        for f in frames:
+        chosen = check_frames(frames, self.numbers, self.source)
+        for f in chosen:
             if not self._has_disparity(f):
                 self._no_disparity(f)
-        return list(frames)
+        return chosen
 
     def _names(self) -> list[str]:
         return list(self.frames.names)
@@ -191,34 +196,26 @@ class RenderInput:
         found = {n: p for n, p in files.items() if p.exists()}
         if not found:
             self._no_disparity(number)
+        disps: dict[str, F32] = {}
+        for n, path in found.items():
+            disp = read_disparity(path) if path.suffix == ".exr" else read_pfm(path)
+            disps[n] = checked_disparity(path, disp, (h, w), self.source)
+        estimated = {n for n, d in disps.items() if bool(np.isfinite(d).any())}
+        if not estimated and self.refuse_unestimated:  # every view would be empty, every score one of nothing
+            raise TakeError(
+                f"{self.disparity_dir}: frame {number}: no camera's disparity holds an estimate (every value is "
+                "+inf, no estimate): nothing to render from"
+            )
         views = {}
         for n in grid.names:
-            disp = None
-            if n in found:
-                disp = read_disparity(found[n]) if found[n].suffix == ".exr" else read_pfm(found[n])
-                checked_disparity(found[n], disp, (h, w), self.source)
             rgb = grid.images[n]
             screen = self.keyer.screen_excess(rgb) > 0
             alpha = self.keyer.matte(rgb) if screen else np.ones((h, w), np.float32)
-            views[n] = View(n, grid.offsets[n], rgb, alpha, disp, screen)
+            views[n] = View(n, grid.offsets[n], rgb, alpha, disps.get(n), screen)
         missing = sorted(set(files) - set(found))
         if missing:
             log.warning("frame %d: no disparity for %s: not used as sources", number, ", ".join(missing))
-        return FrameViews(number, views, grid.focal_px, grid.spacing)
-
-
-def _ranges(numbers: list[int]) -> str:
-    """1, 2, 3, 7 -> '1-3, 7'."""
-    out: list[str] = []
-    start = prev = numbers[0]
-    for n in [*numbers[1:], None]:
-        if n is not None and n == prev + 1:
-            prev = n
-            continue
-        out.append(f"{start}" if start == prev else f"{start}-{prev}")
-        if n is not None:
-            start = prev = n
-    return ", ".join(out)
+        return FrameViews(number, views, grid.focal_px, grid.spacing, estimated)
 
 
 def _made_from(disparity_dir: Path) -> Path | None:

@@ -14,7 +14,7 @@ import numpy as np
 import OpenEXR
 from numpy.typing import NDArray
 
-from rigctl.errors import OutputError, ParameterError, RigctlError
+from rigctl.errors import OutputError, ParameterError, RigctlError, TakeError
 from rigctl.exr import picture, picture_attributes, write_exr
 from rigctl.layout import inside
 from rigctl.publish import publish_png
@@ -247,6 +247,11 @@ def leave_one_out(
             view = frame.views[cam]
             if not [s for s in ren.sources if s.name != cam]:
                 raise ParameterError(f"frame {n}: {cam} is the only camera with a disparity: no other to render from")
+            if frame.estimated is not None and not frame.estimated - {cam}:
+                raise TakeError(
+                    f"{inp.disparity_dir}: frame {n}: no camera but {cam} has an estimate in its disparity (every "
+                    f"other value is +inf, no estimate): nothing to render {cam} from"
+                )
             t0 = time.perf_counter()
             res = ren.render(*view.offset, exclude=(cam,))
             ms = (time.perf_counter() - t0) * 1e3

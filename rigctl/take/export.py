@@ -2,10 +2,19 @@
 
 A damaged frame stops the export (naming file and byte) unless the reader skips damaged frames; then it is
 left out and listed in ``DIR/export.json`` under ``skipped_damaged``.
+
+Each frame set is written whole into a hidden folder of its own in ``DIR`` (``.take-export-<frame>`` +
+:data:`rigctl.publish.PARTIAL_SUFFIX`) and published when all its pictures are there: in the frames layout a
+new frame set's folder is renamed to ``DIR/<frame>`` (it appears whole or not at all), otherwise each picture
+is renamed to its place. A run that fails on a frame set (a damaged frame, a full disk) leaves nothing of it;
+the frame sets before it stay whole, as ``rigctl depth`` leaves its own. A killed run's hidden folders are
+removed by the next run on ``DIR``.
 """
 
 from __future__ import annotations
 
+import os
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 
@@ -14,27 +23,10 @@ import numpy as np
 from rigctl.errors import ParameterError, TakeError
 from rigctl.exr import picture, picture_attributes, to_colour, write_exr
 from rigctl.keying import Keyer
-from rigctl.layout import check_layout, output_path
-from rigctl.publish import publish_json, publish_png
+from rigctl.layout import check_layout, inside, output_path
+from rigctl.publish import PARTIAL_SUFFIX, fsync_dir, move_into, output_error, publish_json, publish_png
+from rigctl.take.framesets import check_frames, parse_frames
 from rigctl.take.reader import TakeReader
-
-
-def parse_range(text: str | None, count: int) -> range:
-    """``N`` or ``A-B`` (inclusive, frame-set numbers from 0) -> range; None -> every set."""
-    if text is None:
-        return range(count)
-    try:
-        if "-" in text:
-            a, b = (int(v) for v in text.split("-", 1))
-        else:
-            a = b = int(text)
-    except ValueError:
-        raise ParameterError(f"--frames {text!r}: expected N or A-B, e.g. 0-24") from None
-    if a < 0 or b < a:
-        raise ParameterError(f"--frames {text!r}: need 0 <= A <= B")
-    if a >= count:
-        raise ParameterError(f"--frames {text!r}: the take has {count} frame sets (0-{count - 1})")
-    return range(a, min(b, count - 1) + 1)
 
 
 def export_take(
@@ -59,29 +51,36 @@ def export_take(
     sets = reader.frame_sets
     if not sets:
         raise TakeError(f"{reader.folder}: the take holds no frames")
-    chosen = parse_range(frames, len(sets))
+    asked = parse_frames(frames) if frames is not None else None
+    chosen = check_frames(asked, range(len(sets)), reader.folder, "frame set")
     keyer = Keyer()
+    remove_stale_staging(out)
     written = missing = 0
     for k, n in enumerate(chosen):
         fs = sets[n]
         tc = reader.set_timecode(fs)
-        for name in reader.names:
-            if name not in fs.members:
-                missing += 1
-                continue
-            image = reader.image_or_none(name, fs.members[name], "bgr8" if fmt == "png" else "float")
-            if image is None:
-                continue  # damaged, skipped: listed in reader.damaged
-            path = output_path(out, layout, n, name, f".{fmt}")
-            if fmt == "png":
-                publish_png(path, image)
-            else:
-                rgb = np.asarray(image, np.float32)
-                attrs = picture_attributes(reader.fps, tc, colour)
-                attrs.update({"rigctl:camera": name, "rigctl:frame_set": str(n)})
-                key = keyer.soft(rgb)  # A: the subject's coverage; RGB: its unmixed colour, premultiplied
-                write_exr(path, picture(key.foreground, key.alpha, colour), attrs)
-            written += 1
+        staged = staging_folder(out, n)
+        try:
+            for name in reader.names:
+                if name not in fs.members:
+                    missing += 1
+                    continue
+                image = reader.image_or_none(name, fs.members[name], "bgr8" if fmt == "png" else "float")
+                if image is None:
+                    continue  # damaged, skipped: listed in reader.damaged
+                path = output_path(staged, "flat", n, name, f".{fmt}")
+                if fmt == "png":
+                    publish_png(path, image)
+                else:
+                    rgb = np.asarray(image, np.float32)
+                    attrs = picture_attributes(reader.fps, tc, colour)
+                    attrs.update({"rigctl:camera": name, "rigctl:frame_set": str(n)})
+                    key = keyer.soft(rgb)  # A: the subject's coverage; RGB: its unmixed colour, premultiplied
+                    write_exr(path, picture(key.foreground, key.alpha, colour), attrs)
+                written += 1
+            publish_frame_set(staged, out, layout, n)
+        finally:
+            shutil.rmtree(staged, ignore_errors=True)  # a frame set that failed leaves nothing
         if progress:
             progress(k + 1, len(chosen))
     result = {"images": written, "missing": missing, "sets": len(chosen), "skipped_damaged": len(reader.damaged)}
@@ -90,3 +89,53 @@ def export_take(
         manifest = {"take": str(reader.folder), **result, "skipped_damaged": skipped}
         publish_json(out / "export.json", manifest)
     return result
+
+
+STAGING_PREFIX = ".take-export-"
+
+
+def staging_folder(out: Path, number: int) -> Path:
+    """A new, empty hidden folder in ``out`` where frame set ``number`` is written before it is published."""
+    staged = out / f"{STAGING_PREFIX}{number:06d}{PARTIAL_SUFFIX}"
+    try:
+        if staged.is_dir() and not staged.is_symlink():
+            shutil.rmtree(staged)
+        staged.mkdir()
+    except OSError as exc:
+        raise output_error(staged, exc) from None
+    return staged
+
+
+def remove_stale_staging(out: Path) -> None:
+    """The hidden frame-set folders a killed export left in ``out`` (this run holds the folder's lock)."""
+    for p in out.glob(f"{STAGING_PREFIX}*{PARTIAL_SUFFIX}"):
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p, ignore_errors=True)
+
+
+def publish_frame_set(staged: Path, out: Path, layout: str, number: int) -> None:
+    """Publish the whole frame set ``staged`` (its pictures ``<camera>.<ext>``) into ``out`` in ``layout``: a new
+    frame set's folder by one rename; an existing one's pictures, and the sequence layout's, each by rename."""
+    files = sorted(staged.iterdir())
+    if not files:
+        return  # every member missing or damaged: nothing to publish, as before
+    try:
+        if layout == "frames":
+            final = inside(out, out / f"{number:06d}")
+            if not final.exists():
+                os.rename(staged, final)
+                fsync_dir(out)
+            else:
+                move_into(staged, final)
+            return
+        folders = set()
+        for f in files:
+            dest = output_path(out, layout, number, f.stem, f.suffix)
+            dest.parent.mkdir(exist_ok=True)
+            os.replace(f, dest)
+            folders.add(dest.parent)
+        for folder in sorted(folders):
+            fsync_dir(folder)
+        fsync_dir(out)
+    except OSError as exc:
+        raise output_error(out, exc) from None

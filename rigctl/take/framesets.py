@@ -10,11 +10,14 @@ A camera missing from a set leaves an explicit gap: later sets are never shifted
 
 from __future__ import annotations
 
+import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
+from rigctl.errors import ParameterError
 from rigctl.interfaces import FrameFlags
 from rigctl.timecode import Timecode, TimecodeError, rate_of, unwrap
 
@@ -152,3 +155,60 @@ def skew_stats(sets: list[FrameSet]) -> dict[str, float]:
         "max_us": round(float(spreads.max()), 1),
         "sets": int(spreads.size),
     }
+
+
+FRAMES = re.compile(r"([0-9]+)(?:-([0-9]+))?")
+
+
+def parse_frames(text: str) -> range:
+    """``--frames`` of every verb that takes it: ``N`` or ``A-B`` (inclusive, frame-set numbers from 0) as a
+    range. Only its form is checked here; :func:`check_frames` checks it against what the input holds."""
+    m = FRAMES.fullmatch(text.strip())
+    if m is None:
+        raise ParameterError(f"--frames {text!r}: expected N or A-B, e.g. 0-24")
+    a = int(m[1])
+    b = a if m[2] is None else int(m[2])
+    if b < a:
+        raise ParameterError(f"--frames {text!r}: need 0 <= A <= B")
+    return range(a, b + 1)
+
+
+def check_frames(
+    frames: Sequence[int] | None, numbers: Sequence[int], source: object, kind: str = "complete frame set"
+) -> list[int]:
+    """The frame sets ``frames`` (--frames, :func:`parse_frames`) asks for, each one of ``numbers`` (what
+    ``source`` holds: its complete frame sets, say), else one line naming --frames and what ``source`` has
+    (exit 2): a range past the end is refused, never shrunk to fit. ``None``, --frames not given: every one of
+    ``numbers``."""
+    if frames is None:
+        return list(numbers)
+    # a range is never walked nor measured with len(): --frames 0-99999999999999999999 is quick, one line
+    wanted = frames if isinstance(frames, range) else set(frames)
+    size = frames.stop - frames.start if isinstance(frames, range) else len(wanted)
+    present = {n for n in numbers if n in wanted}
+    if len(present) == size:
+        return list(frames)
+    first = next(f for f in frames if f not in present)  # within the first len(present) + 1 of them
+    if isinstance(frames, range):
+        last = frames.stop - 1
+        asked = f"{frames.start}" if last == frames.start else f"{frames.start}-{last}"
+    else:
+        asked = ranges(sorted(wanted))
+    has = f"its {kind}s: {ranges(sorted(numbers))}" if numbers else f"it has no {kind}"
+    raise ParameterError(f"--frames {asked}: {source} has no {kind} {first} ({has})")
+
+
+def ranges(numbers: Sequence[int]) -> str:
+    """1, 2, 3, 7 -> '1-3, 7'."""
+    out: list[str] = []
+    if not numbers:
+        return ""
+    start = prev = numbers[0]
+    for n in [*numbers[1:], None]:
+        if n is not None and n == prev + 1:
+            prev = n
+            continue
+        out.append(f"{start}" if start == prev else f"{start}-{prev}")
+        if n is not None:
+            start = prev = n
+    return ", ".join(out)

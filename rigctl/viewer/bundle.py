@@ -42,7 +42,7 @@ class Bundles:
     """The take's frame sets as bundles, made on first request and kept in a small LRU cache."""
 
     def __init__(self, source: Path, disparity: Path) -> None:
-        self.input = RenderInput(source, disparity)
+        self.input = RenderInput(source, disparity, refuse_unestimated=False)  # an empty frame is shown empty
         self.numbers = self.input.select(None)
         self._lock = threading.Lock()
         self._cache: OrderedDict[int, Future[bytes]] = OrderedDict()

@@ -180,6 +180,26 @@ def test_corrupt_frame_refused_by_export_rectify_and_depth(run_cli, tiny: Path, 
     one_line(res, EXIT_DAMAGED, f"{ress}: byte 0: frame", "fails its checksum")
 
 
+@pytest.mark.parametrize("layout", ["frames", "sequence"])
+def test_a_failed_export_leaves_no_half_written_frame_set(run_cli, tiny: Path, tmp_path: Path, layout: str) -> None:  # type: ignore[no-untyped-def]
+    """The last camera's frame of frame set 1 is damaged: frame set 0 stays whole, nothing of frame set 1 is left
+    (its eight good pictures were once published, the ninth refused), and no hidden staging folder either."""
+    take = copy_take(tiny, tmp_path)
+    ess = essence(take, "r2c2")
+    frame = ess.stat().st_size // 3
+    corrupt(ess, frame + 100)
+    out = tmp_path / "x"
+    res = run_cli("take", "export", str(take), "--out", str(out), "--layout", layout)
+    one_line(res, EXIT_DAMAGED, f"{ess}: byte {frame}: frame", "fails its checksum")
+    files = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+    cams = [f"r{r}c{c}" for r in range(3) for c in range(3)]
+    if layout == "frames":
+        assert files == [f"000000/{c}.png" for c in cams]
+    else:
+        assert files == [f"{c}/{c}.000000.png" for c in cams]
+    assert not [p for p in out.rglob(".*")], "a staging folder or temporary file is left"
+
+
 def test_skip_damaged_leaves_out_lists_and_exits_5(run_cli, tiny: Path, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     take = copy_take(tiny, tmp_path)
     ess = essence(take, "r1c1")
@@ -315,3 +335,19 @@ def test_rectify_names_the_camera_that_makes_the_common_plane_degenerate(run_cli
     ok = _calibration(tiny, tmp_path, lambda c: _yaw(c, "r2c0", 0.02))
     res = run_cli("rectify", str(tiny / "t"), "--calibration", str(ok), "--out", str(tmp_path / "r2"))
     assert res.returncode == 0, res.stderr
+
+
+@pytest.mark.parametrize(
+    ("frame", "code", "said"),
+    [
+        ("9999999999999", EXIT_BAD_INPUT, "frame 9999999999999 is past the end of the file"),  # beyond an offset
+        ("99999999999999999999999", EXIT_BAD_INPUT, "is past the end of the file"),
+        ("2", EXIT_BAD_INPUT, "frame 2 is past the end of the file"),
+        ("-1", 2, "--frame: must be at least 0, got '-1'"),
+    ],
+)
+def test_ivpsnr_frame_out_of_the_file_is_one_line(run_cli, tmp_path: Path, frame: str, code: int, said: str) -> None:  # type: ignore[no-untyped-def]
+    pic = tmp_path / "a.yuv"
+    pic.write_bytes(bytes(16 * 8 * 3 // 2 * 2) * 2)  # two 16x8 10-bit 4:2:0 frames of zeros
+    res = run_cli("miv", "ivpsnr", str(pic), str(pic), "--size", "16x8", "--pix-fmt", "yuv420p10le", "--frame", frame)
+    one_line(res, code, said)

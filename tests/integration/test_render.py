@@ -361,3 +361,30 @@ def test_bench_render_refuses_a_size_the_memory_cannot_hold() -> None:
         check_bench_memory((16384, 16384), 24 << 30)
     check_bench_memory((1920, 1080), 24 << 30)  # the default fits
     check_bench_memory((16384, 16384), None)  # no figure, no check
+
+
+def test_a_frame_with_no_estimate_in_any_disparity_is_refused_before_writing(take: Path, tmp_path: Path) -> None:
+    """Every disparity +inf (no estimate) once rendered fully transparent views with exit 0 and a warning, and
+    leave-one-out scored them (7 dB) without one: refused in one line naming the folder and the frame, exit 3."""
+    from rigctl.pfm import read_pfm, write_pfm
+
+    truth = take / "truth" / "disparity"
+    none, only = tmp_path / "none", tmp_path / "only-r1c1"
+    for pfm in sorted(truth.rglob("*.pfm")):
+        for folder in (none, only):
+            d = read_pfm(pfm)
+            keep = folder == only and pfm.stem == "r1c1"
+            write_pfm(folder / pfm.relative_to(truth), d if keep else np.full_like(d, np.inf))
+    out = tmp_path / "views"
+    res = run_rigctl("render", str(take), "--disparity", str(none), "--at", "1,1", "--frames", "0-0", "--out", str(out))
+    assert res.returncode == 3, res.stderr
+    one_line(res, str(none), "frame 0", "no camera's disparity holds an estimate")
+    assert not out.exists()
+    res = run_rigctl("render", str(take), "--disparity", str(none), "--leave-one-out", "--cameras", "r1c1", "--json")
+    assert res.returncode == 3 and not res.stdout, (res.stdout, res.stderr)
+    one_line(res, str(none), "frame 0", "no camera's disparity holds an estimate")
+    res = run_rigctl("render", str(take), "--disparity", str(only), "--leave-one-out", "--cameras", "r1c1", "--json")
+    assert res.returncode == 3 and not res.stdout, (res.stdout, res.stderr)
+    one_line(res, str(only), "frame 0", "no camera but r1c1 has an estimate")
+    res = run_rigctl("render", str(take), "--disparity", str(only), "--at", "1,1", "--out", str(out))
+    assert res.returncode == 0, res.stderr  # r1c1's own estimate is a source of a view beside it
