@@ -106,6 +106,7 @@ def frames_to_do(options: FarmOptions) -> Work:
     """The chunks to compute and the frame sets already done, checked on the client."""
     from rigctl.take.reader import TakeReader
 
+    options.depth.check()  # what needs no take: refused before a cluster or a folder (the CLI checked already)
     take = options.take
     if not (take / "take.yaml").exists():
         raise ParameterError(f"{take}: not a take (no take.yaml)")

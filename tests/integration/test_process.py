@@ -20,6 +20,7 @@ import pytest
 from tests_support import rigctl_exe, run_rigctl
 
 from rigctl.depth.run import DepthOptions
+from rigctl.errors import ParameterError
 from rigctl.farm.frame import frame_name
 from rigctl.farm.run import FarmOptions, Status, process_take
 
@@ -185,6 +186,24 @@ def test_a_ledger_that_is_not_one_is_refused_in_one_line_naming_it(take: Path, t
 def test_a_folder_that_is_not_a_take_is_one_line(tmp_path: Path) -> None:
     res = run_rigctl("process", str(tmp_path / "nothing"), "--out", str(tmp_path / "out"))
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and "not a take" in res.stderr, res.stderr
+
+
+@pytest.mark.parametrize("verb", ["process", "depth"])
+@pytest.mark.parametrize("plan", [("--near", "3", "--far", "2"), ("--near", "2", "--far", "2")])
+def test_a_plan_no_take_could_have_is_refused_on_the_client_before_any_folder(
+    take: Path, tmp_path: Path, verb: str, plan: tuple[str, ...]
+) -> None:
+    """Checked on a Dask worker before: distributed's "Compute Failed" and a traceback, then our line, and an
+    empty DIR/depth left behind. Now the options are checked as rigctl depth checks them, before anything."""
+    out = tmp_path / "out"
+    workers = ("--workers", "1") if verb == "process" else ()
+    res = run_rigctl(verb, str(take), "--out", str(out), *workers, *FAST, *plan)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert "--near must be positive and below --far" in res.stderr, res.stderr
+    assert not out.exists()
+    with pytest.raises(ParameterError, match="below --far"):  # and through the API, before the folder too
+        process_take(FarmOptions(take, out, DepthOptions(preset="fast", near_m=3.0, far_m=2.0), workers=1))
+    assert not out.exists()
 
 
 def proc_io(pid: int) -> int:
