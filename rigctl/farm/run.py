@@ -13,7 +13,10 @@ A worker that dies takes its task back to the scheduler, which runs it elsewhere
 
 from __future__ import annotations
 
+import hashlib
+import json
 import logging
+import math
 import re
 import shutil
 import time
@@ -22,18 +25,21 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel, ConfigDict
 
-from rigctl.depth.export import FORMATS, PARTIAL_PREFIX, frame_name
+from rigctl.depth.export import FORMATS, PARTIAL_PREFIX, Exporter, frame_name
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.pipeline import ChunkEnd, chunks, settle
 from rigctl.depth.take_range import RangeDecision, SearchRounds, SearchState, hull
 from rigctl.errors import DeviceError, ParameterError
 from rigctl.farm.frame import ChunkJob, is_rectified, one_line, run_chunk, take_range
-from rigctl.farm.ledger import FrameEntry, Ledger
+from rigctl.farm.ledger import FrameEntry, Ledger, RunSettings
 from rigctl.farm.wire import MAX_MESSAGE_BYTES, bounded_messages
+
+if TYPE_CHECKING:
+    from rigctl.take.manifest import Manifest
 
 log = logging.getLogger(__name__)
 
@@ -102,6 +108,53 @@ class Work:
         return todo, skipped
 
 
+def run_settings(options: FarmOptions, manifest: Manifest) -> RunSettings:
+    """What the run's outputs depend on besides the chunking (recorded in the ledger, checked by a rerun)."""
+    opt = options.depth
+    if opt.disparity_range is not None:
+        plan = f"disparity range {opt.disparity_range[0]}..{opt.disparity_range[1]} px"
+    elif opt.near_m is not None:
+        plan = f"--near {opt.near_m} --far {opt.far_m if opt.far_m is not None else math.inf}"
+    else:
+        plan = "no plan (--near/--far)"
+    # the manifest as a model, so the YAML's spelling does not count; the crew's verdict changes no frame
+    identity = manifest.model_dump(mode="json", exclude={"verdict", "notes"})
+    calibration = options.calibration
+    return RunSettings(
+        take=str(options.take.resolve()),
+        take_sha256=hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest(),
+        calibration=str(calibration.resolve()) if calibration else None,
+        calibration_sha256=hashlib.sha256(calibration.read_bytes()).hexdigest() if calibration else None,
+        preset=opt.preset,
+        plan=plan,
+        margin_px=opt.margin_px,
+        cameras=sorted(opt.cameras) if opt.cameras else None,
+        key=opt.key,
+        temporal=opt.temporal,
+        layout=Exporter.layout,
+        colour=Exporter.colour,
+    )
+
+
+def check_settings(ledger: Ledger, settings: RunSettings, chunk: int, warmup: int) -> None:
+    """Refuse, in one line, a run whose settings are not those the ledger's frame sets (or its range) were
+    computed with: they would be kept as this run's results. --redo does not lift it (the frame sets it does not
+    redo would stay the old settings'): a new --out does."""
+    data = ledger.data
+    if data.settings is None:
+        if data.frames or data.range is not None:
+            raise ParameterError(
+                f"{ledger.path}: written by an older rigctl that did not record the take and settings its frame sets "
+                "were computed with, so this run cannot be checked against them: use a new --out"
+            )
+        return
+    differ = data.settings.differences(settings)
+    if data.chunk is not None and (data.chunk, data.warmup) != (chunk, warmup):
+        differ.append(f"--chunk {data.chunk} --warmup {data.warmup}, asked --chunk {chunk} --warmup {warmup}")
+    if differ:
+        raise ParameterError(f"{ledger.path}: computed with {'; '.join(differ)}: use a new --out for this run")
+
+
 def frames_to_do(options: FarmOptions) -> Work:
     """The chunks to compute and the frame sets already done, checked on the client."""
     from rigctl.take.reader import TakeReader
@@ -133,13 +186,10 @@ def frames_to_do(options: FarmOptions) -> Work:
     if not numbers:
         raise ParameterError(f"{take}: the take has no complete frame set")
     ledger = Ledger(options.out)
-    chunk, warmup = options.depth.chunk, options.depth.warmup
-    if ledger.frames and not options.redo and (ledger.data.chunk, ledger.data.warmup) != (chunk, warmup):
-        raise ParameterError(
-            f"{ledger.path}: computed with --chunk {ledger.data.chunk} and --warmup {ledger.data.warmup}, asked "
-            f"--chunk {chunk} --warmup {warmup}: run with those, or --redo to compute every frame set again"
-        )
-    ledger.data.chunk, ledger.data.warmup = chunk, warmup
+    settings = run_settings(options, reader.manifest)
+    check_settings(ledger, settings, options.depth.chunk, options.depth.warmup)
+    ledger.data.settings = settings
+    ledger.data.chunk, ledger.data.warmup = options.depth.chunk, options.depth.warmup
     depth_dir = options.out / "depth"
     names = list(cams or reader.names)
     whole = {
@@ -148,7 +198,7 @@ def frames_to_do(options: FarmOptions) -> Work:
         if ledger.whole(frame_name(n), depth_dir / frame_name(n))
         and all((depth_dir / frame_name(n) / f"{c}.{ext}").exists() for c in names for ext in FORMATS)
     }
-    return Work(chunks(numbers, chunk), whole, ledger, options.redo)
+    return Work(chunks(numbers, options.depth.chunk), whole, ledger, options.redo)
 
 
 class ProcessSummary(BaseModel):

@@ -188,6 +188,85 @@ def test_a_folder_that_is_not_a_take_is_one_line(tmp_path: Path) -> None:
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and "not a take" in res.stderr, res.stderr
 
 
+ONE = ("--frames", "0-0", "--workers", "1", "--preset", "fast", "--cameras", "r1c1", "--chunk", "1", "--warmup", "0")
+
+
+@pytest.fixture(scope="module")
+def processed(take: Path, module_tmp: Callable[[str], Path]) -> Path:
+    """One frame set of the take through rigctl process (the first run the reruns below are checked against)."""
+    out = module_tmp("processed")
+    res = run_rigctl("process", str(take), "--out", str(out), *ONE)
+    assert res.returncode == 0, res.stderr
+    return out
+
+
+def outputs(out: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+
+
+@pytest.mark.parametrize(
+    ("more", "words"),
+    [
+        (("--preset", "best"), "--preset fast, asked --preset best"),
+        (("--near", "1", "--far", "5"), "no plan (--near/--far), asked --near 1.0 --far 5.0"),
+        (("--cameras", "r1c0"), "--cameras r1c1, asked --cameras r1c0"),
+        (("--no-key",), "keyed, asked --no-key"),
+        (("--no-temporal",), "temporal, asked --no-temporal"),
+        (("--chunk", "2"), "--chunk 1 --warmup 0, asked --chunk 2 --warmup 0"),
+        (("--preset", "best", "--redo"), "--preset fast, asked --preset best"),  # --redo would keep frames of both
+    ],
+)
+def test_a_rerun_with_other_settings_is_refused_naming_what_differs(
+    take: Path, processed: Path, more: tuple[str, ...], words: str
+) -> None:
+    """The ledger kept only the chunking: a rerun with another preset or plan said "already done" and kept the
+    first run's depth (and its "no plan" range) with exit 0."""
+    before = outputs(processed)
+    res = run_rigctl("process", str(take), "--out", str(processed), *ONE, *more)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert words in res.stderr and "use a new --out" in res.stderr, res.stderr
+    assert outputs(processed) == before
+
+
+def test_a_rerun_on_another_take_or_a_changed_one_is_refused(take: Path, tmp_path: Path) -> None:
+    import shutil
+
+    from rigctl.take.manifest import read_manifest, write_manifest
+
+    copy = tmp_path / "copy"
+    shutil.copytree(take, copy)
+    out = tmp_path / "out"
+    assert run_rigctl("process", str(copy), "--out", str(out), *ONE).returncode == 0
+    before = outputs(out)
+    other = run_rigctl("process", str(take), "--out", str(out), *ONE)  # the same frames, another take folder
+    assert other.returncode == 2 and other.stderr.count("\n") == 1, other.stderr
+    assert f"take {copy.resolve()}, asked take {take.resolve()}" in other.stderr, other.stderr
+
+    manifest = read_manifest(copy)
+    manifest.mark("circled", "the crew's verdict changes no frame")
+    write_manifest(copy, manifest)
+    again = run_rigctl("process", str(copy), "--out", str(out), *ONE, "--json")
+    assert again.returncode == 0 and json.loads(again.stdout)["skipped_done"] == 1, again.stderr
+
+    manifest.take = "another"  # a take.yaml that is not the one the frame sets were computed from
+    write_manifest(copy, manifest)
+    changed = run_rigctl("process", str(copy), "--out", str(out), *ONE)
+    assert changed.returncode == 2 and changed.stderr.count("\n") == 1, changed.stderr
+    assert "the take's take.yaml with sha256" in changed.stderr and "use a new --out" in changed.stderr
+    assert outputs(out) == before
+
+
+def test_a_ledger_of_an_older_rigctl_is_refused_as_one_that_cannot_be_checked(take: Path, tmp_path: Path) -> None:
+    assert run_rigctl("process", str(take), "--out", str(tmp_path), *ONE).returncode == 0
+    path = tmp_path / "process.json"
+    data = json.loads(path.read_text())
+    data.pop("settings", None)  # as an older rigctl wrote it
+    path.write_text(json.dumps(data))
+    res = run_rigctl("process", str(take), "--out", str(tmp_path), *ONE)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert f"{path}: written by an older rigctl" in res.stderr and "use a new --out" in res.stderr, res.stderr
+
+
 @pytest.mark.parametrize("verb", ["process", "depth"])
 @pytest.mark.parametrize("plan", [("--near", "3", "--far", "2"), ("--near", "2", "--far", "2")])
 def test_a_plan_no_take_could_have_is_refused_on_the_client_before_any_folder(
@@ -337,6 +416,8 @@ def test_a_range_too_narrow_for_the_take_is_widened_for_every_chunk_alike_in_dep
     from rigctl.depth.sources import open_source
     from rigctl.depth.take_range import RangeDecision, decide_range
     from rigctl.farm.ledger import Ledger
+    from rigctl.farm.run import run_settings
+    from rigctl.take.manifest import read_manifest
 
     opt = DepthOptions(preset="fast", cameras=CAMS, chunk=CHUNK, warmup=WARMUP)
     src = open_source(take)
@@ -357,6 +438,7 @@ def test_a_range_too_narrow_for_the_take_is_widened_for_every_chunk_alike_in_dep
     assert report.widenings == [] and all("(widened)" in f.range_source for f in report.frames.values())
 
     ledger = Ledger(tmp_path / "p")  # the farm from the same measured range (a measured range is kept)
+    ledger.data.settings = run_settings(FarmOptions(take, tmp_path / "p", opt), read_manifest(take))
     ledger.data.range = narrow
     ledger.save()
     res = run_rigctl("process", str(take), "--out", str(tmp_path / "p"), "--workers", "2", *FAST, "--json")
