@@ -48,13 +48,17 @@ def take(module_tmp: Callable[[str], Path]) -> Path:
     return out / "t"
 
 
+def written(out: Path, verb: str, *args: str) -> Path:
+    """``out`` as ``rigctl VERB ... --out OUT`` wrote it (the run succeeded)."""
+    res = run_rigctl(verb, *args, "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    return out
+
+
 @pytest.fixture(scope="module")
 def single_process(take: Path, module_tmp: Callable[[str], Path]) -> Path:
     """What ``rigctl depth`` writes for the same frames in one process: the reference for byte identity."""
-    out = module_tmp("single")
-    res = run_rigctl("depth", str(take), "--out", str(out), *FAST)
-    assert res.returncode == 0, res.stderr
-    return out
+    return written(module_tmp("single"), "depth", str(take), *FAST)
 
 
 def same_bytes(a: Path, b: Path) -> list[str]:
@@ -194,10 +198,7 @@ ONE = ("--frames", "0-0", "--workers", "1", "--preset", "fast", "--cameras", "r1
 @pytest.fixture(scope="module")
 def processed(take: Path, module_tmp: Callable[[str], Path]) -> Path:
     """One frame set of the take through rigctl process (the first run the reruns below are checked against)."""
-    out = module_tmp("processed")
-    res = run_rigctl("process", str(take), "--out", str(out), *ONE)
-    assert res.returncode == 0, res.stderr
-    return out
+    return written(module_tmp("processed"), "process", str(take), *ONE)
 
 
 def outputs(out: Path) -> dict[str, bytes]:
