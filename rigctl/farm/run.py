@@ -210,19 +210,23 @@ class ProcessSummary(BaseModel):
     out: str
     ledger: str
     frames: int
-    chunks: int
-    computed: int
+    chunks: int  # chunks this run computed, each once (it ran again from a widened range: chunks_recomputed)
+    computed: int  # frame sets this run computed, each once, done in its last pass
     failed: int
     skipped_done: int
     failed_frames: dict[str, str]
-    frames_by_worker: dict[str, int]
+    frames_by_worker: dict[str, int]  # frame sets by the worker of their last pass
     range: RangeDecision | None
     search: SearchRounds | None  # how the take's range settled: the state every chunk started from, the rounds
     widenings: int  # widenings of the range within the chunks of the last round (each in the frame's report)
     bound_hit_pixels: int  # summed over the frame sets computed by this run
     seconds: float
     compute_seconds: float  # from the first task submitted to the last result (no cluster start)
-    frames_per_second: float
+    frames_per_second: float  # frame sets computed (each once) a second of compute
+    # the repeat passes: frame-set computations beyond each one's first, and runs of a chunk beyond its first,
+    # when a chunk widened the take's range and every chunk was run again from it
+    recomputed: int = 0
+    chunks_recomputed: int = 0
 
 
 def default_memory_limit(take: Path, cameras: int | None) -> int:
@@ -316,7 +320,6 @@ def process_take(
     for stale in depth_dir.glob(PARTIAL_PREFIX + "*"):  # left by a run that was stopped mid-write
         shutil.rmtree(stale, ignore_errors=True)
     status = Status(total=0)
-    workers: dict[str, int] = {}
     failed: dict[str, str] = {}
     computed: dict[str, FrameEntry] = {}  # this run's last result of every frame set
     t0 = clock()
@@ -325,7 +328,8 @@ def process_take(
     if known is not None and ledger.data.reached is not None:
         known = hull([known, ledger.data.reached])  # a round was cut short: its chunks widened the range
     todo, skipped = work.todo(known) if known is not None else (work.chunks, [])
-    chunks_run = 0
+    chunks_run = 0  # runs of a chunk, each round's
+    chunks_seen: set[tuple[int, ...]] = set()
     if todo:
         from distributed import as_completed
 
@@ -366,6 +370,7 @@ def process_take(
                     skipped = now_skipped
                 status.total += sum(len(c) for c in todo)
                 chunks_run += len(todo)
+                chunks_seen.update(tuple(c) for c in todo)
                 futures = {}
                 for chunk in todo:
                     job = ChunkJob(
@@ -391,7 +396,6 @@ def process_take(
                         computed[name] = entry
                         if entry.status == "done":
                             status.done += 1
-                            workers[entry.worker] = workers.get(entry.worker, 0) + 1
                             failed.pop(name, None)
                         else:
                             status.failed += 1
@@ -409,13 +413,17 @@ def process_take(
     final = [e for e in computed.values() if e.report is not None and ledger.data.search is not None
              and e.start == ledger.data.search.state]  # fmt: skip
     seconds = clock() - t0
+    done = [e for e in computed.values() if e.status == "done"]  # each frame set once, by its last pass
+    workers: dict[str, int] = {}
+    for e in done:
+        workers[e.worker] = workers.get(e.worker, 0) + 1
     return ProcessSummary(
         take=str(options.take),
         out=str(options.out),
         ledger=str(ledger.path),
         frames=sum(len(c) for c in work.chunks),
-        chunks=chunks_run,
-        computed=status.done,
+        chunks=len(chunks_seen),
+        computed=len(done),
         failed=len(failed),
         skipped_done=len(skipped),
         failed_frames=failed,
@@ -426,5 +434,7 @@ def process_take(
         bound_hit_pixels=sum(e.report.bound_hit_pixels for e in final if e.report is not None),
         seconds=seconds,
         compute_seconds=compute_seconds,
-        frames_per_second=status.done / compute_seconds if compute_seconds > 0 and status.done else 0.0,
+        frames_per_second=len(done) / compute_seconds if compute_seconds > 0 and done else 0.0,
+        recomputed=status.done + status.failed - len(computed),
+        chunks_recomputed=chunks_run - len(chunks_seen),
     )

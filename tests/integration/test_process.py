@@ -76,7 +76,9 @@ def test_local_cluster_of_processes_matches_rigctl_depth_byte_for_byte(
     assert res.returncode == 0, res.stderr
     summary = json.loads(res.stdout)
     rounds = summary["search"]["rounds"]  # 2 when a chunk widened the take's range: every chunk again from it
-    assert summary["computed"] == rounds * FRAMES and summary["chunks"] == rounds * FRAMES // CHUNK
+    assert summary["computed"] == FRAMES and summary["chunks"] == FRAMES // CHUNK  # each once
+    assert summary["recomputed"] == (rounds - 1) * FRAMES  # the repeat passes, apart
+    assert summary["chunks_recomputed"] == (rounds - 1) * FRAMES // CHUNK
     assert summary["failed"] == 0 and summary["search"]["settled"]
     ledger = json.loads((tmp_path / "process.json").read_text())
     report = json.loads((single_process / "report.json").read_text())
@@ -349,7 +351,8 @@ def test_subprocess_cluster_survives_a_killed_worker_and_keeps_images_off_the_sc
                 os.killpg(p.pid, signal.SIGKILL)
 
     summary = json.loads(stdout)
-    assert summary["computed"] == summary["search"]["rounds"] * FRAMES and summary["failed"] == 0
+    assert summary["computed"] == FRAMES and summary["failed"] == 0
+    assert summary["recomputed"] == (summary["search"]["rounds"] - 1) * FRAMES
     frames = json.loads(ledger.read_text())["frames"]
     assert all(e["status"] == "done" for e in frames.values()) and len(frames) == FRAMES
     for name in frames:
@@ -446,7 +449,11 @@ def test_a_range_too_narrow_for_the_take_is_widened_for_every_chunk_alike_in_dep
     assert res.returncode == 0, res.stderr
     summary = json.loads(res.stdout)
     assert summary["search"] == search.model_dump(mode="json")  # the same rounds, whatever order chunks finished in
-    assert summary["computed"] == search.rounds * FRAMES and summary["failed"] == 0
+    # every frame set counted once, the rounds after the first apart (they were counted as frame sets)
+    assert summary["computed"] == FRAMES and summary["failed"] == 0 and summary["chunks"] == FRAMES // CHUNK
+    assert summary["recomputed"] == (search.rounds - 1) * FRAMES
+    assert summary["chunks_recomputed"] == (search.rounds - 1) * FRAMES // CHUNK
+    assert sum(summary["frames_by_worker"].values()) == FRAMES and summary["frames"] == FRAMES
     written = json.loads((tmp_path / "p" / "process.json").read_text())
     assert written["search"] == summary["search"] and written["chunk"] == CHUNK and written["warmup"] == WARMUP
     for name, entry in written["frames"].items():
@@ -458,3 +465,41 @@ def test_a_range_too_narrow_for_the_take_is_widened_for_every_chunk_alike_in_dep
     assert other.returncode == 2 and other.stderr.count("\n") == 1 and "--chunk 2" in other.stderr, other.stderr
     again = run_rigctl("process", str(take), "--out", str(tmp_path / "p"), *FAST, "--json")
     assert again.returncode == 0 and json.loads(again.stdout)["skipped_done"] == FRAMES, again.stderr
+
+
+def test_a_frame_set_computed_again_after_the_range_widened_is_counted_once(take: Path, tmp_path: Path) -> None:
+    """One frame set, one chunk, a measured range that clips the presenter: its chunk widens the range and runs
+    again. It said "2 frame sets computed in 2 chunks" (on a 3-frame take, computed 6 and chunks 6)."""
+    import numpy as np
+
+    from rigctl.depth.sources import open_source
+    from rigctl.depth.take_range import RangeDecision, decide_range
+    from rigctl.farm.ledger import Ledger
+    from rigctl.farm.run import run_settings
+    from rigctl.take.manifest import read_manifest
+
+    opt = DepthOptions(preset="fast", cameras=("r1c1",), chunk=1, warmup=0)
+    src = open_source(take)
+    truth = src.grid(0).truth["r1c1"]
+    top = float(np.nanmax(np.where(np.isfinite(truth), truth, np.nan)))
+    low = decide_range(src, opt).disparity_range_px[0]
+    for out in (tmp_path / "json", tmp_path / "text"):
+        out.mkdir()
+        ledger = Ledger(out)
+        ledger.data.settings = run_settings(FarmOptions(take, out, opt), read_manifest(take))
+        ledger.data.range = RangeDecision(disparity_range_px=(low, top - 3.0), source="measured (test)", planned=False)
+        ledger.save()
+    res = run_rigctl("process", str(take), "--out", str(tmp_path / "json"), *ONE, "--json")
+    assert res.returncode == 0, res.stderr
+    summary = json.loads(res.stdout)
+    assert summary["search"]["rounds"] == 2, summary["search"]  # the chunk ran twice
+    assert (summary["frames"], summary["computed"], summary["chunks"]) == (1, 1, 1)
+    assert (summary["recomputed"], summary["chunks_recomputed"]) == (1, 1)
+    assert summary["frames_by_worker"] and sum(summary["frames_by_worker"].values()) == 1
+    assert summary["frames_per_second"] == pytest.approx(1 / summary["compute_seconds"])
+
+    text = run_rigctl("process", str(take), "--out", str(tmp_path / "text"), *ONE)  # in words: said apart
+    assert text.returncode == 0, text.stderr
+    assert "1 frame sets computed in 1 chunks (1 chunks, 1 frame sets, run again after the range widened)" in (
+        text.stdout
+    ), text.stdout
