@@ -33,7 +33,7 @@ from rigctl.depth.export import FORMATS, PARTIAL_PREFIX, Exporter, frame_name
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.pipeline import ChunkEnd, chunks, settle
 from rigctl.depth.take_range import RangeDecision, SearchRounds, SearchState, hull
-from rigctl.errors import DeviceError, ParameterError
+from rigctl.errors import DeviceError, ParameterError, RigctlError
 from rigctl.farm.frame import ChunkJob, is_rectified, one_line, run_chunk, take_range
 from rigctl.farm.ledger import FrameEntry, Ledger, RunSettings
 from rigctl.farm.wire import MAX_MESSAGE_BYTES, bounded_messages
@@ -316,9 +316,6 @@ def process_take(
     work = frames_to_do(options)
     ledger = work.ledger
     depth_dir = options.out / "depth"
-    depth_dir.mkdir(parents=True, exist_ok=True)
-    for stale in depth_dir.glob(PARTIAL_PREFIX + "*"):  # left by a run that was stopped mid-write
-        shutil.rmtree(stale, ignore_errors=True)
     status = Status(total=0)
     failed: dict[str, str] = {}
     computed: dict[str, FrameEntry] = {}  # this run's last result of every frame set
@@ -345,6 +342,8 @@ def process_take(
             if decision is None or options.redo or plan or decision.planned:
                 fut = client.submit(take_range, take, calibration, options.depth, key=f"rigctl-range-{run_id}")
                 new = fut.result()
+                if isinstance(new, RigctlError):  # refused on the worker: our one line, before any folder
+                    raise new
                 if new != decision or options.redo:  # the chunks start from the new range
                     ledger.data.search = ledger.data.reached = None
                 decision = ledger.data.range = new
@@ -354,6 +353,9 @@ def process_take(
             if ledger.data.reached is not None:
                 start = hull([start, ledger.data.reached])
             ledger.save()
+            depth_dir.mkdir(parents=True, exist_ok=True)
+            for stale in depth_dir.glob(PARTIAL_PREFIX + "*"):  # left by a run that was stopped mid-write
+                shutil.rmtree(stale, ignore_errors=True)
 
             def run_round(state: SearchState, round_: int) -> list[ChunkEnd]:
                 """The chunks not yet computed from ``state``; the ledger notes where each one's search ended."""

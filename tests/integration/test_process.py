@@ -288,6 +288,16 @@ def test_a_plan_no_take_could_have_is_refused_on_the_client_before_any_folder(
     assert not out.exists()
 
 
+def test_a_plan_refused_on_the_worker_is_our_one_line_and_leaves_no_folder(take: Path, tmp_path: Path) -> None:
+    """What only the take can tell (a --near whose disparity is beyond any number at this rig's focal length)
+    is refused by the range task: distributed logged "Compute Failed" and a traceback before our line, and an
+    empty DIR/depth was left."""
+    out = tmp_path / "out"
+    res = run_rigctl("process", str(take), "--out", str(out), *ONE, "--near", "1e-320", "--far", "1")
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert "--near 1e-320 m is too close to plan" in res.stderr and not out.exists()
+
+
 def proc_io(pid: int) -> int:
     """Bytes the process has read and written through system calls (sockets included)."""
     fields = dict(line.split(": ") for line in Path(f"/proc/{pid}/io").read_text().splitlines())
