@@ -152,10 +152,11 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
 
 def depth_options(ns: argparse.Namespace) -> DepthOptions:
     """The depth options rigctl depth and rigctl process read from their shared arguments (the preset, the
-    range, the key, the cameras and :func:`add_pipeline_options`'s): one reading, so the verbs cannot drift."""
+    range, the key, the cameras and :func:`add_pipeline_options`'s): one reading and one check
+    (:meth:`DepthOptions.check`), so the verbs cannot drift."""
     from rigctl.depth.options import DepthOptions
 
-    return DepthOptions(
+    opt = DepthOptions(
         preset=ns.preset,
         near_m=ns.near,
         far_m=ns.far if ns.far is not None else (math.inf if ns.near is not None else None),
@@ -165,3 +166,5 @@ def depth_options(ns: argparse.Namespace) -> DepthOptions:
         chunk=ns.chunk,
         warmup=ns.warmup,
     )
+    opt.check()  # before the verb makes any folder or starts any cluster
+    return opt

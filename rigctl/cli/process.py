@@ -166,8 +166,14 @@ def run(ns: argparse.Namespace) -> int:
                 lo, hi = summary.search.state.disparity_range_px
                 rounds = summary.search.rounds
                 print(f"widened to {lo:.1f}..{hi:.1f} px: every chunk computed again from it ({rounds} rounds)")
+        again = ""
+        if summary.chunks_recomputed:  # the repeat passes, said apart from the frame sets they computed again
+            again = (
+                f" ({summary.chunks_recomputed} chunks, {summary.recomputed} frame sets, run again after the range "
+                "widened)"
+            )
         print(
-            f"{summary.computed} frame sets computed in {summary.chunks} chunks, {summary.failed} failed, "
+            f"{summary.computed} frame sets computed in {summary.chunks} chunks{again}, {summary.failed} failed, "
             f"{summary.skipped_done} already done; {summary.frames_per_second:.2f} frames/s; ledger {summary.ledger}"
         )
         for name, err in summary.failed_frames.items():  # what went wrong goes where errors go

@@ -188,10 +188,7 @@ class TakeProcessor:
         decision: RangeDecision | None = None,
         exporter: Exporter | None = None,
     ) -> None:
-        if opt.preset not in PRESETS:
-            raise ParameterError(f"unknown preset {opt.preset!r} (presets: {', '.join(PRESETS)})")
-        if opt.chunk < 1:
-            raise ParameterError(f"--chunk must be at least 1 frame set, got {opt.chunk}")
+        opt.check()  # what needs no take: the verbs checked it before any folder or cluster
         cameras = list(opt.cameras) if opt.cameras else list(source.names)
         unknown = [c for c in cameras if c not in source.names]
         if unknown:

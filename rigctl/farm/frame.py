@@ -81,11 +81,15 @@ def cached_source(take: str, calibration: str | None) -> FrameSource:
     return open_source(Path(take), Path(calibration) if calibration else None)
 
 
-def take_range(take: str, calibration: str | None, options: DepthOptions) -> RangeDecision:
+def take_range(take: str, calibration: str | None, options: DepthOptions) -> RangeDecision | RigctlError:
     """The Dask task run before the chunks: the take's range, decided once on a worker (the client reads no
-    image)."""
+    image). A refusal (a plan too close to turn into disparities, a damaged take) is returned, not raised: the
+    client raises it as its one line, and distributed logs no "Compute Failed" and traceback before it."""
     pin_threads()
-    return decide_range(cached_source(take, calibration), options)
+    try:
+        return decide_range(cached_source(take, calibration), options)
+    except RigctlError as exc:
+        return exc
 
 
 def run_chunk(job: ChunkJob) -> tuple[list[tuple[int, FrameEntry]], ChunkEnd]:

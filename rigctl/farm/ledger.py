@@ -40,9 +40,62 @@ class FrameEntry(BaseModel):
     start: SearchState | None = None  # the search state its chunk started from (done from another: redone)
 
 
+class RunSettings(BaseModel):
+    """What a run's outputs depend on besides the chunking: the take (its folder and its manifest), the
+    calibration it is rectified with, and the depth options. A run on a ledger with other settings is refused
+    (its frame sets, and a measured range, would be kept as if they were this run's)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    take: str  # the take's folder, resolved
+    take_sha256: str  # its take.yaml as a model, less the crew's verdict and notes (they change no frame)
+    calibration: str | None = None  # resolved, for a take rectified on the workers
+    calibration_sha256: str | None = None
+    preset: str
+    plan: str  # the planned range as given (--near/--far, a disparity range), or "no plan"
+    margin_px: float
+    cameras: list[str] | None  # sorted; None for every camera
+    key: bool
+    temporal: bool
+    layout: str  # what the exporter writes (process has no option for them: recorded so a new one is seen)
+    colour: str
+
+    def differences(self, asked: RunSettings) -> list[str]:
+        """Each setting that differs, as "was, asked now" in the words of its option (a file's checksum only
+        when the file is the same one: another take's take.yaml differs anyway)."""
+        differ = [name for name in type(self).model_fields if getattr(self, name) != getattr(asked, name)]
+        for path, checksum in (("take", "take_sha256"), ("calibration", "calibration_sha256")):
+            if path in differ and checksum in differ:
+                differ.remove(checksum)
+        return [f"{_describe(n, getattr(self, n))}, asked {_describe(n, getattr(asked, n))}" for n in differ]
+
+
+def _describe(name: str, value: Any) -> str:
+    if name == "take":
+        return f"take {value}"
+    if name == "take_sha256":
+        return f"the take's take.yaml with sha256 {value[:12]}"
+    if name == "calibration":
+        return f"--calibration {value}" if value else "no --calibration"
+    if name == "calibration_sha256":
+        return f"calibration sha256 {value[:12]}" if value else "no calibration"
+    if name == "cameras":
+        return "--cameras " + " ".join(value) if value else "every camera"
+    if name == "key":
+        return "keyed" if value else "--no-key"
+    if name == "temporal":
+        return "temporal" if value else "--no-temporal"
+    if name == "margin_px":
+        return f"margin {value} px"
+    if name == "plan":
+        return str(value)
+    return f"--{name} {value}"
+
+
 class LedgerFile(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
+    settings: RunSettings | None = None  # what the frame sets and the range were computed with
     range: RangeDecision | None = None
     search: SearchRounds | None = None  # the state chunks start from now, and how it got there
     reached: SearchState | None = None  # the hull of every chunk's end state under ``search`` (wider: a round)

@@ -13,7 +13,10 @@ A worker that dies takes its task back to the scheduler, which runs it elsewhere
 
 from __future__ import annotations
 
+import hashlib
+import json
 import logging
+import math
 import re
 import shutil
 import time
@@ -22,18 +25,21 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel, ConfigDict
 
-from rigctl.depth.export import FORMATS, PARTIAL_PREFIX, frame_name
+from rigctl.depth.export import FORMATS, PARTIAL_PREFIX, Exporter, frame_name
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.pipeline import ChunkEnd, chunks, settle
 from rigctl.depth.take_range import RangeDecision, SearchRounds, SearchState, hull
-from rigctl.errors import DeviceError, ParameterError
+from rigctl.errors import DeviceError, ParameterError, RigctlError
 from rigctl.farm.frame import ChunkJob, is_rectified, one_line, run_chunk, take_range
-from rigctl.farm.ledger import FrameEntry, Ledger
+from rigctl.farm.ledger import FrameEntry, Ledger, RunSettings
 from rigctl.farm.wire import MAX_MESSAGE_BYTES, bounded_messages
+
+if TYPE_CHECKING:
+    from rigctl.take.manifest import Manifest
 
 log = logging.getLogger(__name__)
 
@@ -102,11 +108,59 @@ class Work:
         return todo, skipped
 
 
+def run_settings(options: FarmOptions, manifest: Manifest) -> RunSettings:
+    """What the run's outputs depend on besides the chunking (recorded in the ledger, checked by a rerun)."""
+    opt = options.depth
+    if opt.disparity_range is not None:
+        plan = f"disparity range {opt.disparity_range[0]}..{opt.disparity_range[1]} px"
+    elif opt.near_m is not None:
+        plan = f"--near {opt.near_m} --far {opt.far_m if opt.far_m is not None else math.inf}"
+    else:
+        plan = "no plan (--near/--far)"
+    # the manifest as a model, so the YAML's spelling does not count; the crew's verdict changes no frame
+    identity = manifest.model_dump(mode="json", exclude={"verdict", "notes"})
+    calibration = options.calibration
+    return RunSettings(
+        take=str(options.take.resolve()),
+        take_sha256=hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest(),
+        calibration=str(calibration.resolve()) if calibration else None,
+        calibration_sha256=hashlib.sha256(calibration.read_bytes()).hexdigest() if calibration else None,
+        preset=opt.preset,
+        plan=plan,
+        margin_px=opt.margin_px,
+        cameras=sorted(opt.cameras) if opt.cameras else None,
+        key=opt.key,
+        temporal=opt.temporal,
+        layout=Exporter.layout,
+        colour=Exporter.colour,
+    )
+
+
+def check_settings(ledger: Ledger, settings: RunSettings, chunk: int, warmup: int) -> None:
+    """Refuse, in one line, a run whose settings are not those the ledger's frame sets (or its range) were
+    computed with: they would be kept as this run's results. --redo does not lift it (the frame sets it does not
+    redo would stay the old settings'): a new --out does."""
+    data = ledger.data
+    if data.settings is None:
+        if data.frames or data.range is not None:
+            raise ParameterError(
+                f"{ledger.path}: written by an older rigctl that did not record the take and settings its frame sets "
+                "were computed with, so this run cannot be checked against them: use a new --out"
+            )
+        return
+    differ = data.settings.differences(settings)
+    if data.chunk is not None and (data.chunk, data.warmup) != (chunk, warmup):
+        differ.append(f"--chunk {data.chunk} --warmup {data.warmup}, asked --chunk {chunk} --warmup {warmup}")
+    if differ:
+        raise ParameterError(f"{ledger.path}: computed with {'; '.join(differ)}: use a new --out for this run")
+
+
 def frames_to_do(options: FarmOptions) -> Work:
     """The chunks to compute and the frame sets already done, checked on the client."""
     from rigctl.take.framesets import check_frames
     from rigctl.take.reader import TakeReader
 
+    options.depth.check()  # what needs no take: refused before a cluster or a folder (the CLI checked already)
     take = options.take
     if not (take / "take.yaml").exists():
         raise ParameterError(f"{take}: not a take (no take.yaml)")
@@ -129,13 +183,10 @@ def frames_to_do(options: FarmOptions) -> Work:
     if not numbers:
         raise ParameterError(f"{take}: the take has no complete frame set")
     ledger = Ledger(options.out)
-    chunk, warmup = options.depth.chunk, options.depth.warmup
-    if ledger.frames and not options.redo and (ledger.data.chunk, ledger.data.warmup) != (chunk, warmup):
-        raise ParameterError(
-            f"{ledger.path}: computed with --chunk {ledger.data.chunk} and --warmup {ledger.data.warmup}, asked "
-            f"--chunk {chunk} --warmup {warmup}: run with those, or --redo to compute every frame set again"
-        )
-    ledger.data.chunk, ledger.data.warmup = chunk, warmup
+    settings = run_settings(options, reader.manifest)
+    check_settings(ledger, settings, options.depth.chunk, options.depth.warmup)
+    ledger.data.settings = settings
+    ledger.data.chunk, ledger.data.warmup = options.depth.chunk, options.depth.warmup
     depth_dir = options.out / "depth"
     names = list(cams or reader.names)
     whole = {
@@ -144,7 +195,7 @@ def frames_to_do(options: FarmOptions) -> Work:
         if ledger.whole(frame_name(n), depth_dir / frame_name(n))
         and all((depth_dir / frame_name(n) / f"{c}.{ext}").exists() for c in names for ext in FORMATS)
     }
-    return Work(chunks(numbers, chunk), whole, ledger, options.redo)
+    return Work(chunks(numbers, options.depth.chunk), whole, ledger, options.redo)
 
 
 class ProcessSummary(BaseModel):
@@ -156,19 +207,23 @@ class ProcessSummary(BaseModel):
     out: str
     ledger: str
     frames: int
-    chunks: int
-    computed: int
+    chunks: int  # chunks this run computed, each once (it ran again from a widened range: chunks_recomputed)
+    computed: int  # frame sets this run computed, each once, done in its last pass
     failed: int
     skipped_done: int
     failed_frames: dict[str, str]
-    frames_by_worker: dict[str, int]
+    frames_by_worker: dict[str, int]  # frame sets by the worker of their last pass
     range: RangeDecision | None
     search: SearchRounds | None  # how the take's range settled: the state every chunk started from, the rounds
     widenings: int  # widenings of the range within the chunks of the last round (each in the frame's report)
     bound_hit_pixels: int  # summed over the frame sets computed by this run
     seconds: float
     compute_seconds: float  # from the first task submitted to the last result (no cluster start)
-    frames_per_second: float
+    frames_per_second: float  # frame sets computed (each once) a second of compute
+    # the repeat passes: frame-set computations beyond each one's first, and runs of a chunk beyond its first,
+    # when a chunk widened the take's range and every chunk was run again from it
+    recomputed: int = 0
+    chunks_recomputed: int = 0
 
 
 def default_memory_limit(take: Path, cameras: int | None) -> int:
@@ -258,11 +313,7 @@ def process_take(
     work = frames_to_do(options)
     ledger = work.ledger
     depth_dir = options.out / "depth"
-    depth_dir.mkdir(parents=True, exist_ok=True)
-    for stale in depth_dir.glob(PARTIAL_PREFIX + "*"):  # left by a run that was stopped mid-write
-        shutil.rmtree(stale, ignore_errors=True)
     status = Status(total=0)
-    workers: dict[str, int] = {}
     failed: dict[str, str] = {}
     computed: dict[str, FrameEntry] = {}  # this run's last result of every frame set
     t0 = clock()
@@ -271,7 +322,8 @@ def process_take(
     if known is not None and ledger.data.reached is not None:
         known = hull([known, ledger.data.reached])  # a round was cut short: its chunks widened the range
     todo, skipped = work.todo(known) if known is not None else (work.chunks, [])
-    chunks_run = 0
+    chunks_run = 0  # runs of a chunk, each round's
+    chunks_seen: set[tuple[int, ...]] = set()
     if todo:
         from distributed import as_completed
 
@@ -287,6 +339,8 @@ def process_take(
             if decision is None or options.redo or plan or decision.planned:
                 fut = client.submit(take_range, take, calibration, options.depth, key=f"rigctl-range-{run_id}")
                 new = fut.result()
+                if isinstance(new, RigctlError):  # refused on the worker: our one line, before any folder
+                    raise new
                 if new != decision or options.redo:  # the chunks start from the new range
                     ledger.data.search = ledger.data.reached = None
                 decision = ledger.data.range = new
@@ -296,6 +350,9 @@ def process_take(
             if ledger.data.reached is not None:
                 start = hull([start, ledger.data.reached])
             ledger.save()
+            depth_dir.mkdir(parents=True, exist_ok=True)
+            for stale in depth_dir.glob(PARTIAL_PREFIX + "*"):  # left by a run that was stopped mid-write
+                shutil.rmtree(stale, ignore_errors=True)
 
             def run_round(state: SearchState, round_: int) -> list[ChunkEnd]:
                 """The chunks not yet computed from ``state``; the ledger notes where each one's search ended."""
@@ -312,6 +369,7 @@ def process_take(
                     skipped = now_skipped
                 status.total += sum(len(c) for c in todo)
                 chunks_run += len(todo)
+                chunks_seen.update(tuple(c) for c in todo)
                 futures = {}
                 for chunk in todo:
                     job = ChunkJob(
@@ -337,7 +395,6 @@ def process_take(
                         computed[name] = entry
                         if entry.status == "done":
                             status.done += 1
-                            workers[entry.worker] = workers.get(entry.worker, 0) + 1
                             failed.pop(name, None)
                         else:
                             status.failed += 1
@@ -355,13 +412,17 @@ def process_take(
     final = [e for e in computed.values() if e.report is not None and ledger.data.search is not None
              and e.start == ledger.data.search.state]  # fmt: skip
     seconds = clock() - t0
+    done = [e for e in computed.values() if e.status == "done"]  # each frame set once, by its last pass
+    workers: dict[str, int] = {}
+    for e in done:
+        workers[e.worker] = workers.get(e.worker, 0) + 1
     return ProcessSummary(
         take=str(options.take),
         out=str(options.out),
         ledger=str(ledger.path),
         frames=sum(len(c) for c in work.chunks),
-        chunks=chunks_run,
-        computed=status.done,
+        chunks=len(chunks_seen),
+        computed=len(done),
         failed=len(failed),
         skipped_done=len(skipped),
         failed_frames=failed,
@@ -372,5 +433,7 @@ def process_take(
         bound_hit_pixels=sum(e.report.bound_hit_pixels for e in final if e.report is not None),
         seconds=seconds,
         compute_seconds=compute_seconds,
-        frames_per_second=status.done / compute_seconds if compute_seconds > 0 and status.done else 0.0,
+        frames_per_second=len(done) / compute_seconds if compute_seconds > 0 and done else 0.0,
+        recomputed=status.done + status.failed - len(computed),
+        chunks_recomputed=chunks_run - len(chunks_seen),
     )

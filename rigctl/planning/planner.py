@@ -169,14 +169,20 @@ def disparity_range_px(
     return d_min - margin_px, d_max + margin_px
 
 
+def check_plan_distances(near_m: float, far_m: float) -> None:
+    """Refuse a plan whose nearest distance is not positive and below the farthest (``inf`` allowed), in the
+    words of the options that give them: what :func:`search_range_px` needs, checkable before any take is read."""
+    if not (near_m > 0 and far_m > near_m):
+        raise ParameterError(f"--near must be positive and below --far, got {near_m} and {far_m}")
+
+
 def search_range_px(
     focal_px: float, spacing_m: float, near_m: float, far_m: float, margin_px: float = 0.0, doffs_px: float = 0.0
 ) -> tuple[float, float]:
     """The disparity search range of a rectified grid (focal length in pixels, horizontal spacing) for a
     subject between ``near_m`` and ``far_m`` (``inf`` allowed), less the grid's ``doffs_px`` and widened by
     ``margin_px`` on both sides: the one conversion from a plan's distances to a range of disparities."""
-    if not (near_m > 0 and far_m > near_m):
-        raise ParameterError(f"--near must be positive and below --far, got {near_m} and {far_m}")
+    check_plan_distances(near_m, far_m)
     with np.errstate(over="ignore"):  # overflow is refused just below, in one line
         lo, hi = disparity_range_px(focal_px, spacing_m, near_m, far_m)
     if not math.isfinite(float(hi)):

@@ -20,6 +20,7 @@ import pytest
 from tests_support import rigctl_exe, run_rigctl
 
 from rigctl.depth.run import DepthOptions
+from rigctl.errors import ParameterError
 from rigctl.farm.frame import frame_name
 from rigctl.farm.run import FarmOptions, Status, process_take
 
@@ -47,13 +48,17 @@ def take(module_tmp: Callable[[str], Path]) -> Path:
     return out / "t"
 
 
+def written(out: Path, verb: str, *args: str) -> Path:
+    """``out`` as ``rigctl VERB ... --out OUT`` wrote it (the run succeeded)."""
+    res = run_rigctl(verb, *args, "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    return out
+
+
 @pytest.fixture(scope="module")
 def single_process(take: Path, module_tmp: Callable[[str], Path]) -> Path:
     """What ``rigctl depth`` writes for the same frames in one process: the reference for byte identity."""
-    out = module_tmp("single")
-    res = run_rigctl("depth", str(take), "--out", str(out), *FAST)
-    assert res.returncode == 0, res.stderr
-    return out
+    return written(module_tmp("single"), "depth", str(take), *FAST)
 
 
 def same_bytes(a: Path, b: Path) -> list[str]:
@@ -71,7 +76,9 @@ def test_local_cluster_of_processes_matches_rigctl_depth_byte_for_byte(
     assert res.returncode == 0, res.stderr
     summary = json.loads(res.stdout)
     rounds = summary["search"]["rounds"]  # 2 when a chunk widened the take's range: every chunk again from it
-    assert summary["computed"] == rounds * FRAMES and summary["chunks"] == rounds * FRAMES // CHUNK
+    assert summary["computed"] == FRAMES and summary["chunks"] == FRAMES // CHUNK  # each once
+    assert summary["recomputed"] == (rounds - 1) * FRAMES  # the repeat passes, apart
+    assert summary["chunks_recomputed"] == (rounds - 1) * FRAMES // CHUNK
     assert summary["failed"] == 0 and summary["search"]["settled"]
     ledger = json.loads((tmp_path / "process.json").read_text())
     report = json.loads((single_process / "report.json").read_text())
@@ -187,6 +194,110 @@ def test_a_folder_that_is_not_a_take_is_one_line(tmp_path: Path) -> None:
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and "not a take" in res.stderr, res.stderr
 
 
+ONE = ("--frames", "0-0", "--workers", "1", "--preset", "fast", "--cameras", "r1c1", "--chunk", "1", "--warmup", "0")
+
+
+@pytest.fixture(scope="module")
+def processed(take: Path, module_tmp: Callable[[str], Path]) -> Path:
+    """One frame set of the take through rigctl process (the first run the reruns below are checked against)."""
+    return written(module_tmp("processed"), "process", str(take), *ONE)
+
+
+def outputs(out: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+
+
+@pytest.mark.parametrize(
+    ("more", "words"),
+    [
+        (("--preset", "best"), "--preset fast, asked --preset best"),
+        (("--near", "1", "--far", "5"), "no plan (--near/--far), asked --near 1.0 --far 5.0"),
+        (("--cameras", "r1c0"), "--cameras r1c1, asked --cameras r1c0"),
+        (("--no-key",), "keyed, asked --no-key"),
+        (("--no-temporal",), "temporal, asked --no-temporal"),
+        (("--chunk", "2"), "--chunk 1 --warmup 0, asked --chunk 2 --warmup 0"),
+        (("--preset", "best", "--redo"), "--preset fast, asked --preset best"),  # --redo would keep frames of both
+    ],
+)
+def test_a_rerun_with_other_settings_is_refused_naming_what_differs(
+    take: Path, processed: Path, more: tuple[str, ...], words: str
+) -> None:
+    """The ledger kept only the chunking: a rerun with another preset or plan said "already done" and kept the
+    first run's depth (and its "no plan" range) with exit 0."""
+    before = outputs(processed)
+    res = run_rigctl("process", str(take), "--out", str(processed), *ONE, *more)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert words in res.stderr and "use a new --out" in res.stderr, res.stderr
+    assert outputs(processed) == before
+
+
+def test_a_rerun_on_another_take_or_a_changed_one_is_refused(take: Path, tmp_path: Path) -> None:
+    import shutil
+
+    from rigctl.take.manifest import read_manifest, write_manifest
+
+    copy = tmp_path / "copy"
+    shutil.copytree(take, copy)
+    out = tmp_path / "out"
+    assert run_rigctl("process", str(copy), "--out", str(out), *ONE).returncode == 0
+    before = outputs(out)
+    other = run_rigctl("process", str(take), "--out", str(out), *ONE)  # the same frames, another take folder
+    assert other.returncode == 2 and other.stderr.count("\n") == 1, other.stderr
+    assert f"take {copy.resolve()}, asked take {take.resolve()}" in other.stderr, other.stderr
+
+    manifest = read_manifest(copy)
+    manifest.mark("circled", "the crew's verdict changes no frame")
+    write_manifest(copy, manifest)
+    again = run_rigctl("process", str(copy), "--out", str(out), *ONE, "--json")
+    assert again.returncode == 0 and json.loads(again.stdout)["skipped_done"] == 1, again.stderr
+
+    manifest.take = "another"  # a take.yaml that is not the one the frame sets were computed from
+    write_manifest(copy, manifest)
+    changed = run_rigctl("process", str(copy), "--out", str(out), *ONE)
+    assert changed.returncode == 2 and changed.stderr.count("\n") == 1, changed.stderr
+    assert "the take's take.yaml with sha256" in changed.stderr and "use a new --out" in changed.stderr
+    assert outputs(out) == before
+
+
+def test_a_ledger_of_an_older_rigctl_is_refused_as_one_that_cannot_be_checked(take: Path, tmp_path: Path) -> None:
+    assert run_rigctl("process", str(take), "--out", str(tmp_path), *ONE).returncode == 0
+    path = tmp_path / "process.json"
+    data = json.loads(path.read_text())
+    data.pop("settings", None)  # as an older rigctl wrote it
+    path.write_text(json.dumps(data))
+    res = run_rigctl("process", str(take), "--out", str(tmp_path), *ONE)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert f"{path}: written by an older rigctl" in res.stderr and "use a new --out" in res.stderr, res.stderr
+
+
+@pytest.mark.parametrize("verb", ["process", "depth"])
+@pytest.mark.parametrize("plan", [("--near", "3", "--far", "2"), ("--near", "2", "--far", "2")])
+def test_a_plan_no_take_could_have_is_refused_on_the_client_before_any_folder(
+    take: Path, tmp_path: Path, verb: str, plan: tuple[str, ...]
+) -> None:
+    """Checked on a Dask worker before: distributed's "Compute Failed" and a traceback, then our line, and an
+    empty DIR/depth left behind. Now the options are checked as rigctl depth checks them, before anything."""
+    out = tmp_path / "out"
+    workers = ("--workers", "1") if verb == "process" else ()
+    res = run_rigctl(verb, str(take), "--out", str(out), *workers, *FAST, *plan)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert "--near must be positive and below --far" in res.stderr, res.stderr
+    assert not out.exists()
+    with pytest.raises(ParameterError, match="below --far"):  # and through the API, before the folder too
+        process_take(FarmOptions(take, out, DepthOptions(preset="fast", near_m=3.0, far_m=2.0), workers=1))
+    assert not out.exists()
+
+
+def test_a_plan_refused_on_the_worker_is_our_one_line_and_leaves_no_folder(take: Path, tmp_path: Path) -> None:
+    """What only the take can tell (a --near whose disparity is beyond any number at this rig's focal length)
+    is refused by the range task: distributed logged "Compute Failed" and a traceback before our line, and an
+    empty DIR/depth was left."""
+    out = tmp_path / "out"
+    res = run_rigctl("process", str(take), "--out", str(out), *ONE, "--near", "1e-320", "--far", "1")
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert "--near 1e-320 m is too close to plan" in res.stderr and not out.exists()
+
+
 def proc_io(pid: int) -> int:
     """Bytes the process has read and written through system calls (sockets included)."""
     fields = dict(line.split(": ") for line in Path(f"/proc/{pid}/io").read_text().splitlines())
@@ -250,7 +361,8 @@ def test_subprocess_cluster_survives_a_killed_worker_and_keeps_images_off_the_sc
                 os.killpg(p.pid, signal.SIGKILL)
 
     summary = json.loads(stdout)
-    assert summary["computed"] == summary["search"]["rounds"] * FRAMES and summary["failed"] == 0
+    assert summary["computed"] == FRAMES and summary["failed"] == 0
+    assert summary["recomputed"] == (summary["search"]["rounds"] - 1) * FRAMES
     frames = json.loads(ledger.read_text())["frames"]
     assert all(e["status"] == "done" for e in frames.values()) and len(frames) == FRAMES
     for name in frames:
@@ -318,6 +430,8 @@ def test_a_range_too_narrow_for_the_take_is_widened_for_every_chunk_alike_in_dep
     from rigctl.depth.sources import open_source
     from rigctl.depth.take_range import RangeDecision, decide_range
     from rigctl.farm.ledger import Ledger
+    from rigctl.farm.run import run_settings
+    from rigctl.take.manifest import read_manifest
 
     opt = DepthOptions(preset="fast", cameras=CAMS, chunk=CHUNK, warmup=WARMUP)
     src = open_source(take)
@@ -338,13 +452,18 @@ def test_a_range_too_narrow_for_the_take_is_widened_for_every_chunk_alike_in_dep
     assert report.widenings == [] and all("(widened)" in f.range_source for f in report.frames.values())
 
     ledger = Ledger(tmp_path / "p")  # the farm from the same measured range (a measured range is kept)
+    ledger.data.settings = run_settings(FarmOptions(take, tmp_path / "p", opt), read_manifest(take))
     ledger.data.range = narrow
     ledger.save()
     res = run_rigctl("process", str(take), "--out", str(tmp_path / "p"), "--workers", "2", *FAST, "--json")
     assert res.returncode == 0, res.stderr
     summary = json.loads(res.stdout)
     assert summary["search"] == search.model_dump(mode="json")  # the same rounds, whatever order chunks finished in
-    assert summary["computed"] == search.rounds * FRAMES and summary["failed"] == 0
+    # every frame set counted once, the rounds after the first apart (they were counted as frame sets)
+    assert summary["computed"] == FRAMES and summary["failed"] == 0 and summary["chunks"] == FRAMES // CHUNK
+    assert summary["recomputed"] == (search.rounds - 1) * FRAMES
+    assert summary["chunks_recomputed"] == (search.rounds - 1) * FRAMES // CHUNK
+    assert sum(summary["frames_by_worker"].values()) == FRAMES and summary["frames"] == FRAMES
     written = json.loads((tmp_path / "p" / "process.json").read_text())
     assert written["search"] == summary["search"] and written["chunk"] == CHUNK and written["warmup"] == WARMUP
     for name, entry in written["frames"].items():
@@ -356,3 +475,41 @@ def test_a_range_too_narrow_for_the_take_is_widened_for_every_chunk_alike_in_dep
     assert other.returncode == 2 and other.stderr.count("\n") == 1 and "--chunk 2" in other.stderr, other.stderr
     again = run_rigctl("process", str(take), "--out", str(tmp_path / "p"), *FAST, "--json")
     assert again.returncode == 0 and json.loads(again.stdout)["skipped_done"] == FRAMES, again.stderr
+
+
+def test_a_frame_set_computed_again_after_the_range_widened_is_counted_once(take: Path, tmp_path: Path) -> None:
+    """One frame set, one chunk, a measured range that clips the presenter: its chunk widens the range and runs
+    again. It said "2 frame sets computed in 2 chunks" (on a 3-frame take, computed 6 and chunks 6)."""
+    import numpy as np
+
+    from rigctl.depth.sources import open_source
+    from rigctl.depth.take_range import RangeDecision, decide_range
+    from rigctl.farm.ledger import Ledger
+    from rigctl.farm.run import run_settings
+    from rigctl.take.manifest import read_manifest
+
+    opt = DepthOptions(preset="fast", cameras=("r1c1",), chunk=1, warmup=0)
+    src = open_source(take)
+    truth = src.grid(0).truth["r1c1"]
+    top = float(np.nanmax(np.where(np.isfinite(truth), truth, np.nan)))
+    low = decide_range(src, opt).disparity_range_px[0]
+    for out in (tmp_path / "json", tmp_path / "text"):
+        out.mkdir()
+        ledger = Ledger(out)
+        ledger.data.settings = run_settings(FarmOptions(take, out, opt), read_manifest(take))
+        ledger.data.range = RangeDecision(disparity_range_px=(low, top - 3.0), source="measured (test)", planned=False)
+        ledger.save()
+    res = run_rigctl("process", str(take), "--out", str(tmp_path / "json"), *ONE, "--json")
+    assert res.returncode == 0, res.stderr
+    summary = json.loads(res.stdout)
+    assert summary["search"]["rounds"] == 2, summary["search"]  # the chunk ran twice
+    assert (summary["frames"], summary["computed"], summary["chunks"]) == (1, 1, 1)
+    assert (summary["recomputed"], summary["chunks_recomputed"]) == (1, 1)
+    assert summary["frames_by_worker"] and sum(summary["frames_by_worker"].values()) == 1
+    assert summary["frames_per_second"] == pytest.approx(1 / summary["compute_seconds"])
+
+    text = run_rigctl("process", str(take), "--out", str(tmp_path / "text"), *ONE)  # in words: said apart
+    assert text.returncode == 0, text.stderr
+    assert "1 frame sets computed in 1 chunks (1 chunks, 1 frame sets, run again after the range widened)" in (
+        text.stdout
+    ), text.stdout

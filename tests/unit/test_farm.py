@@ -4,11 +4,14 @@
 from __future__ import annotations
 
 import json
+import math
+import re
 from pathlib import Path
 
 import pytest
 
 from rigctl.depth.export import file_record
+from rigctl.depth.options import DepthOptions
 from rigctl.errors import ParameterError, TakeError
 from rigctl.farm.ledger import FrameEntry, Ledger
 from rigctl.farm.run import scheduler_url, worker_memory_bytes
@@ -232,3 +235,25 @@ def test_plots_are_published_whole_through_a_temporary_name(tmp_path: Path, monk
     img = cv2.imdecode(np.frombuffer((tmp_path / "plot.png").read_bytes(), np.uint8), cv2.IMREAD_UNCHANGED)
     assert img is not None and img.shape[:2] == (50, 100)
     assert [p.name for p in tmp_path.iterdir()] == ["plot.png"]
+
+
+@pytest.mark.parametrize(
+    ("opt", "words"),
+    [
+        (DepthOptions(near_m=3.0, far_m=2.0), "--near must be positive and below --far"),
+        (DepthOptions(near_m=2.0, far_m=2.0), "--near must be positive and below --far"),
+        (DepthOptions(preset="slowest"), "unknown preset"),
+        (DepthOptions(disparity_range=(40.0, 10.0)), "disparity range"),
+        (DepthOptions(margin_px=float("nan")), "margin"),
+        (DepthOptions(chunk=0), "--chunk"),
+        (DepthOptions(warmup=-1), "--warmup"),
+    ],
+)
+def test_depth_options_no_take_could_run_with_are_refused_without_a_take(opt: DepthOptions, words: str) -> None:
+    with pytest.raises(ParameterError, match=re.escape(words)):
+        opt.check()
+
+
+def test_depth_options_a_take_could_run_with_pass_the_check() -> None:
+    DepthOptions(near_m=1.0, far_m=math.inf).check()
+    DepthOptions(disparity_range=(0.0, 40.0), chunk=1, warmup=0).check()
