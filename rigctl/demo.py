@@ -87,7 +87,8 @@ def _run_demo(out: Path, say: Say, progress_factory: Callable[[str, str], Any]) 
     from rigctl.depth.bench import better, comparisons, motorcycle, plot, run_bench
     from rigctl.depth.bench import format_table as bench_table
     from rigctl.depth.run import DepthOptions, run_depth
-    from rigctl.planning.report import format_plan, plan_rig
+    from rigctl.planning.report import plan_rig
+    from rigctl.planning.text import format_plan
     from rigctl.rectification.rectify import rectify_take
     from rigctl.registry import simulated_burnin_box
     from rigctl.render.demo import novel_views_section

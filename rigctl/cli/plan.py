@@ -9,7 +9,8 @@ import math
 from rigctl.cli import args
 from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
-from rigctl.planning.report import format_plan, plan_rig
+from rigctl.planning.report import plan_rig
+from rigctl.planning.text import format_plan
 from rigctl.rig import load_rig
 
 

@@ -15,7 +15,8 @@ from textual.screen import ModalScreen, Screen
 from textual.widgets import Input, Static
 
 from rigctl.errors import RigctlError
-from rigctl.planning.report import format_plan, plan_rig
+from rigctl.planning.report import plan_rig
+from rigctl.planning.text import format_plan
 
 KEYS = [
     ("r", "start / stop recording on every camera"),

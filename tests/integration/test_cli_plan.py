@@ -132,7 +132,8 @@ def test_the_text_report_stays_readable_at_its_extremes(run_cli) -> None:  # typ
 
 def test_the_report_never_prints_hundreds_of_digits() -> None:
     """The library still plans what the CLI refuses; its text report stays in columns whatever the numbers."""
-    from rigctl.planning.report import format_plan, plan_rig
+    from rigctl.planning.report import plan_rig
+    from rigctl.planning.text import format_plan
     from rigctl.rig import load_rig
 
     rig = load_rig("sim-3x3")

@@ -147,6 +147,7 @@ def test_64x64_plan_groups_pairs_by_offset(tmp_path: Path) -> None:
 
 def test_grouped_and_listed_plans_agree(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from rigctl.planning import report as plan_report
+    from rigctl.planning.text import format_plan
     from rigctl.rig import load_rig
 
     rig = load_rig("sim-3x3")
@@ -160,7 +161,7 @@ def test_grouped_and_listed_plans_agree(tmp_path: Path, monkeypatch: pytest.Monk
         assert len(same) == g.same_offset_pairs and by_name[g.name].parallax_px == g.parallax_px
     assert grouped.over_budget_count == listed.over_budget_count == len(listed.over_budget)
     assert all(p.same_offset_pairs == 1 for p in listed.pairs)
-    assert f"{len(listed.over_budget)} of 36 pairs exceed the budget" in plan_report.format_plan(listed, rig)
+    assert f"{len(listed.over_budget)} of 36 pairs exceed the budget" in format_plan(listed, rig)
 
 
 # ---- 6. rig files ---------------------------------------------------------------------------------------------
