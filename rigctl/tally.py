@@ -32,10 +32,11 @@ def tsl_addresses(rig: Rig) -> dict[str, int]:
 def tally_state(
     rig: Rig, program: list[str], preview: list[str], names: tuple[str, str] = ("--program", "--preview")
 ) -> TallyState:
-    """The state asked for, checked: every camera in ``rig``, none named twice, none on program and preview at
-    once (the outputs cannot show both: TSL 5.0 lights it red, the shoot UI says PGM, so the preview asked for
-    would be dropped without a word). Refused with :class:`ParameterError` naming the camera and the lists by
-    ``names`` (the options of ``rigctl tally``, or the shoot UI's words)."""
+    """The state asked for, checked: every camera in ``rig``, none named twice in one list. A camera may be on
+    program and preview at once (a switcher with the same source on both buses): TSL 3.1 and the embedded
+    tally light both lamps; TSL 5.0 and the shoot UI show program, which wins. Refused with
+    :class:`ParameterError` naming the camera and the list by ``names`` (the options of ``rigctl tally``, or the
+    shoot UI's words)."""
     known = set(rig.camera_names)
     for cam in [*program, *preview]:
         if cam not in known:
@@ -44,12 +45,6 @@ def tally_state(
         twice = next((cam for i, cam in enumerate(cams) if cam in cams[:i]), None)
         if twice is not None:
             raise ParameterError(f"{option}: camera {twice} is named twice")
-    both = [cam for cam in program if cam in preview]
-    if both:
-        raise ParameterError(
-            f"{'cameras' if len(both) > 1 else 'camera'} {', '.join(both)} on {names[0]} and {names[1]} at once: "
-            "a camera is on one of them (or neither)"
-        )
     return TallyState(frozenset(program), frozenset(preview))
 
 

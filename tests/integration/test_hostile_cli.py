@@ -24,18 +24,16 @@ from rigctl.errors import EXIT_BAD_INPUT, EXIT_DEVICE, EXIT_USAGE
 @pytest.mark.parametrize(
     ("argv", "fragment"),
     [
-        (("--program", "r1c1", "--preview", "r1c1"), "camera r1c1 on --program and --preview at once"),
-        (("--program", "r1c1", "r1c2", "--preview", "r1c2", "r1c1"), "cameras r1c1, r1c2 on --program and --pre"),
         (("--program", "r1c1", "r1c1"), "--program: camera r1c1 is named twice"),
         (("--preview", "r0c0", "r1c0", "r0c0"), "--preview: camera r0c0 is named twice"),
     ],
 )
-def test_tally_refuses_a_camera_on_program_and_preview_or_named_twice(  # type: ignore[no-untyped-def]
+def test_tally_refuses_a_camera_named_twice(  # type: ignore[no-untyped-def]
     run_cli, tmp_path: Path, argv: tuple[str, ...], fragment: str
 ) -> None:
-    """The outputs show one state a camera (TSL 5.0 lights it red, the shoot UI says PGM): a preview asked for
-    with program would be dropped silently. Refused on the shipped rig, and before the line is opened (a rig
-    whose port is missing says the same, not a device error)."""
+    """A name twice in one list is a typing slip: refused on the shipped rig, and before the line is opened (a
+    rig whose port is missing says the same, not a device error). Program and preview at once is a state
+    (test_tally_pty.py)."""
     one_line(run_cli("tally", "sim-3x3", *argv), EXIT_USAGE, fragment)
     rig = rig_with(tmp_path, tally={"protocol": "tsl-umd-3.1", "port": "/nonexistent/ttyUSB9"})
     one_line(run_cli("tally", str(rig), *argv), EXIT_USAGE, fragment)
