@@ -55,8 +55,9 @@ class BoardSpec:
     def as_dict(self) -> dict[str, Any]:
         return {"spec": 1, "type": "charuco", **asdict(self)}
 
-    def save(self, path: Path) -> None:
-        publish_text(path, yaml.safe_dump(self.as_dict(), sort_keys=False))
+    def save(self, path: Path, exists: str | None = None) -> None:
+        """Published whole; ``exists``: never over an existing file (the refusal's text, see ``publishing``)."""
+        publish_text(path, yaml.safe_dump(self.as_dict(), sort_keys=False), exists)
 
     @classmethod
     def load(cls, path: Path) -> BoardSpec:

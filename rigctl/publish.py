@@ -152,12 +152,13 @@ def kind(mode: int) -> str:
 
 
 @contextmanager
-def publishing(path: Path, durable: bool = True) -> Iterator[Path]:
+def publishing(path: Path, durable: bool = True, exists: str | None = None) -> Iterator[Path]:
     """Yields the temporary name to write (same folder, hidden, ours), then fsyncs it, renames it over ``path``
     and fsyncs the folder; on any failure the temporary file is removed and an OSError becomes one line.
     ``durable=False`` leaves out the two fsyncs (about 10 ms a file on a busy disk) for files that can be made
     again, such as a simulated take's truth: a killed process still leaves each whole or absent, a power cut
-    may not."""
+    may not. ``exists``: never replace ``path``; if something holds the name when the file is published (made
+    by another run since the caller looked), the ParameterError ``"<path>: <exists>"`` and nothing changed."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -172,7 +173,10 @@ def publishing(path: Path, durable: bool = True) -> Iterator[Path]:
                 os.fsync(fd)
             finally:
                 os.close(fd)
-        os.replace(tmp, path)
+        if exists is None:
+            os.replace(tmp, path)
+        else:
+            _publish_new(tmp, path, exists)
         if durable:
             fsync_dir(path.parent)
     except OSError as exc:
@@ -181,6 +185,32 @@ def publishing(path: Path, durable: bool = True) -> Iterator[Path]:
     except BaseException:
         _discard(tmp)
         raise
+
+
+# a link() a file system does not offer (FAT, some network and FUSE mounts)
+_NO_LINKS = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EXDEV, errno.EMLINK}
+
+
+def _publish_new(tmp: Path, path: Path, exists: str) -> None:
+    """``tmp`` published as ``path`` only if nothing holds that name: a hard link, which the kernel refuses
+    atomically when the name exists (a rename would replace it), then the temporary name removed. Where the
+    file system has no hard links, an exclusive create claims the name first and the rename fills it."""
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        _discard(tmp)
+        raise ParameterError(f"{path}: {exists}") from None
+    except OSError as exc:
+        if exc.errno not in _NO_LINKS:
+            raise
+        try:
+            os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+        except FileExistsError:
+            _discard(tmp)
+            raise ParameterError(f"{path}: {exists}") from None
+        os.replace(tmp, path)
+        return
+    tmp.unlink()
 
 
 def _discard(tmp: Path) -> None:
@@ -211,14 +241,15 @@ def move_into(staged: Path, final: Path) -> list[Path]:
     return moved
 
 
-def publish_bytes(path: Path, data: bytes | memoryview, durable: bool = True) -> None:
-    """Write ``data`` to ``path`` atomically: temporary name, flush, fsync, rename, fsync the folder."""
-    with publishing(path, durable) as tmp, open(tmp, "wb") as f:
+def publish_bytes(path: Path, data: bytes | memoryview, durable: bool = True, exists: str | None = None) -> None:
+    """Write ``data`` to ``path`` atomically: temporary name, flush, fsync, rename, fsync the folder
+    (``exists``: never over an existing file, see :func:`publishing`)."""
+    with publishing(path, durable, exists) as tmp, open(tmp, "wb") as f:
         f.write(data)
 
 
-def publish_text(path: Path, text: str) -> None:
-    publish_bytes(path, text.encode("utf-8"))
+def publish_text(path: Path, text: str, exists: str | None = None) -> None:
+    publish_bytes(path, text.encode("utf-8"), exists=exists)
 
 
 def publish_json(path: Path, data: object, **kwargs: object) -> None:

@@ -37,6 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+EXISTS = "already exists; a board is never replaced: choose another --out or remove it"
 MAX_BOARD_PIXELS = 1 << 28  # 256 MB of grey: a 2 x 1.5 m board at 200 dpi
 
 
@@ -81,9 +82,7 @@ def run(ns: argparse.Namespace) -> int:
         refuse_special(path)
     for path in (png, yml):  # never replaced: a printed board measured by another description calibrates wrong
         if path.exists() or path.is_symlink():
-            raise ParameterError(
-                f"{path}: already exists; a board is never replaced: choose another --out or remove it"
-            )
+            raise ParameterError(f"{path}: {EXISTS}")
     margin = round(ns.margin_mm / 25.4 * ns.dpi)
     image = spec.image(px_per_square, margin)
     # the PNG states its physical resolution (pHYs, whole pixels per metre): the one at which a square of
@@ -91,11 +90,16 @@ def run(ns: argparse.Namespace) -> int:
     px_per_m = round(px_per_square / (ns.square_mm / 1000))
     dpi = px_per_m * 0.0254  # what the print gives exactly (--dpi rounded to whole pixels per square)
     # published whole like every output: a read-only or full destination is one line with exit 4 (OutputError)
-    with publishing(png) as tmp:
+    # and never over a board another run published since the check above (the name is claimed atomically)
+    with publishing(png, exists=EXISTS) as tmp:
         # OpenCV cannot write pHYs; Pillow writes dpi as round(dpi / 0.0254) pixels per metre
         Image.fromarray(image).save(tmp, format="PNG", dpi=(dpi, dpi), optimize=True)
     # the printed square size follows from the DPI: record it so a user can check the print with a ruler
-    spec.save(yml)
+    try:
+        spec.save(yml, exists=EXISTS)
+    except ParameterError:
+        png.unlink()  # ours, just published: no picture is left without the description it was drawn from
+        raise
     h, w = image.shape
     print(
         f"wrote {png} ({w}x{h} px = {w / dpi * 25.4:.0f} x {h / dpi * 25.4:.0f} mm at {dpi:.2f} dpi, stored in it; "

@@ -371,6 +371,31 @@ def test_board_never_replaces_an_existing_board(tmp_path: Path) -> None:
     assert (tmp_path / "c.yaml").read_text() == "mine" and not (tmp_path / "c.png").exists()
 
 
+@pytest.mark.parametrize("raced", ["b.png", "b.yaml"])
+def test_board_published_by_another_run_meanwhile_is_not_replaced(
+    tmp_path: Path, raced: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two ``board`` runs on one --out at the same instant both pass the check for an existing board; the one
+    that publishes second must not replace the first's files. The other run is simulated by writing its
+    file while this one draws (after the check, before the publish)."""
+    import rigctl.board
+    from rigctl.cli.main import main
+
+    drawn = rigctl.board.BoardSpec.image
+
+    def draw_while_another_run_publishes(self: Any, *args: Any) -> Any:
+        (tmp_path / raced).write_bytes(b"the other run's")
+        return drawn(self, *args)
+
+    monkeypatch.setattr(rigctl.board.BoardSpec, "image", draw_while_another_run_publishes)
+    code = main(["board", "--out", str(tmp_path / "b"), "--squares", "5x4", "--square-mm", "30",
+                 "--marker-mm", "22", "--dpi", "100"])  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == EXIT_USAGE and len(err) == 1 and raced in err[0] and "already exists" in err[0], err
+    assert (tmp_path / raced).read_bytes() == b"the other run's"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [raced]  # nothing of ours, no temporary
+
+
 # 4. numbers bounded to physical ranges; the machine bounds the workers
 
 
