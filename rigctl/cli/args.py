@@ -29,10 +29,6 @@ class OneLineParser(argparse.ArgumentParser):
         sys.exit(2)
 
 
-# distances a plan or a clipping range can mean: 1 mm from the lens to 1,000 km (beyond it, say inf)
-NEAREST_M, FARTHEST_M = 1e-3, 1e6
-
-
 def _number(text: str) -> float:
     try:
         value = float(text.strip().rstrip("m"))

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 
 from rigctl.cli import args
 from rigctl.cli.helptext import examples
-from rigctl.errors import ParameterError
+from rigctl.planning.planner import check_derived_near, check_distances
 from rigctl.planning.report import plan_rig
 from rigctl.planning.text import format_plan
 from rigctl.rig import load_rig
@@ -45,29 +44,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _check_distances(ns: argparse.Namespace) -> None:
-    """Distances a camera can be planned for, as ``usd`` holds its clipping range: 1 mm to 1,000 km (``--far inf``
-    for a background at infinity); outside them the plan is numbers without a meaning (hundreds of digits)."""
-    for option, value in (("--near", ns.near), ("--far", ns.far)):
-        if value is not None and not math.isinf(value) and not args.NEAREST_M <= value <= args.FARTHEST_M:
-            raise ParameterError(
-                f"{option} {value:g} m: a plan's distances run from {args.NEAREST_M:g} m to {args.FARTHEST_M:g} m"
-                + (" (inf for a background at infinity)" if option == "--far" else "")
-            )
-    if ns.subject_depth is not None and ns.subject_depth > args.FARTHEST_M:
-        raise ParameterError(f"--subject-depth {ns.subject_depth:g} m: at most {args.FARTHEST_M:g} m")
+    """The distances a plan can mean (:func:`rigctl.planning.planner.check_distances`), named as options."""
+    check_distances(ns.near, ns.far, ns.subject_depth, ("--near", "--far", "--subject-depth"))
 
 
 def _check_near(ns: argparse.Namespace, near_m: float) -> None:
     """A near side the plan derived (solved from --subject-depth, or --far minus it) closer than 1 mm to the lens."""
-    if near_m >= args.NEAREST_M:
-        return
     given = " and ".join(
         f"{o} {v:g} m" for o, v in (("--far", ns.far), ("--subject-depth", ns.subject_depth)) if v is not None
     )
-    raise ParameterError(
-        f"{given or 'the rig file plan section'}: the subject's near side would be {near_m:.3g} m from the "
-        f"lens, under {args.NEAREST_M * 1e3:g} mm: no shot to plan (a deeper subject, or --near and --far)"
-    )
+    check_derived_near(near_m, given or "the rig file plan section", "a deeper subject, or --near and --far")
 
 
 def run(ns: argparse.Namespace) -> int:

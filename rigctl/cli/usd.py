@@ -9,6 +9,7 @@ from pathlib import Path
 from rigctl.cli import args
 from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
+from rigctl.planning.planner import FARTHEST_M, NEAREST_M
 from rigctl.publish import utf8_path
 
 log = logging.getLogger(__name__)
@@ -36,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-NEAREST_M, FARTHEST_M = args.NEAREST_M, args.FARTHEST_M  # a clipping range USD's float holds, a renderer uses
+# NEAREST_M, FARTHEST_M (the planner's): a clipping range USD's float holds, a renderer uses
 
 
 def run(ns: argparse.Namespace) -> int:

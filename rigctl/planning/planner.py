@@ -22,6 +22,39 @@ from rigctl.errors import ParameterError
 
 Array = NDArray[np.float64]
 
+# distances a plan or a clipping range can mean: 1 mm from the lens to 1,000 km (beyond it, say inf)
+NEAREST_M, FARTHEST_M = 1e-3, 1e6
+
+
+def check_distances(
+    near_m: float | None,
+    far_m: float | None,
+    depth_m: float | None,
+    names: tuple[str, str, str] = ("near", "far", "subject depth"),
+) -> None:
+    """Distances a camera can be planned for, as ``usd`` holds its clipping range: 1 mm to 1,000 km (``far``
+    inf for a background at infinity); outside them the plan is numbers without a meaning (hundreds of
+    digits). ``names``: how the caller's user gave near, far and the subject depth (``rigctl plan``'s options,
+    the shoot UI's fields)."""
+    for name, value in ((names[0], near_m), (names[1], far_m)):
+        if value is not None and not math.isinf(value) and not NEAREST_M <= value <= FARTHEST_M:
+            raise ParameterError(
+                f"{name} {value:g} m: a plan's distances run from {NEAREST_M:g} m to {FARTHEST_M:g} m"
+                + (" (inf for a background at infinity)" if name == names[1] else "")
+            )
+    if depth_m is not None and depth_m > FARTHEST_M:
+        raise ParameterError(f"{names[2]} {depth_m:g} m: at most {FARTHEST_M:g} m")
+
+
+def check_derived_near(near_m: float, given: str, instead: str) -> None:
+    """A near side the plan derived (solved from the subject depth, or far minus it) closer than 1 mm to the
+    lens: ``given`` says from what, ``instead`` what to give instead."""
+    if near_m < NEAREST_M:
+        raise ParameterError(
+            f"{given}: the subject's near side would be {near_m:.3g} m from the lens, under "
+            f"{NEAREST_M * 1e3:g} mm: no shot to plan ({instead})"
+        )
+
 
 def checked(name: str, value: ArrayLike, *, allow_inf: bool = False, allow_zero: bool = False) -> Array:
     """``value`` as float64, refusing NaN, negative, zero (unless allowed) and infinity (unless allowed)."""

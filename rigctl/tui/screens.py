@@ -15,6 +15,7 @@ from textual.screen import ModalScreen, Screen
 from textual.widgets import Input, Static
 
 from rigctl.errors import RigctlError
+from rigctl.planning.planner import check_derived_near, check_distances
 from rigctl.planning.report import plan_rig
 from rigctl.planning.text import format_plan
 
@@ -180,13 +181,11 @@ class PlannerScreen(Screen[None]):
 
         out = self.query_one("#plan", Static)
         try:
-            plan = plan_rig(
-                self.rig,
-                subject_depth_m=num("depth"),
-                near_m=num("near"),
-                far_m=num("far"),
-                budget_fraction=num("budget"),
-            )
+            depth, near, far = num("depth"), num("near"), num("far")
+            check_distances(near, far, depth)  # the distances `rigctl plan` accepts, named as the fields are
+            plan = plan_rig(self.rig, subject_depth_m=depth, near_m=near, far_m=far, budget_fraction=num("budget"))
+            given = " and ".join(f"{n} {v:g} m" for n, v in (("far", far), ("subject depth", depth)) if v is not None)
+            check_derived_near(plan.near_m, given or "the rig file plan section", "a deeper subject, or near and far")
             out.update(Text(format_plan(plan, self.rig)))
         except (ValueError, RigctlError) as exc:
             out.update(Text(f"not a plan: {exc}", style="bold red"))

@@ -387,6 +387,26 @@ def test_planner_recomputes_as_values_are_typed() -> None:
         app.screen.query_one("#depth").value = "-1"
         await pilot.pause(0.2)
         assert "not a plan" in str(plan.render())
+        # the distances `rigctl plan` refuses are refused here too, named as the fields are, not planned into
+        # numbers of hundreds of digits
+        app.screen.query_one("#depth").value = "1"
+        for field, value, says in (
+            ("#near", "1e-300", "near 1e-300 m: a plan's distances run from 0.001 m to 1e+06 m"),
+            ("#near", "2", None),
+            ("#far", "1e300", "far 1e+300 m: a plan's distances run from 0.001 m to 1e+06 m (inf for a background"),
+            ("#far", "", None),
+            ("#near", "", None),
+            ("#depth", "1e9", "subject depth 1e+09 m: at most 1e+06 m"),
+            ("#depth", "0.9999999", None),
+            ("#far", "1", "far 1 m and subject depth 1 m: the subject's near side would be 1e-07 m from the lens"),
+        ):
+            app.screen.query_one(field).value = value
+            await pilot.pause(0.2)
+            text = " ".join(str(plan.render()).split())
+            if says is None:
+                assert "not a plan" not in text, text
+            else:
+                assert "not a plan" in text and says in text, text
         await pilot.press("escape")
         await pilot.press("question_mark")
         assert isinstance(app.screen, HelpScreen)
