@@ -26,6 +26,22 @@ def normalise(g: F32, win: int = 7) -> tuple[F32, F32]:
     return np.asarray((g - mean) / (std + 0.01), dtype=np.float32), np.asarray(std, dtype=np.float32)
 
 
+def normalise_part(g: F32, part: tuple[int, int, int, int], win: int = 7) -> tuple[F32, F32]:
+    """``normalise(g)`` cropped to ``part`` (y0, y1, x0, x1), made from that part and the window's reach
+    around it (inside the frame) rather than from the frame (issue 24: a view's part is what is matched, and
+    at 3840x2160 a whole frame's five temporaries are 165 MB). The same values: the window reads only the
+    reach, the frame's own edges are reflected as before, and OpenCV's box sums of float run in double, exact
+    for pictures of up to 10 bits, so a sum started elsewhere on the row is the same number
+    (``tests/unit/test_cost.py``)."""
+    y0, y1, x0, x1 = part
+    h, w = g.shape
+    m = win // 2
+    a0, a1, b0, b1 = max(0, y0 - m), min(h, y1 + m), max(0, x0 - m), min(w, x1 + m)
+    norm, std = normalise(np.ascontiguousarray(g[a0:a1, b0:b1]), win)
+    rows, cols = slice(y0 - a0, y1 - a0), slice(x0 - b0, x1 - b0)
+    return np.ascontiguousarray(norm[rows, cols]), np.ascontiguousarray(std[rows, cols])
+
+
 PART_MARGIN = 4  # px around a view's part beyond the bilinear sample's pixels (see :func:`view_part`)
 
 
@@ -81,19 +97,15 @@ class SweepLevel:
             g = grey_of(grid.images, n)
             if scale != 1.0:
                 g = np.asarray(cv2.resize(g, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA), np.float32)
-            norm, std = normalise(g)
             self.h, self.w = g.shape
             if n == ref:
-                self.texture = np.ascontiguousarray(std[y0:y1, x0:x1])
+                self.ref, self.texture = normalise_part(g, self.box)
                 self.bright = np.ascontiguousarray(g[y0:y1, x0:x1])
-                self.ref = np.ascontiguousarray(norm[y0:y1, x0:x1])
                 continue
             a0, a1, b0, b1 = view_part(self.box, (self.h, self.w), self.rel[n], scaled)
             self.org[n] = (a0, b0)
-            self.norm[n] = (
-                norm if (a0, a1, b0, b1) == (0, self.h, 0, self.w) else np.ascontiguousarray(norm[a0:a1, b0:b1])
-            )
-            del g, norm, std
+            self.norm[n] = normalise_part(g, (a0, a1, b0, b1))[0]
+            del g
 
     def cost_const(self, d: float, win: int) -> F32:
         """(views, h, w) aggregated cost at one disparity for every pixel."""

@@ -35,7 +35,7 @@ from rigctl.depth.cost import (
     active_pixels,
     combine,
     exposure,
-    normalise,
+    normalise_part,
     view_part,
 )
 from rigctl.depth.cost_kernels import combined_costs, computed_pixels
@@ -103,9 +103,7 @@ class MatchViews:
 
         g_ref = scaled_grey(ref)
         self.h, self.w = g_ref.shape
-        _, std = normalise(g_ref)
-        self.texture = np.ascontiguousarray(std[y0:y1, x0:x1])
-        del std
+        self.texture = normalise_part(g_ref, (y0, y1, x0, x1))[1]
         self.guide = np.ascontiguousarray(g_ref[y0:y1, x0:x1])
         self.bright = self.guide  # the same pixels (read only)
         self.ref = view_features(g_ref, (y0, y1, x0, x1))  # cost.features, compiled (feature_kernels.py)
