@@ -151,7 +151,10 @@ def run(ns: argparse.Namespace) -> int:
     with Progress(f"process {ns.take.name}", "frame sets", ns.quiet) as bar:
 
         def show(st: Status) -> None:
-            bar.update(st.finished, st.total, f"{st.failed} failed" if st.failed else "")
+            # each round's frame sets apart: a widened range computes the take again, it does not double it
+            notes = [f"round {st.round}: the take's range was widened"] if st.round > 1 else []
+            notes += [f"{st.failed} failed"] if st.failed else []
+            bar.update(st.round_finished, st.round_total, "; ".join(notes))
 
         with output_folder(ns.out, "process"):  # usable, and one run at a time on a folder
             summary = process_take(opt, progress=show)

@@ -84,19 +84,28 @@ class Progress:
         self.clock = clock
         self.started = clock()
         self.done, self.what = 0, ""
+        self.earlier = 0  # items counted by earlier passes over the work (see :meth:`update`)
         self.total = total
         self._bar: RichProgress | None = None
         self._task: Any = None
         self._closed = False
 
     def update(self, done: int, total: int | None = None, what: str = "") -> None:
-        """``done`` items of ``total`` (keeps the last total when None), doing ``what``."""
+        """``done`` items of ``total`` (keeps the last total when None), doing ``what``. A count lower than the
+        last one starts a new pass over the work (``depth`` and ``process`` run every frame set again when the
+        take's range was widened): the bar starts again, its rate and time left this pass's, not a count that
+        ran backwards; the summary tells the earlier passes' items apart."""
         changed = done != self.done
+        again = done < self.done
+        if again:
+            self.earlier += self.done
         self.done, self.what = done, what or self.what
         if total is not None:
             self.total = total
         if not self.live or self._closed:
             return
+        if again and self._bar is not None:
+            self._bar.reset(self._task, total=self.total, completed=done, what=self.what)
         if self._bar is None:
             from rich.console import Console
             from rich.progress import Progress as RichProgress
@@ -122,8 +131,10 @@ class Progress:
         if self.total is None and not self.done:  # open-ended work that counted nothing (a take until Ctrl-C)
             return f"{self.label}: finished in {seconds:.1f} s"
         of = f"{self.done} of {self.total}" if self.total is not None else f"{self.done}"
-        rate = f" ({self.done / seconds:.2f}{unit}/s)" if seconds > 0 and self.done else ""
-        return f"{self.label}: {of}{unit} in {seconds:.1f} s{rate}"
+        items = self.done + self.earlier
+        rate = f" ({items / seconds:.2f}{unit}/s)" if seconds > 0 and items else ""
+        again = f" (and {self.earlier} in earlier passes)" if self.earlier else ""
+        return f"{self.label}: {of}{unit}{again} in {seconds:.1f} s{rate}"
 
     def close(self, finished: bool = True) -> None:
         """Stop the bar (it stays on the terminal as it last was), or print the summary line when the work

@@ -73,14 +73,21 @@ class FarmOptions:
 class Status:
     """The counts a run reports as it goes (``rigctl process`` shows them with rate and time remaining)."""
 
-    total: int
+    total: int  # frame sets to compute, every round's
     skipped: int = 0
     done: int = 0
     failed: int = 0
+    round: int = 1  # the take's range widened in round 1: every chunk is computed again from it (``settle``)
+    round_total: int = 0  # the frame sets of this round
+    round_start: int = 0  # ``finished`` when it started
 
     @property
     def finished(self) -> int:
         return self.done + self.failed
+
+    @property
+    def round_finished(self) -> int:
+        return self.finished - self.round_start
 
 
 @dataclass
@@ -367,7 +374,9 @@ def process_take(
                 todo, now_skipped = work.todo(state)
                 if round_ == 1:
                     skipped = now_skipped
-                status.total += sum(len(c) for c in todo)
+                status.round, status.round_start = round_, status.finished
+                status.round_total = sum(len(c) for c in todo)
+                status.total += status.round_total
                 chunks_run += len(todo)
                 chunks_seen.update(tuple(c) for c in todo)
                 futures = {}

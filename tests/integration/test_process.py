@@ -459,6 +459,9 @@ def test_a_range_too_narrow_for_the_take_is_widened_for_every_chunk_alike_in_dep
     assert res.returncode == 0, res.stderr
     summary = json.loads(res.stdout)
     assert summary["search"] == search.model_dump(mode="json")  # the same rounds, whatever order chunks finished in
+    # the progress counts each round's frame sets apart: the take's, not the take's times the rounds
+    again = (search.rounds - 1) * FRAMES
+    assert f": {FRAMES} of {FRAMES} frame sets (and {again} in earlier passes) in " in res.stderr, res.stderr
     # every frame set counted once, the rounds after the first apart (they were counted as frame sets)
     assert summary["computed"] == FRAMES and summary["failed"] == 0 and summary["chunks"] == FRAMES // CHUNK
     assert summary["recomputed"] == (search.rounds - 1) * FRAMES

@@ -54,3 +54,28 @@ def test_on_a_terminal_a_bar_with_count_rate_elapsed_and_time_left() -> None:
     text = term.getvalue()
     assert "render T1" in text and "4/4 views" in text and "elapsed" in text and "left" in text, text
     assert "render T1: 4 of 4" not in text  # the bar, not the summary line
+
+
+def test_a_second_pass_starts_the_count_again_and_the_summary_tells_the_passes_apart() -> None:
+    """``depth`` and ``process`` compute every frame set again when the take's range was widened: the count
+    starts again (the take's frame sets, not the take's times the passes), and the summary says the rest."""
+    now = [0.0]
+    out = io.StringIO()
+    with Progress("process T1", "frame sets", stream=out, clock=lambda: now[0]) as bar:
+        for k in range(7):
+            bar.update(k, 6)
+        for k in range(7):
+            bar.update(k, 6, "round 2: the take's range was widened")
+        now[0] = 6.0
+    assert out.getvalue() == "process T1: 6 of 6 frame sets (and 6 in earlier passes) in 6.0 s (2.00 frame sets/s)\n"
+    term = Terminal()
+    with Progress("process T1", "frame sets", stream=term) as bar:
+        for k in range(7):
+            bar.update(k, 6)
+        bar.update(0, 6, "round 2: the take's range was widened")
+        bar.update(3, 6)
+        assert bar._task is not None and bar._bar is not None
+        task = bar._bar.tasks[0]
+        assert (task.completed, task.total, task.fields["what"]) == (3, 6, "round 2: the take's range was widened")
+        assert task.speed is None or task.speed >= 0  # no rate or time left from a count that ran backwards
+    assert "round 2" in term.getvalue()  # what is done, cut to the line
