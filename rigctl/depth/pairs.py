@@ -140,6 +140,11 @@ def nan_median_reference(stack: F32) -> tuple[F32, F32]:
     return np.asarray(med, np.float32), np.asarray(spread, np.float32)
 
 
+def _flipped(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """``image[:, ::-1]`` as a new array (OpenCV's flip: the same bytes as numpy's strided copy, faster)."""
+    return np.asarray(cv2.flip(image, 1), np.uint8)
+
+
 def pair_disparity(
     grid: Grid,
     ref: str,
@@ -178,7 +183,7 @@ def pair_disparity(
     if horizontal:  # horizontal: the other camera to the right is the "right" image
         scale = abs(rx)
         flip = rx < 0
-        a, b = (cv2.flip(a, 1), cv2.flip(b, 1)) if flip else (np.ascontiguousarray(a), np.ascontiguousarray(b))
+        a, b = (_flipped(a), _flipped(b)) if flip else (np.ascontiguousarray(a), np.ascontiguousarray(b))
         rng = _capped(d_range, scale, a.shape[1])
         if rng is None:
             return np.full((y1 - y0, x1 - x0), np.inf, np.float32)
@@ -188,9 +193,9 @@ def pair_disparity(
     else:  # vertical: transposed, the camera below is the "right" image
         scale = abs(ry)
         flip = ry < 0
-        a, b = cv2.transpose(a), cv2.transpose(b)
+        a, b = np.asarray(cv2.transpose(a), np.uint8), np.asarray(cv2.transpose(b), np.uint8)
         if flip:
-            a, b = cv2.flip(a, 1), cv2.flip(b, 1)
+            a, b = _flipped(a), _flipped(b)
         rng = _capped(d_range, scale, a.shape[1])
         if rng is None:
             return np.full((y1 - y0, x1 - x0), np.inf, np.float32)
