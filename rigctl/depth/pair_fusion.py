@@ -45,12 +45,14 @@ def pairs_engine(job: SearchJob) -> BoxEstimate:
             "use --preset balanced"
         )
     stack = np.stack(maps)  # +-inf or NaN where a pair has no estimate: the median ignores all three
+    n_pairs = len(maps)
+    del maps  # in the stack (issue 24: not held twice)
     med, spread = nan_median(stack)
     have = ~np.isnan(med)  # some pair has an estimate (the median is NaN exactly where none has)
     # a point no pair matched (hidden from each, or outside each pair's search) takes the background side
     base = fill_from_background(np.where(have, med, np.inf).astype(np.float32), np.asarray(~have, bool))
     base = np.where(np.isfinite(base), base, 0.5 * (d_range[0] + d_range[1])).astype(np.float32)
-    stats["pairs"] = len(maps)
+    stats["pairs"] = n_pairs
     stats["levels"] = max(searched, default=0)  # disparities the widest pair searched, in its own pixels
     stats["pairs_s"] = time.perf_counter() - t0
     stats["pairs_pixel_levels"] = sum(work)
@@ -59,8 +61,9 @@ def pairs_engine(job: SearchJob) -> BoxEstimate:
     candidates = [base] + [np.where(np.isfinite(m), m, base).astype(np.float32) for m in stack]
     # the views only as far as the candidates reach from the box (issue 24: memory), the same samples
     reach = (min(float(c.min()) for c in candidates), max(float(c.max()) for c in candidates))
-    fine = SweepLevel(grid, ref, job.moving, 1.0, box, reach)
     conflict = ((np.nan_to_num(spread, nan=0.0) > CONFLICT_PX) | ~have) & region
+    del med, spread  # before the views are made (issue 24: memory)
+    fine = SweepLevel(grid, ref, job.moving, 1.0, box, reach)
     costs = fine.costs_where(candidates, conflict, preset.window, job.keep)
     k = np.argmin(costs, axis=0)
     disp = base.copy()
@@ -75,7 +78,7 @@ def pairs_engine(job: SearchJob) -> BoxEstimate:
         warnings.simplefilter("ignore", RuntimeWarning)
         for m in stack:  # one pair at a time (issue 24: no pairs x pixels temporaries)
             count += np.abs(m - disp) <= 1.0
-    agree = count / np.float32(len(maps))
+    agree = count / np.float32(n_pairs)
     zeros = np.zeros(disp.shape, bool)
     no_view = cost >= INVALID_COST * 0.5
     return BoxEstimate(disp, cost, agree.astype(np.float32), fine.texture, fine.bright, zeros, no_view, ~have & region)

@@ -1,4 +1,4 @@
-"""``cost.normalise_part``: the locally normalised intensity of a part of a grey, made from that part and the
+"""The plane sweep's cost (``cost.py``), issue 24's forms of it against the forms before. ``cost.normalise_part``: the locally normalised intensity of a part of a grey, made from that part and the
 window's reach around it, against ``cost.normalise`` of the whole grey cropped (what the plane sweep, the
 pair fusion's referee and the cost volume's texture used before, issue 24).
 
@@ -58,3 +58,18 @@ def test_a_part_that_ignores_its_surroundings_would_be_caught() -> None:
     g = grey(bgr[..., ::-1].astype(np.float32) / np.float32(255.0))
     alone, _ = normalise(np.ascontiguousarray(g[100:200, 100:200]))
     assert not np.array_equal(alone, normalise(g)[0][100:200, 100:200])
+
+
+def test_one_view_at_a_time_is_the_four_channel_box_filter() -> None:
+    """``SweepLevel.costs_where`` aggregates one view at a time (it took four views as the four channels of one
+    image): OpenCV sums each channel on its own, so the sums are the same bits, here on sparse differences
+    of the sizes and windows the referee uses, the crop's edges included."""
+    rng = np.random.default_rng(5)
+    for shape, win in (((60, 90), 3), ((257, 131), 5), ((1080, 700), 7)):
+        dense = np.zeros((*shape, 4), np.float32)
+        mask = rng.random(shape) < 0.2
+        dense[mask] = (rng.random((int(mask.sum()), 4)) * 1.5).astype(np.float32)
+        four = cv2.boxFilter(dense, -1, (win, win), borderType=cv2.BORDER_REFLECT)
+        for c in range(4):
+            one = cv2.boxFilter(np.ascontiguousarray(dense[..., c]), -1, (win, win), borderType=cv2.BORDER_REFLECT)
+            assert np.array_equal(one.view(np.uint32), np.ascontiguousarray(four[..., c]).view(np.uint32))
