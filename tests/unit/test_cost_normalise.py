@@ -1,6 +1,7 @@
-"""The plane sweep's cost (``cost.py``), issue 24's forms of it against the forms before. ``cost.normalise_part``: the locally normalised intensity of a part of a grey, made from that part and the
-window's reach around it, against ``cost.normalise`` of the whole grey cropped (what the plane sweep, the
-pair fusion's referee and the cost volume's texture used before, issue 24).
+"""The plane sweep's cost (``cost.py``): issue 24's forms against the forms before. ``cost.normalise_part``,
+the locally normalised intensity of a part of a grey made from that part and the window's reach around it,
+against ``cost.normalise`` of the whole grey cropped (what the plane sweep, the pair fusion's referee and the
+cost volume's texture used before); the referee's box sums one view at a time against four as channels.
 
 Tolerance: none on 8-bit pictures (OpenCV's box sums of float run in double, which holds the sums of 8-bit
 greys and their squares exactly, wherever on the row a sum starts); on arbitrary float greys within 1e-6
