@@ -27,7 +27,7 @@ ROWS = 128  # rows per block of the per-view arrays (views x rows x width): a bl
 
 @njit(parallel=True, cache=True, fastmath=False)
 def _differences(
-    feats: F32,
+    levels: F32,
     ref: F32,
     rel: F32,
     d: F32,
@@ -46,8 +46,9 @@ def _differences(
 ) -> None:
     """``ad`` (views, h, w): the truncated differences of each view sampled at disparity ``d`` (h, w), summed
     over ``2 r + 1`` columns; ``outside``: where the sample falls outside the view (its frame, ``fh`` x ``fw``).
-    ``feats[v]`` is the part of view v whose top-left pixel is ``org[v]`` (y, x) in its frame."""
-    nv, hh, ww = feats.shape[0], feats.shape[1], feats.shape[2]
+    ``levels[v]`` is the part of view v whose top-left pixel is ``org[v]`` (y, x) in its frame, with one pixel
+    around it (``feature_kernels.view_levels``)."""
+    nv, hh, ww = levels.shape[0], levels.shape[1] - 2, levels.shape[2] - 2
     h, w = d.shape
     ci, cg = np.float32(c_int), np.float32(c_grad)
     ti, tg = np.float32(tau_i), np.float32(tau_g)
@@ -76,21 +77,7 @@ def _differences(
                 w01 = (np.float32(1.0) - ey) * ex
                 w10 = ey * (np.float32(1.0) - ex)
                 w11 = ey * ex
-                p00, p01, p10, p11 = (
-                    feats[v, ya[x], xa[x]],
-                    feats[v, ya[x], xb[x]],
-                    feats[v, yb[x], xa[x]],
-                    feats[v, yb[x], xb[x]],
-                )
-                s0 = p00[0] * w00 + p01[0] * w01
-                s0 += p10[0] * w10
-                s0 += p11[0] * w11
-                s1 = p00[1] * w00 + p01[1] * w01
-                s1 += p10[1] * w10
-                s1 += p11[1] * w11
-                s2 = p00[2] * w00 + p01[2] * w01
-                s2 += p10[2] * w10
-                s2 += p11[2] * w11
+                s0, s1, s2 = sample3(levels, v, ya[x], yb[x], xa[x], xb[x], w00, w01, w10, w11)
                 a = min(abs(s0 - ref[y, x, 0]), ti) * ci
                 a += min(abs(s1 - ref[y, x, 1]) + abs(s2 - ref[y, x, 2]), tg) * cg
                 row[x] = a
@@ -99,7 +86,7 @@ def _differences(
 
 @njit(parallel=True, cache=True, fastmath=False)
 def _differences_at(
-    feats: F32,
+    levels: F32,
     ref: F32,
     shift: F32,
     r: int,
@@ -114,7 +101,7 @@ def _differences_at(
     """``_differences`` at one disparity for every pixel: view v's sample for crop pixel (x, y) lies at
     (x + shift[v, 0], y + shift[v, 1]) (``warpAffine``'s translation), so the weights are one per view.
     ``ref`` and ``ad`` hold the crop's rows from ``yoff`` on."""
-    nv, hh, ww = feats.shape[0], feats.shape[1], feats.shape[2]
+    nv, hh, ww = levels.shape[0], levels.shape[1] - 2, levels.shape[2] - 2
     h, w = ref.shape[0], ref.shape[1]
     ci, cg = np.float32(c_int), np.float32(c_grad)
     ti, tg = np.float32(tau_i), np.float32(tau_g)
@@ -132,7 +119,7 @@ def _differences_at(
             w11 = fy * fx
             for x in range(w):
                 xa, xb = min(max(x + ox, 0), ww - 1), min(max(x + ox + 1, 0), ww - 1)
-                s0, s1, s2 = sample3(feats, v, ya, yb, xa, xb, w00, w01, w10, w11)
+                s0, s1, s2 = sample3(levels, v, ya, yb, xa, xb, w00, w01, w10, w11)
                 a = min(abs(s0 - ref[y, x, 0]), ti) * ci
                 a += min(abs(s1 - ref[y, x, 1]) + abs(s2 - ref[y, x, 2]), tg) * cg
                 row[x] = a
@@ -141,7 +128,7 @@ def _differences_at(
 
 @njit(inline="always")
 def sample3(
-    feats: F32,
+    levels: F32,
     v: int,
     ya: int,
     yb: int,
@@ -152,16 +139,24 @@ def sample3(
     w10: np.float32,
     w11: np.float32,
 ) -> tuple[np.float32, np.float32, np.float32]:
-    # view v's three channels, bilinear between rows ya, yb and columns xa, xb (the sums in this order)
-    s0 = feats[v, ya, xa, 0] * w00 + feats[v, ya, xb, 0] * w01
-    s0 += feats[v, yb, xa, 0] * w10
-    s0 += feats[v, yb, xb, 0] * w11
-    s1 = feats[v, ya, xa, 1] * w00 + feats[v, ya, xb, 1] * w01
-    s1 += feats[v, yb, xa, 1] * w10
-    s1 += feats[v, yb, xb, 1] * w11
-    s2 = feats[v, ya, xa, 2] * w00 + feats[v, ya, xb, 2] * w01
-    s2 += feats[v, yb, xa, 2] * w10
-    s2 += feats[v, yb, xb, 2] * w11
+    # view v's intensity, d/dx and d/dy, bilinear between rows ya, yb and columns xa, xb of its part (the sums
+    # in this order), each corner's derivatives made from ``levels`` (the part with one pixel around it,
+    # ``feature_kernels.view_levels``) as ``view_features`` makes them: central differences halved
+    a0, a1, b0, b1 = ya + 1, yb + 1, xa + 1, xb + 1
+    i00, i01, i10, i11 = levels[v, a0, b0], levels[v, a0, b1], levels[v, a1, b0], levels[v, a1, b1]
+    s0 = i00 * w00 + i01 * w01
+    s0 += i10 * w10
+    s0 += i11 * w11
+    # a derivative is (right - left) * 0.5, then times its weight: the same as the difference times half the
+    # weight (halving is exact), so each corner's product is the features' bit for bit
+    half = np.float32(0.5)
+    h00, h01, h10, h11 = w00 * half, w01 * half, w10 * half, w11 * half
+    s1 = (levels[v, a0, b0 + 1] - levels[v, a0, b0 - 1]) * h00 + (levels[v, a0, b1 + 1] - levels[v, a0, b1 - 1]) * h01
+    s1 += (levels[v, a1, b0 + 1] - levels[v, a1, b0 - 1]) * h10
+    s1 += (levels[v, a1, b1 + 1] - levels[v, a1, b1 - 1]) * h11
+    s2 = (levels[v, a0 + 1, b0] - levels[v, a0 - 1, b0]) * h00 + (levels[v, a0 + 1, b1] - levels[v, a0 - 1, b1]) * h01
+    s2 += (levels[v, a1 + 1, b0] - levels[v, a1 - 1, b0]) * h10
+    s2 += (levels[v, a1 + 1, b1] - levels[v, a1 - 1, b1]) * h11
     return s0, s1, s2
 
 
@@ -255,7 +250,7 @@ def _aggregate(
 
 
 def combined_costs(
-    feats: F32,
+    levels: F32,
     ref: F32,
     rel: NDArray[np.float64],
     d: float | F32,
@@ -268,16 +263,17 @@ def combined_costs(
     frame: tuple[int, int] | None = None,
     active: NDArray[np.bool_] | None = None,
 ) -> F32:
-    """(h, w) combined cost at the disparity ``d`` (a number or an (h, w) map): ``feats`` (views, H, W, 3) the
-    views' intensity and gradients, ``ref`` (h, w, 3) the reference crop whose top-left pixel is ``origin``
-    (y, x) in the views, ``rel`` (views, 2) the baselines, ``weights`` the intensity and gradient scale and
-    truncation. At a number, samples and the outside test are placed as ``MatchViews.warp`` places them
-    (``warpAffine``'s float32 translation; the test in double precision). ``feats[v]`` may be a part of view
-    v: its top-left pixel at ``org[v]`` (y, x) in the view's ``frame`` (h, w) (default: the whole view).
-    ``active`` (h, w): only these pixels are wanted; each block of rows is computed on the columns its active
-    pixels and their windows span (the same values there, bit for bit), ``invalid`` beside them."""
-    nv = feats.shape[0]
-    hh, ww = frame if frame is not None else (feats.shape[1], feats.shape[2])
+    """(h, w) combined cost at the disparity ``d`` (a number or an (h, w) map): ``levels`` (views, H + 2, W + 2) the
+    views' intensity with a pixel around it (``feature_kernels.view_levels``; their gradients are made from it),
+    ``ref`` (h, w, 3) the reference crop whose top-left pixel is ``origin`` (y, x) in the views, ``rel`` (views, 2)
+    the baselines, ``weights`` the intensity and gradient scale and truncation. At a number, samples and the outside
+    test are placed as ``MatchViews.warp`` places them (``warpAffine``'s float32 translation; the test in double
+    precision). ``levels[v]`` may be a part of view v: its top-left pixel at ``org[v]`` (y, x) in the view's
+    ``frame`` (h, w) (default: the whole view). ``active`` (h, w): only these pixels are wanted; each block of rows
+    is computed on the columns its active pixels and their windows span (the same values there, bit for bit),
+    ``invalid`` beside them."""
+    nv = levels.shape[0]
+    hh, ww = frame if frame is not None else (levels.shape[1] - 2, levels.shape[2] - 2)
     org = np.zeros((nv, 2), np.int64) if org is None else np.ascontiguousarray(org, np.int64)
     h, w = ref.shape[0], ref.shape[1]
     y0, x0 = origin
@@ -311,10 +307,10 @@ def combined_costs(
                 ys = np.arange(y0 + a0, y0 + b0, dtype=np.float32) - d * ry
                 outside[v] = ((ys < 0) | (ys > hh - 1))[:, None] | ((xs < 0) | (xs > ww - 1))[None, :]
             org_c = org - np.array([0, ca], np.int64)
-            _differences_at(feats, ref_b, shift.astype(np.float64), r, *weights, ad, org_c, a0)
+            _differences_at(levels, ref_b, shift.astype(np.float64), r, *weights, ad, org_c, a0)
         else:
             d_b = np.ascontiguousarray(dm[a0:b0, ca:cb])
-            _differences(feats, ref_b, rel32, d_b, y0 + a0, x0 + ca, r, *weights, ad, outside, org, hh, ww)
+            _differences(levels, ref_b, rel32, d_b, y0 + a0, x0 + ca, r, *weights, ad, outside, org, hh, ww)
         if ca == 0 and cb == w:
             _aggregate(ad, outside, win, keep, invalid, out[a:b], a, h, a0)
         else:

@@ -18,6 +18,7 @@ the frame): levels are streamed, never stored as a volume.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import time
@@ -39,11 +40,11 @@ from rigctl.depth.cost import (
     view_part,
 )
 from rigctl.depth.cost_kernels import combined_costs, computed_pixels
-from rigctl.depth.feature_kernels import view_features
+from rigctl.depth.feature_kernels import features_of_levels, view_features, view_levels
 from rigctl.depth.grid import grey_of
 from rigctl.depth.search import EstimateStats
 from rigctl.depth.sweep_kernels import truncate_level, update, update_reference
-from rigctl.depth.visible_kernels import visible_views
+from rigctl.depth.visible_kernels import visible_views, visible_views_reference
 
 F32 = NDArray[np.float32]
 log = logging.getLogger(__name__)
@@ -112,20 +113,32 @@ class MatchViews:
         ph = max((b[1] - b[0] for b in parts), default=0)
         pw = max((b[3] - b[2] for b in parts), default=0)
         self.org = np.array([(min(b[0], self.h - ph), min(b[2], self.w - pw)) for b in parts], np.int64).reshape(-1, 2)
-        # the views side by side for the compiled cost; ``feat`` holds views of it (no copy)
-        self.stack = np.empty((len(self.names), ph, pw, 3), np.float32)
-        self.feat: dict[str, F32] = {}  # per camera: intensity (matched to the reference's), d/dx, d/dy
+        # the views side by side for the compiled kernels: each part's intensity (matched to the reference's
+        # exposure) with one pixel around it, from which the kernels make its d/dx and d/dy as
+        # ``view_features`` does (issue 24: a third of the three planes' memory, the same values)
+        self.levels = np.empty((len(self.names), ph + 2, pw + 2), np.float32)
         for i, n in enumerate(self.names):
             # one gain and offset per camera (exposure differences), not a local normalisation: a window
             # statistic mixes a foreground edge with the background it moves over, and moves the edge
             g = scaled_grey(n)
             gain, offset = exposure(g_ref, g, (centre * scale * rel[n][0], centre * scale * rel[n][1]))
             oy, ox = int(self.org[i, 0]), int(self.org[i, 1])
-            view_features(g, (oy, oy + ph, ox, ox + pw), out=self.stack[i], exposure=(gain, offset))
-            self.feat[n] = self.stack[i]
+            view_levels(g, (oy, oy + ph, ox, ox + pw), out=self.levels[i], exposure=(gain, offset))
             del g
         self.rel_array = np.array([rel[n] for n in self.names], np.float64).reshape(-1, 2)
-        self.gy, self.gx = np.mgrid[y0:y1, x0:x1].astype(np.float32)
+
+    def features(self, name: str) -> F32:
+        """View ``name``'s part as intensity, d/dx and d/dy (ph x pw x 3: ``view_features``'s, bit for bit),
+        made when asked (the OpenCV and numpy reference paths; the compiled kernels read ``levels``)."""
+        return features_of_levels(self.levels[self.names.index(name)])
+
+    @functools.cached_property
+    def grid(self) -> tuple[F32, F32]:
+        """The crop's rows and columns in the frame (gy, gx; h x w each): the reference paths' sampling grid,
+        made when they ask for it (the compiled kernels place their samples themselves)."""
+        y0, y1, x0, x1 = self.box
+        gy, gx = np.mgrid[y0:y1, x0:x1].astype(np.float32)
+        return gy, gx
 
     def part(self, rel: tuple[float, float], reach: tuple[float, float] | None) -> tuple[int, int, int, int]:
         """(y0, y1, x0, x1) of a view at ``rel`` that disparities within ``reach`` (full-resolution px) sample
@@ -149,20 +162,21 @@ class MatchViews:
             m[0, 2] -= np.float32(ox)  # in the part (exact: an integer off a float32 of at most this size)
             m[1, 2] -= np.float32(oy)
             out = cv2.warpAffine(
-                self.feat[name],
+                self.features(name),
                 m,
                 (x1 - x0, y1 - y0),
                 flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                 borderMode=cv2.BORDER_REPLICATE,
             )
-            xs, ys = self.gx[0] - d * rx, self.gy[:, 0] - d * ry
+            gy, gx = self.grid
+            xs, ys = gx[0] - d * rx, gy[:, 0] - d * ry
             outside = ((ys < 0) | (ys > self.h - 1))[:, None] | ((xs < 0) | (xs > self.w - 1))[None, :]
             return np.asarray(out, np.float32), np.asarray(outside)
-        mx = self.gx - d * np.float32(rx)
-        my = self.gy - d * np.float32(ry)
-        out = cv2.remap(
-            self.feat[name], mx - np.float32(ox), my - np.float32(oy), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
-        )
+        gy, gx = self.grid
+        mx, my = gx - d * np.float32(rx), gy - d * np.float32(ry)
+        feat = self.features(name)
+        mx0, my0 = mx - np.float32(ox), my - np.float32(oy)
+        out = cv2.remap(feat, mx0, my0, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         return np.asarray(out, np.float32), np.asarray((mx < 0) | (mx > self.w - 1) | (my < 0) | (my > self.h - 1))
 
     def visible_count(
@@ -178,24 +192,7 @@ class MatchViews:
         if COMPILED:
             count = visible_views(d, front, self.rel_array, (y0, x0), (self.h, self.w), tol, where)
             return np.asarray(count, np.int32)
-        n = np.zeros(self.shape, np.int32)
-        for rx, ry in self.rel.values():
-            mx, my = self.gx - d * np.float32(rx), self.gy - d * np.float32(ry)
-            inside = (mx >= 0) & (mx <= self.w - 1) & (my >= 0) & (my <= self.h - 1)
-            zbuf = np.full((self.h, self.w), -np.inf, np.float32)
-            sx, sy = mx[front], my[front]
-            reach = (sx > -1) & (sx < self.w) & (sy > -1) & (sy < self.h)
-            sx, sy, sd = sx[reach], sy[reach], d[front][reach]
-            xa, ya = np.floor(sx).astype(np.int64), np.floor(sy).astype(np.int64)
-            for j in (ya, ya + 1):
-                for i in (xa, xa + 1):
-                    ok = (j >= 0) & (j < self.h) & (i >= 0) & (i < self.w)
-                    np.maximum.at(zbuf, (j[ok], i[ok]), sd[ok])
-            xa = np.clip(np.floor(mx).astype(np.int64), 0, self.w - 1)
-            ya = np.clip(np.floor(my).astype(np.int64), 0, self.h - 1)
-            xb, yb = np.minimum(xa + 1, self.w - 1), np.minimum(ya + 1, self.h - 1)
-            nearest = np.minimum(np.minimum(zbuf[ya, xa], zbuf[ya, xb]), np.minimum(zbuf[yb, xa], zbuf[yb, xb]))
-            n += inside & ~(nearest > d + np.float32(tol))
+        n = visible_views_reference(d, front, list(self.rel.values()), self.grid, (self.h, self.w), tol)
         return n if where is None else np.where(where, n, 0).astype(np.int32)
 
     def costs(self, d: float | F32, win: int, keep: int) -> F32:
@@ -207,7 +204,7 @@ class MatchViews:
         y0, _, x0, _ = self.box
         weights = ((1 - ALPHA) * TRUNCATE / TAU_I, ALPHA * TRUNCATE / TAU_G, TAU_I, TAU_G)
         return combined_costs(
-            self.stack,
+            self.levels,
             self.ref,
             self.rel_array,
             d,

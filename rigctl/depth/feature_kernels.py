@@ -51,6 +51,44 @@ def _features(g: F32, gain: np.float32, offset: np.float32, matched: bool, y0: i
             out[i, j, 2] = dy * half
 
 
+@njit(parallel=True, cache=True, fastmath=False)
+def _levels(g: F32, gain: np.float32, offset: np.float32, matched: bool, y0: int, x0: int, out: F32) -> None:
+    h, w = g.shape
+    for i in prange(out.shape[0]):
+        y = min(max(y0 - 1 + i, 0), h - 1)  # the row above and below the part, the frame's edge replicated
+        for j in range(out.shape[1]):
+            out[i, j] = _level(g, y, min(max(x0 - 1 + j, 0), w - 1), gain, offset, matched)
+
+
+def view_levels(
+    g: F32, part: tuple[int, int, int, int], out: F32 | None = None, exposure: tuple[float, float] | None = None
+) -> F32:
+    """(h + 2, w + 2) float32: the intensity of :func:`view_features` on ``part`` (y0, y1, x0, x1) of the whole
+    grey ``g`` and one pixel around it, the frame's edges replicated (BORDER_REFLECT reaches one pixel as
+    replication does): all the features are made of, so a kernel reading a part's features at a pixel makes
+    them from it bit for bit (:func:`features_of_levels`, ``cost_kernels.sample3``) from a third of the
+    memory (issue 24: the views' parts are most of a 4K estimate's working set). Into ``out`` when given."""
+    y0, y1, x0, x1 = part
+    if out is None:
+        out = np.empty((y1 - y0 + 2, x1 - x0 + 2), np.float32)
+    if out.size and g.size:
+        gain, offset = exposure if exposure is not None else (1.0, 0.0)
+        g32 = np.ascontiguousarray(g, dtype=np.float32)
+        _levels(g32, np.float32(gain), np.float32(offset), exposure is not None, y0, x0, out)
+    return out
+
+
+def features_of_levels(levels: F32) -> F32:
+    """(h, w, 3): the part's intensity, d/dx and d/dy (:func:`view_features`'s, bit for bit) from its
+    :func:`view_levels` (h + 2, w + 2): central differences halved, the same two roundings."""
+    half = np.float32(0.5)
+    out = np.empty((levels.shape[0] - 2, levels.shape[1] - 2, 3), np.float32)
+    out[..., 0] = levels[1:-1, 1:-1]
+    out[..., 1] = (levels[1:-1, 2:] - levels[1:-1, :-2]) * half
+    out[..., 2] = (levels[2:, 1:-1] - levels[:-2, 1:-1]) * half
+    return out
+
+
 def view_features(
     g: F32, part: tuple[int, int, int, int], out: F32 | None = None, exposure: tuple[float, float] | None = None
 ) -> F32:

@@ -46,7 +46,7 @@ def refine(
         if COMPILED and nv:
             y0, _, x0, _ = views.box
             a_raw, b_raw = refine_sums(
-                views.stack,
+                views.levels,
                 views.ref,
                 views.rel_array,
                 d,

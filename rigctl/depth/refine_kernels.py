@@ -19,7 +19,7 @@ F32 = NDArray[np.float32]
 
 @njit(parallel=True, cache=True, fastmath=False)
 def _residuals(
-    feats: F32,
+    levels: F32,
     ref: F32,
     rel: F32,
     d: F32,
@@ -36,8 +36,9 @@ def _residuals(
 ) -> None:
     """Per view and pixel: the intensity residual at disparity ``d`` (INVALID outside the view's frame,
     ``fh`` x ``fw``), its derivative along the baseline (0 outside) and the residual truncated at ``tau_i``.
-    ``feats[v]``: the part of view v whose top-left pixel is ``org[v]`` (y, x)."""
-    nv, hh, ww = feats.shape[0], feats.shape[1], feats.shape[2]
+    ``levels[v]``: the part of view v whose top-left pixel is ``org[v]`` (y, x), with one pixel around it
+    (``feature_kernels.view_levels``)."""
+    nv, hh, ww = levels.shape[0], levels.shape[1] - 2, levels.shape[2] - 2
     h, w = d.shape
     big, ti = np.float32(inv), np.float32(tau_i)
     for y in prange(h):
@@ -60,7 +61,7 @@ def _residuals(
                 w01 = (np.float32(1.0) - ey) * ex
                 w10 = ey * (np.float32(1.0) - ex)
                 w11 = ey * ex
-                s0, s1, s2 = sample3(feats, v, ya, yb, xa, xb, w00, w01, w10, w11)
+                s0, s1, s2 = sample3(levels, v, ya, yb, xa, xb, w00, w01, w10, w11)
                 r = s0 - ref[y, x, 0]
                 res[v, y, x] = r
                 jac[v, y, x] = -(rx * s1 + ry * s2)
@@ -127,7 +128,7 @@ def _selected_sums(
 
 
 def refine_sums(
-    feats: F32,
+    levels: F32,
     ref: F32,
     rel: NDArray[np.float64],
     d: F32,
@@ -143,8 +144,8 @@ def refine_sums(
     sums of J^2 and J r over the ``keep`` views that fit best locally, divided by ``keep``. What the
     reference path computes with ``cv2.remap``, ``cv2.boxFilter`` and ``np.partition`` over the views.
     ``org``, ``frame``, ``active``: as for :func:`combined_costs` (beside the active columns, sums 0: no step)."""
-    nv = feats.shape[0]
-    fh, fw = frame if frame is not None else (feats.shape[1], feats.shape[2])
+    nv = levels.shape[0]
+    fh, fw = frame if frame is not None else (levels.shape[1] - 2, levels.shape[2] - 2)
     org = np.zeros((nv, 2), np.int64) if org is None else np.ascontiguousarray(org, np.int64)
     h, w = d.shape
     dm = np.ascontiguousarray(d, np.float32)
@@ -163,7 +164,7 @@ def refine_sums(
         tr = np.empty((nv, b0 - a0, cb - ca), np.float32)
         y0, x0 = origin
         ref_b, d_b = np.ascontiguousarray(ref[a0:b0, ca:cb]), np.ascontiguousarray(dm[a0:b0, ca:cb])
-        _residuals(feats, ref_b, rel32, d_b, y0 + a0, x0 + ca, inv, tau_i, res, jac, tr, org, fh, fw)
+        _residuals(levels, ref_b, rel32, d_b, y0 + a0, x0 + ca, inv, tau_i, res, jac, tr, org, fh, fw)
         if ca == 0 and cb == w:
             _selected_sums(res, jac, tr, keep, inv, tau_i, a_sum[a:b], b_sum[a:b], a, h, a0)
         else:

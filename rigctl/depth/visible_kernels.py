@@ -98,3 +98,36 @@ def visible_views(
         where is None,
     )
     return count
+
+
+def visible_views_reference(
+    d: F32,
+    front: NDArray[np.bool_],
+    rel: list[tuple[float, float]],
+    grid: tuple[F32, F32],
+    size: tuple[int, int],
+    tol: float,
+) -> NDArray[np.int32]:
+    """:func:`visible_views` in numpy (``MatchViews.visible_count`` with ``COMPILED`` off), everywhere:
+    ``grid`` (gy, gx) the crop's rows and columns in views of ``size`` (h, w), ``rel`` the baselines."""
+    h, w = size
+    gy, gx = grid
+    n = np.zeros(d.shape, np.int32)
+    for rx, ry in rel:
+        mx, my = gx - d * np.float32(rx), gy - d * np.float32(ry)
+        inside = (mx >= 0) & (mx <= w - 1) & (my >= 0) & (my <= h - 1)
+        zbuf = np.full((h, w), -np.inf, np.float32)
+        sx, sy = mx[front], my[front]
+        reach = (sx > -1) & (sx < w) & (sy > -1) & (sy < h)
+        sx, sy, sd = sx[reach], sy[reach], d[front][reach]
+        xa, ya = np.floor(sx).astype(np.int64), np.floor(sy).astype(np.int64)
+        for j in (ya, ya + 1):
+            for i in (xa, xa + 1):
+                ok = (j >= 0) & (j < h) & (i >= 0) & (i < w)
+                np.maximum.at(zbuf, (j[ok], i[ok]), sd[ok])
+        xa = np.clip(np.floor(mx).astype(np.int64), 0, w - 1)
+        ya = np.clip(np.floor(my).astype(np.int64), 0, h - 1)
+        xb, yb = np.minimum(xa + 1, w - 1), np.minimum(ya + 1, h - 1)
+        nearest = np.minimum(np.minimum(zbuf[ya, xa], zbuf[ya, xb]), np.minimum(zbuf[yb, xa], zbuf[yb, xb]))
+        n += inside & ~(nearest > d + np.float32(tol))
+    return n

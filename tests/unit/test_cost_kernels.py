@@ -115,7 +115,7 @@ def test_the_compiled_refinement_matches_the_reference(keep: int, monkeypatch: p
     a_ref, b_ref = rf._normal_equations(views, start, keep, agg)
     out_ref, _ = rf.refine(views, start, keep, 4, 1e-4, 3, reach=0.25)
     monkeypatch.setattr(rf, "COMPILED", True)
-    a_raw, b_raw = rf.refine_sums(views.stack, views.ref, views.rel_array, start, (4, 2), keep, INVALID_COST, rf.TAU_I)
+    a_raw, b_raw = rf.refine_sums(views.levels, views.ref, views.rel_array, start, (4, 2), keep, INVALID_COST, rf.TAU_I)
     a, b = agg.smooth(a_raw), agg.smooth(b_raw)
     assert np.abs(a - a_ref).max() <= 1e-5 * np.abs(a_ref).max()
     assert np.abs(b - b_ref).max() <= 1e-5 * np.abs(b_ref).max()
@@ -143,7 +143,7 @@ def test_views_cut_to_the_range_give_the_whole_views_costs_and_steps_bit_for_bit
     box = (30, 70, 50, 110)  # a crop away from every edge: the parts are smaller than the frame
     whole = cvm.MatchViews(dict(grid.images), ref, rel, box, scale, 0.5 * (lo + hi))
     cut = cvm.MatchViews(dict(grid.images), ref, rel, box, scale, 0.5 * (lo + hi), (lo - 2.0, hi + 2.0))
-    assert cut.stack.shape[1] * cut.stack.shape[2] < 0.8 * whole.stack.shape[1] * whole.stack.shape[2]
+    assert cut.levels.shape[1] * cut.levels.shape[2] < 0.8 * whole.levels.shape[1] * whole.levels.shape[2]
     rng = np.random.default_rng(4)
     maps = [(rng.uniform(lo - 1.5, hi + 1.5, whole.shape) * scale).astype(np.float32) for _ in range(2)]
     for d in [float(round(lo * scale)), hi * scale + 0.37, (lo - 1.0) * scale, *maps]:
@@ -156,9 +156,9 @@ def test_views_cut_to_the_range_give_the_whole_views_costs_and_steps_bit_for_bit
         assert np.array_equal(a, b) if isinstance(d, np.ndarray) else np.abs(a - b).max() <= 1e-5
     y0, _, x0, _ = whole.box
     for m in maps:
-        want = rf.refine_sums(whole.stack, whole.ref, whole.rel_array, m, (y0, x0), 4, INVALID_COST, rf.TAU_I)
+        want = rf.refine_sums(whole.levels, whole.ref, whole.rel_array, m, (y0, x0), 4, INVALID_COST, rf.TAU_I)
         got = rf.refine_sums(
-            cut.stack, cut.ref, cut.rel_array, m, (y0, x0), 4, INVALID_COST, rf.TAU_I, cut.org, (cut.h, cut.w)
+            cut.levels, cut.ref, cut.rel_array, m, (y0, x0), 4, INVALID_COST, rf.TAU_I, cut.org, (cut.h, cut.w)
         )
         assert all(np.array_equal(a, b) for a, b in zip(got, want, strict=True))
     for name in rel:
@@ -179,7 +179,7 @@ def test_row_blocks_give_the_one_pass_bits(monkeypatch: pytest.MonkeyPatch) -> N
 
     def run() -> list[np.ndarray]:
         y0, _, x0, _ = views.box
-        sums = rf.refine_sums(views.stack, views.ref, views.rel_array, d, (y0, x0), 4, INVALID_COST, rf.TAU_I)
+        sums = rf.refine_sums(views.levels, views.ref, views.rel_array, d, (y0, x0), 4, INVALID_COST, rf.TAU_I)
         return [views.costs(d, 3, 4), views.costs(d, 5, 2), views.costs(float(round(lo)), 3, 4), *sums]
 
     monkeypatch.setattr(ck, "ROWS", 10_000)
@@ -268,7 +268,7 @@ def test_costs_on_the_active_pixels_alone_are_the_same_bits(win: int) -> None:
     assert all(s.any() for s in seen) and not all(s.all() for s in seen)  # matches, and samples outside
     # the refinement's sums likewise (0 beside the active columns: no step there)
     y0, _, x0, _ = views.box
-    args = (views.stack, views.ref, views.rel_array, maps[1] - 0.6, (y0, x0), 4, INVALID_COST, cvm.TAU_I)
+    args = (views.levels, views.ref, views.rel_array, maps[1] - 0.6, (y0, x0), 4, INVALID_COST, cvm.TAU_I)
     whole_sums = refine_sums(*args, views.org, (views.h, views.w))
     part_sums = refine_sums(*args, views.org, (views.h, views.w), active)
     for got, want in zip(part_sums, whole_sums, strict=True):

@@ -10,7 +10,7 @@ import pytest
 from conftest import SHARED
 
 from rigctl.depth.cost import features
-from rigctl.depth.feature_kernels import view_features
+from rigctl.depth.feature_kernels import features_of_levels, view_features, view_levels
 from rigctl.depth.grid import grey
 
 
@@ -57,3 +57,62 @@ def test_the_derivatives_see_the_exposure_match() -> None:
     matched = view_features(g, (0, 4, 0, 8), exposure=(2.0, 0.0))
     assert np.array_equal(matched[..., 1], 2 * plain[..., 1])
     assert plain[1, 3, 1] == pytest.approx(0.125)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 6), (6, 1), (2, 2), (7, 9), (64, 97)])
+@pytest.mark.parametrize("exposure", [None, (1.37, -0.021)])
+def test_levels_make_the_features_bit_for_bit(shape: tuple[int, int], exposure: tuple[float, float] | None) -> None:
+    """Issue 24: the cost volume keeps each view's part as levels (its intensity with one pixel around it, the
+    frame's edges replicated) and the kernels make the derivatives from them; ``features_of_levels`` (what the
+    reference paths read) is ``view_features`` bit for bit, at every edge of the frame and inside it."""
+    g = np.random.default_rng(sum(shape) + 1).random(shape, np.float32)
+    for part in _parts(*shape):
+        levels = view_levels(g, part, exposure=exposure)
+        assert levels.shape == (part[1] - part[0] + 2, part[3] - part[2] + 2)
+        want = view_features(g, part, exposure=exposure)
+        assert np.array_equal(features_of_levels(levels).view(np.uint32), want.view(np.uint32)), (shape, part)
+
+
+def test_the_kernels_sample_the_levels_as_they_sampled_the_features() -> None:
+    """``cost_kernels.sample3`` makes a sample's three channels from the levels: the bilinear mix of the four
+    corners' ``view_features``, in the same order, on a real picture and at the part's clamped edges."""
+    from numba import njit
+
+    from rigctl.depth.cost_kernels import sample3
+
+    @njit(cache=False)
+    def samples(levels: np.ndarray, points: np.ndarray, out: np.ndarray) -> None:
+        hh, ww = levels.shape[1] - 2, levels.shape[2] - 2
+        for k in range(points.shape[0]):
+            my, mx = points[k, 0], points[k, 1]
+            by, bx = np.floor(my), np.floor(mx)
+            ey, ex = my - by, mx - bx
+            ya, yb = min(max(int(by), 0), hh - 1), min(max(int(by) + 1, 0), hh - 1)
+            xa, xb = min(max(int(bx), 0), ww - 1), min(max(int(bx) + 1, 0), ww - 1)
+            one = np.float32(1.0)
+            w = ((one - ey) * (one - ex), (one - ey) * ex, ey * (one - ex), ey * ex)
+            out[k, 0], out[k, 1], out[k, 2] = sample3(levels, 0, ya, yb, xa, xb, w[0], w[1], w[2], w[3])
+
+    bgr = cv2.imread(str(SHARED / "data" / "hci-training" / "cotton" / "input_Cam040.png"), cv2.IMREAD_COLOR)
+    g = grey(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB).astype(np.float32) / np.float32(255))
+    h = g.shape[0]
+    part = (h - 120, h, 3, 163)  # at the frame's bottom edge; samples beyond the part clamp to its edge
+    feats = view_features(g, part, exposure=(0.93, 0.012))
+    levels = view_levels(g, part, exposure=(0.93, 0.012))[None]
+    rng = np.random.default_rng(9)
+    points = np.concatenate([rng.uniform(-2, 122, (4000, 1)), rng.uniform(-2, 162, (4000, 1))], 1).astype(np.float32)
+    got = np.empty((len(points), 3), np.float32)
+    samples(levels, points, got)
+    want = np.empty_like(got)
+    for k, (my, mx) in enumerate(points):  # the features' bilinear mix as the kernels did it before
+        by, bx = np.floor(my), np.floor(mx)
+        ey, ex = np.float32(my - by), np.float32(mx - bx)
+        ya, yb = min(max(int(by), 0), 119), min(max(int(by) + 1, 0), 119)
+        xa, xb = min(max(int(bx), 0), 159), min(max(int(bx) + 1, 0), 159)
+        one = np.float32(1.0)
+        w00, w01, w10, w11 = (one - ey) * (one - ex), (one - ey) * ex, ey * (one - ex), ey * ex
+        s = feats[ya, xa] * w00 + feats[ya, xb] * w01
+        s += feats[yb, xa] * w10
+        s += feats[yb, xb] * w11
+        want[k] = s
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
