@@ -264,6 +264,24 @@ def test_grid_folder_input(tmp_path: Path) -> None:
     assert np.median(np.abs(d[10:-10, 10:-10] - 6.0)) < 0.5
 
 
+def test_out_over_a_grid_folder_or_its_truth_is_refused_and_leaves_the_pictures(tmp_path: Path) -> None:
+    """A grid folder's outputs are named as its pictures: depth GRID --out GRID wrote the colour-mapped preview
+    over r0c0.png with exit 0; --out GRID/truth would have replaced the reference disparities."""
+    g = plane_grid(6.0, h=40, w=60, rows=1, cols=2)
+    grid = tmp_path / "grid"
+    grid.mkdir()
+    for n, img in g.images.items():
+        cv2.imwrite(str(grid / f"{n}.png"), (img[..., ::-1] * 255).astype(np.uint8))
+    (grid / "grid.yaml").write_text("spacing_x: 0.12\nfocal_px: 1000\ndisparity_range_px: [0, 12]\n")
+    before = {p.name: p.read_bytes() for p in grid.iterdir()}
+    (tmp_path / "link").symlink_to(grid)
+    for out in (grid, tmp_path / "link", grid / "truth", grid / "truth" / "x"):
+        res = run_rigctl("depth", str(grid), "--out", str(out), "--no-key", "--preset", "fast")
+        assert res.returncode == 2 and len(res.stderr.splitlines()) == 1, res.stderr
+        assert "would write over" in res.stderr and str(out) in res.stderr
+    assert {p.name: p.read_bytes() for p in grid.iterdir()} == before
+
+
 def test_bench_depth_quick(tmp_path: Path) -> None:
     res = run_rigctl("bench", "depth", "--quick", "--json", "--plot", str(tmp_path / "p.png"), timeout=600)
     assert res.returncode == 0, res.stderr
