@@ -233,7 +233,7 @@ def _png_picture(img: NDArray[Any]) -> NDArray[Any]:
             return np.asarray(cv2.cvtColor(img, cv2.COLOR_GRAY2BGR), np.uint8)
         return np.ascontiguousarray(img[..., :3])
     rgb = img.astype(np.float32) / np.float32(65535.0 if img.dtype == np.uint16 else 255.0)
-    return rgb[..., ::-1][..., :3] if rgb.ndim == 3 else rgb
+    return rgb[..., 2::-1] if rgb.ndim == 3 else rgb  # BGR(A) to RGB: alpha, when there is one, left out
 
 
 def load_grid_folder(folder: Path) -> Grid:
