@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from rigctl.calibration_model import FOCAL_RANGE_WIDTHS
 from rigctl.errors import ParameterError, RigFileError, TakeError
 from rigctl.imagefile import MAX_SIDE, png_size, read_png
 from rigctl.layout import SAFE_CAMERA
@@ -253,6 +254,11 @@ def load_grid_folder(folder: Path) -> Grid:
             raise RigFileError(f"{path}: {key}: must be a finite number, got {v!r}")
         if (key in ("focal_px", "spacing_x") and v <= 0) or (key == "spacing_y" and v < 0):
             raise RigFileError(f"{path}: {key}: must be positive, got {v!r}")
+        # beyond these, depth = focal_px * spacing / (disparity + doffs) is 0 or infinite in float32 everywhere
+        if key.startswith("spacing") and v and not GRID_SPACING[0] <= v <= GRID_SPACING[1]:
+            raise RigFileError(f"{path}: {key}: must be between {GRID_SPACING[0]:g} and {GRID_SPACING[1]:g}, got {v!r}")
+        if key == "doffs" and abs(v) > MAX_SIDE:
+            raise RigFileError(f"{path}: doffs: must be within +-{MAX_SIDE} px, got {v!r}")
     rng = _disparity_range(path, spec.get("disparity_range_px"))
     files = sorted(p for p in folder.glob("r*c*.png") if SAFE_CAMERA.fullmatch(p.stem))
     for p in sorted(set(folder.glob("r*c*.png")) - set(files))[:8]:
@@ -263,6 +269,16 @@ def load_grid_folder(folder: Path) -> Grid:
     total = sum(w * h for w, h in sizes.values())
     if total > MAX_GRID_PIXELS:
         raise RigFileError(f"{folder}: {len(files)} images of {total:,} pixels together: over {MAX_GRID_PIXELS:,}")
+    width = sizes[files[0]][0]
+    lo, hi = FOCAL_RANGE_WIDTHS  # the sense a calibration is held to
+    if not lo * width <= spec["focal_px"] <= hi * width:
+        raise RigFileError(
+            f"{path}: focal_px: {spec['focal_px']!r} is not plausible for pictures {width} px wide "
+            f"(expected {lo * width:g} to {hi * width:g} px)"
+        )
+    rows = {int(m[1]) for p in files if (m := SAFE_CAMERA.fullmatch(p.stem))}
+    if spec.get("spacing_y") == 0 and len(rows) > 1:
+        raise RigFileError(f"{path}: spacing_y: 0 puts the {len(rows)} rows of cameras at one place")
     images = {p.stem: read_png(p) for p in files}
     first = next(iter(images))
     for n, img in images.items():
@@ -346,6 +362,7 @@ def _disparity_range(path: Path, rng: object) -> tuple[float, float] | None:
     return float(rng[0]), float(rng[1])  # type: ignore[index]
 
 
+GRID_SPACING = (1e-6, 1e6)  # spacing_x, spacing_y, in grid.yaml's own unit
 MAX_GRID_PIXELS = 1 << 28  # all pictures of a grid folder together (nine UHD pictures are 75 million)
 GRID_KEYS = ("spacing_x", "spacing_y", "focal_px", "doffs", "disparity_range_px")  # what grid.yaml may hold
 

@@ -334,6 +334,34 @@ def test_a_grid_yaml_value_out_of_range_is_named(tmp_path: Path, line: str, says
         load_grid_folder(tmp_path)
 
 
+@pytest.mark.parametrize(
+    ("spec", "says"),
+    [
+        ("focal_px: 1.0e+300", "focal_px: 1e+300 is not plausible for pictures 24 px wide (expected 1.2 to 2400 px)"),
+        ("focal_px: 1.0e-300", "focal_px: 1e-300 is not plausible for pictures 24 px wide"),
+        ("focal_px: 100\nspacing_x: 1.0e-300", "spacing_x: must be between 1e-06 and 1e+06, got 1e-300"),
+        ("focal_px: 100\nspacing_x: 1.0e+300", "spacing_x: must be between 1e-06 and 1e+06, got 1e+300"),
+        ("focal_px: 100\nspacing_y: 1.0e+300", "spacing_y: must be between 1e-06 and 1e+06, got 1e+300"),
+        ("focal_px: 100\ndoffs: -1.0e+300", "doffs: must be within +-16384 px, got -1e+300"),
+        ("focal_px: 100\nspacing_y: 0", "spacing_y: 0 puts the 2 rows of cameras at one place"),
+    ],
+)
+def test_grid_yaml_numbers_that_make_every_depth_zero_or_infinite_are_refused(
+    tmp_path: Path, spec: str, says: str
+) -> None:
+    """focal_px 1e300 (or 1e-300), a spacing of 1e300 or a doffs of 1e300 were accepted: every depth.Z came out
+    0 and the EXR's worldToNDC infinite, with exit 0; spacing_y 0 was read as spacing_x."""
+    import cv2
+
+    from rigctl.errors import RigFileError
+
+    (tmp_path / "grid.yaml").write_text("spacing_x: 1\n" * ("spacing_x" not in spec) + spec + "\n")
+    for cam in ("r0c0", "r1c0"):
+        cv2.imwrite(str(tmp_path / f"{cam}.png"), np.zeros((16, 24, 3), np.uint8))
+    with pytest.raises(RigFileError, match=re.escape(says)):
+        load_grid_folder(tmp_path)
+
+
 def test_grid_yaml_refuses_an_unknown_key_as_a_rig_file_does(tmp_path: Path) -> None:
     """A misspelt key (spacng_y) was silently ignored, the grid then read with spacing_y = spacing_x."""
     from rigctl.errors import RigFileError
