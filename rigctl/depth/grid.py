@@ -303,17 +303,25 @@ def _folder_truth(folder: Path, grid: Grid) -> dict[str, F32] | None:
     with, ``rigctl miv import``): what depth scores its estimates against. None when there are none."""
     if not folder.is_dir():
         return None
-    from rigctl.pfm import read_pfm
-
     truth = {}
     for n in grid.names:
         p = folder / f"{n}.pfm"
         if p.is_file():
-            d = read_pfm(p)
-            if d.shape != grid.shape:
-                raise RigFileError(f"{p}: reference disparity is {d.shape[::-1]} px, the images {grid.shape[::-1]}")
-            truth[n] = d
+            truth[n] = read_truth(p, grid.shape)
     return truth or None
+
+
+def read_truth(path: Path, shape: tuple[int, int]) -> F32:
+    """A reference disparity PFM (+inf where undefined), refused unless it is the pictures' size and free of
+    NaN: scored as it was, a smaller one ended depth in a traceback and one of NaN read as 0 % bad."""
+    from rigctl.pfm import read_pfm
+
+    d = read_pfm(path)
+    if d.shape != shape:
+        raise RigFileError(f"{path}: reference disparity is {d.shape[::-1]} px, the images {shape[::-1]}")
+    if np.isnan(d).any():
+        raise RigFileError(f"{path}: reference disparity holds NaN (undefined is +inf): refused")
+    return d
 
 
 def camera_offsets(
@@ -433,9 +441,8 @@ class TakeGrid(TakeFrames):
         truth = None
         tdir = self.folder / "truth" / "disparity" / f"{number:06d}"
         if tdir.is_dir():
-            from rigctl.pfm import read_pfm
-
-            truth = {n: read_pfm(tdir / f"{n}.pfm") for n in self.names if (tdir / f"{n}.pfm").exists()}
+            shape = images.shape()
+            truth = {n: read_truth(tdir / f"{n}.pfm", shape) for n in self.names if (tdir / f"{n}.pfm").exists()}
         return Grid(
             list(self.names),
             images,

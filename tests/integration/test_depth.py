@@ -282,6 +282,36 @@ def test_out_over_a_grid_folder_or_its_truth_is_refused_and_leaves_the_pictures(
     assert {p.name: p.read_bytes() for p in grid.iterdir()} == before
 
 
+@pytest.mark.parametrize("bad", ["small", "nan"])
+def test_a_truth_of_the_wrong_size_or_of_nan_is_named_in_one_line(
+    ideal_take: Path, tmp_path: Path, bad: str
+) -> None:
+    """A take's truth PFM smaller than its frames ended depth in an IndexError traceback (exit 1); one of NaN
+    (undefined is +inf) was scored as 0 % bad. A grid folder's truth of NaN is refused the same way."""
+    import shutil
+
+    from rigctl.pfm import read_pfm, write_pfm
+
+    take = tmp_path / "take"
+    shutil.copytree(ideal_take, take)
+    pfm = take / "truth" / "disparity" / "000000" / "r1c1.pfm"
+    t = read_pfm(pfm)
+    write_pfm(pfm, np.zeros((10, 12), np.float32) if bad == "small" else np.full_like(t, np.nan))
+    res = run_rigctl("depth", str(take), "--out", str(tmp_path / "d"), "--preset", "fast", "--cameras", "r1c1")
+    assert res.returncode == 3 and len(res.stderr.splitlines()) == 1, res.stderr
+    assert str(pfm) in res.stderr and ("(12, 10) px" if bad == "small" else "holds NaN") in res.stderr
+    if bad == "nan":
+        g = plane_grid(6.0, h=40, w=60, rows=1, cols=2)
+        grid = tmp_path / "grid"
+        (grid / "truth").mkdir(parents=True)
+        for n, img in g.images.items():
+            cv2.imwrite(str(grid / f"{n}.png"), (img[..., ::-1] * 255).astype(np.uint8))
+        (grid / "grid.yaml").write_text("spacing_x: 0.12\nfocal_px: 1000\ndisparity_range_px: [0, 12]\n")
+        write_pfm(grid / "truth" / "r0c0.pfm", np.full((40, 60), np.nan, np.float32))
+        res = run_rigctl("depth", str(grid), "--out", str(tmp_path / "g"), "--preset", "fast")
+        assert res.returncode == 3 and "truth/r0c0.pfm: reference disparity holds NaN" in res.stderr, res.stderr
+
+
 def test_bench_depth_quick(tmp_path: Path) -> None:
     res = run_rigctl("bench", "depth", "--quick", "--json", "--plot", str(tmp_path / "p.png"), timeout=600)
     assert res.returncode == 0, res.stderr
