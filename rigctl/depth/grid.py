@@ -250,8 +250,8 @@ def load_grid_folder(folder: Path) -> Grid:
         v = spec.get(key)
         if v is None and key in ("spacing_y", "doffs"):
             continue
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise RigFileError(f"{path}: {key}: must be a finite number, got {v!r}")
+        if not _finite(v):
+            raise RigFileError(f"{path}: {key}: must be a finite number, got {v!r:.60}")
         if (key in ("focal_px", "spacing_x") and v <= 0) or (key == "spacing_y" and v < 0):
             raise RigFileError(f"{path}: {key}: must be positive, got {v!r}")
         # beyond these, depth = focal_px * spacing / (disparity + doffs) is 0 or infinite in float32 everywhere
@@ -357,17 +357,24 @@ def _disparity_range(path: Path, rng: object) -> tuple[float, float] | None:
     """``disparity_range_px: [min, max]``: two finite numbers, min below max, within a picture's width."""
     if rng is None:
         return None
-    ok = (
-        isinstance(rng, list)
-        and len(rng) == 2
-        and all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in rng)
-    )
+    ok = isinstance(rng, list) and len(rng) == 2 and all(_finite(v) for v in rng)
     if not ok or not (-MAX_SIDE <= rng[0] < rng[1] <= MAX_SIDE):  # type: ignore[index]
         raise RigFileError(
             f"{path}: disparity_range_px: expected [min, max], two numbers with min < max within "
-            f"+-{MAX_SIDE} px, got {rng!r}"
+            f"+-{MAX_SIDE} px, got {rng!r:.60}"
         )
     return float(rng[0]), float(rng[1])  # type: ignore[index]
+
+
+def _finite(v: object) -> bool:
+    """A YAML number (not a boolean) that is finite as a float: an integer of 400 digits is not (math.isfinite
+    raised OverflowError on it, a traceback)."""
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        return False
+    try:
+        return math.isfinite(v)
+    except OverflowError:
+        return False
 
 
 GRID_SPACING = (1e-6, 1e6)  # spacing_x, spacing_y, in grid.yaml's own unit

@@ -319,6 +319,11 @@ def test_take_with_any_timecodes(module_tmp: Callable[[str], Path], timecodes: l
         ("spacing_x: .nan", "spacing_x: must be a finite number, got nan"),
         ("spacing_x: '0.12'", "spacing_x: must be a finite number, got '0.12'"),
         ("spacing_x: 0.12\nspacing_y: -1", "spacing_y: must be positive, got -1"),
+        # an integer too large for a float: math.isfinite raised OverflowError (a traceback)
+        pytest.param("spacing_x: 1" + "0" * 400, "spacing_x: must be a finite number, got 1000", id="int-spacing"),
+        pytest.param(
+            "spacing_x: 1\ndisparity_range_px: [0, 1" + "0" * 400 + "]", "disparity_range_px: expected", id="int-range"
+        ),
     ],
 )
 def test_a_grid_yaml_value_out_of_range_is_named(tmp_path: Path, line: str, says: str) -> None:
