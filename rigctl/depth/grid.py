@@ -17,7 +17,7 @@ import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard
 
 import cv2
 import numpy as np
@@ -366,7 +366,7 @@ def _disparity_range(path: Path, rng: object) -> tuple[float, float] | None:
     return float(rng[0]), float(rng[1])  # type: ignore[index]
 
 
-def _finite(v: object) -> bool:
+def _finite(v: object) -> TypeGuard[int | float]:
     """A YAML number (not a boolean) that is finite as a float: an integer of 400 digits is not (math.isfinite
     raised OverflowError on it, a traceback)."""
     if isinstance(v, bool) or not isinstance(v, int | float):
