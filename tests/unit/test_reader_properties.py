@@ -147,6 +147,39 @@ def test_calibration_any_text(tmp_path: Path, text: str) -> None:
     bounded(lambda: load_calibration(path))
 
 
+CALIBRATION = """spec: 1
+cameras:
+  r0c0:
+    K: [[1000, 0, 320], [0, 1000, 240], [0, 0, 1]]
+    dist: [0, 0, 0, 0, 0]
+    R: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]
+    t: [0, 0, 0]
+    image_size: [640, 480]
+"""
+
+
+@pytest.mark.parametrize(
+    ("old", "says"),
+    [
+        ("[[1000, 0, 320]", "cameras.r0c0.K must be 3x3 finite numbers"),
+        ("[0, 0, 0, 0, 0]", "cameras.r0c0.dist must be a list of finite numbers"),
+        ("t: [0, 0, 0]", "cameras.r0c0.t must be 3 finite numbers"),
+        ("[640, 480]", "cameras.r0c0.image_size must be [width, height], at most 65536 px a side"),
+    ],
+    ids=["K", "dist", "t", "image_size"],
+)
+def test_calibration_integer_too_large_for_a_float_is_named(tmp_path: Path, old: str, says: str) -> None:
+    """A 401-digit integer in a calibration ended rectify (and every reader of it) in an OverflowError traceback."""
+    from rigctl.errors import RigFileError
+
+    path = tmp_path / "calibration.yaml"
+    path.write_text(CALIBRATION)
+    load_calibration(path)  # the file as it is reads
+    path.write_text(CALIBRATION.replace(old, old.replace("0", "1" + "0" * 400, 1), 1))
+    with pytest.raises(RigFileError, match=re.escape(says)):
+        load_calibration(path)
+
+
 @PROPERTY
 @given(
     spec=st.dictionaries(
