@@ -312,6 +312,30 @@ def test_a_truth_of_the_wrong_size_or_of_nan_is_named_in_one_line(
         assert res.returncode == 3 and "truth/r0c0.pfm: reference disparity holds NaN" in res.stderr, res.stderr
 
 
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [("focal_px", ".nan"), ("focal_px", "1.0e+300"), ("focal_px", "-1838.0"), ("spacing_x_m", "1.0e-300"),
+     ("spacing_x_m", "-0.12"), ("spacing_y_m", ".inf")],
+)  # fmt: skip
+def test_a_rectified_take_whose_focal_length_or_spacing_makes_no_sense_is_refused(
+    ideal_take: Path, tmp_path: Path, key: str, value: str
+) -> None:
+    """A rectified take's rectification.focal_px NaN, negative or 1e300, or a spacing of 1e-300, negative or
+    infinite, was read with exit 0: every depth.Z came out 0 and worldToNDC NaN."""
+    import re
+    import shutil
+
+    take = tmp_path / "take"
+    shutil.copytree(ideal_take, take)
+    text = (take / "take.yaml").read_text()
+    text, n = re.subn(rf"(\n  {key}: )[^\n]+", rf"\g<1>{value}", text)
+    assert n == 1
+    (take / "take.yaml").write_text(text)
+    res = run_rigctl("depth", str(take), "--out", str(tmp_path / "d"), "--preset", "fast", "--cameras", "r1c1")
+    assert res.returncode == 3 and len(res.stderr.splitlines()) == 1, res.stderr
+    assert "take.yaml:" in res.stderr and f"rectification.{key}" in res.stderr
+
+
 def test_bench_depth_quick(tmp_path: Path) -> None:
     res = run_rigctl("bench", "depth", "--quick", "--json", "--plot", str(tmp_path / "p.png"), timeout=600)
     assert res.returncode == 0, res.stderr
