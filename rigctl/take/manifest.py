@@ -16,6 +16,7 @@ and keys another tool added at the top level kept when rigctl rewrites the file.
 from __future__ import annotations
 
 import logging
+import math
 import os
 from pathlib import Path
 from typing import Annotated, Literal, cast
@@ -163,9 +164,19 @@ class Rectification(_Section):
     @field_validator("positions_m")
     @classmethod
     def _camera_names(cls, value: dict[str, list[float]]) -> dict[str, list[float]]:
-        for name in value:
+        for name, p in value.items():
             if not SAFE_CAMERA.fullmatch(name):
                 raise ValueError(f"{name!r} is not a camera name r{{row}}c{{col}}")
+            # a camera's centre in metres: NaN made every camera's offset NaN, a short list a traceback
+            if len(p) != 3 or not all(math.isfinite(v) and abs(v) <= 1e6 for v in p):
+                raise ValueError(f"{name}: expected [x, y, z], three finite numbers within 1e6, got {p!r:.60}")
+        return value
+
+    @field_validator("R", "K")
+    @classmethod
+    def _matrix(cls, value: list[list[float]]) -> list[list[float]]:
+        if len(value) != 3 or any(len(row) != 3 or not all(math.isfinite(v) for v in row) for row in value):
+            raise ValueError(f"expected 3x3 finite numbers, got {value!r:.60}")
         return value
 
 

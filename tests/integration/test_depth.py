@@ -313,22 +313,28 @@ def test_a_truth_of_the_wrong_size_or_of_nan_is_named_in_one_line(
 
 
 @pytest.mark.parametrize(
-    ("key", "value"),
-    [("focal_px", ".nan"), ("focal_px", "1.0e+300"), ("focal_px", "-1838.0"), ("spacing_x_m", "1.0e-300"),
-     ("spacing_x_m", "-0.12"), ("spacing_y_m", ".inf")],
+    ("key", "line", "value"),
+    [("focal_px", "  focal_px", ".nan"), ("focal_px", "  focal_px", "1.0e+300"), ("focal_px", "  focal_px", "-1838.0"),
+     ("spacing_x_m", "  spacing_x_m", "1.0e-300"), ("spacing_x_m", "  spacing_x_m", "-0.12"),
+     ("spacing_y_m", "  spacing_y_m", ".inf"), ("positions_m", "    r0c0", "[.nan, 0, 0]"),
+     ("positions_m", "    r0c0", "[1]"), ("K", "  K", "[[1838, 0, .nan], [0, 1838, 270], [0, 0, 1]]")],
 )  # fmt: skip
 def test_a_rectified_take_whose_focal_length_or_spacing_makes_no_sense_is_refused(
-    ideal_take: Path, tmp_path: Path, key: str, value: str
+    ideal_take: Path, tmp_path: Path, key: str, line: str, value: str
 ) -> None:
-    """A rectified take's rectification.focal_px NaN, negative or 1e300, or a spacing of 1e-300, negative or
-    infinite, was read with exit 0: every depth.Z came out 0 and worldToNDC NaN."""
+    """A rectified take's rectification.focal_px NaN, negative or 1e300, a spacing of 1e-300, negative or
+    infinite, a camera position or K of NaN was read with exit 0: every depth.Z came out 0 and worldToNDC NaN
+    (a position of NaN: 'no camera at a different position'); a position of one number was a traceback."""
     import re
     import shutil
 
     take = tmp_path / "take"
     shutil.copytree(ideal_take, take)
     text = (take / "take.yaml").read_text()
-    text, n = re.subn(rf"(\n  {key}: )[^\n]+", rf"\g<1>{value}", text)
+    if key == "K":  # a block list in the file: replaced by a flow one
+        text, n = re.subn(r"\n  K:\n(  - [^\n]+\n){3}", f"\n  K: {value}\n", text)
+    else:
+        text, n = re.subn(rf"(\n{line}: )[^\n]+", rf"\g<1>{value}", text)
     assert n == 1
     (take / "take.yaml").write_text(text)
     res = run_rigctl("depth", str(take), "--out", str(tmp_path / "d"), "--preset", "fast", "--cameras", "r1c1")
