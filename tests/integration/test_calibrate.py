@@ -218,6 +218,12 @@ def test_bad_inputs_are_one_line(tmp_path: Path) -> None:
     empty.mkdir()
     code, _, err = calibrate(str(empty), "--out", str(tmp_path / "c.yaml"))
     assert code == 3 and "no images found" in err
+    # a refinement window larger than the images: cv2.error from cornerSubPix, a traceback (exit 1)
+    code, _, err = calibrate(
+        str(STEREO), "--chessboard", "9x6", "--subpix-window", "100000", "--out", str(tmp_path / "c.yaml")
+    )
+    assert code == 2 and "--subpix-window 100000: needs images at least 200005 px a side, got 640x480" in err, err
+    assert len(err.splitlines()) == 1
     odd = tmp_path / "odd"
     odd.mkdir()
     shutil.copy(STEREO / "left01.jpg", odd / "cam01.jpg")
