@@ -65,4 +65,26 @@ class BoardSpec:
         if not isinstance(data, dict) or data.get("type") != "charuco":
             raise RigFileError(f"{path}: not a board description (type: charuco)")
         fields = {k: data[k] for k in ("squares_x", "squares_y", "square_m", "marker_m", "dictionary") if k in data}
-        return cls(**fields)
+        spec = cls(**fields)
+        problem = spec.problem()
+        if problem:  # held to what rigctl board makes: OpenCV hung on 100000 squares, raised on the rest
+            raise RigFileError(f"{path}: {problem}")
+        return spec
+
+    def problem(self) -> str | None:
+        """What makes no board, as ``field: why`` (the bounds ``rigctl board`` holds its options to), or None."""
+        for key in ("squares_x", "squares_y"):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, int) or not 3 <= v <= 40:
+                return f"{key}: must be a whole number of squares 3 to 40, got {v!r:.60}"
+        if self.squares_x * self.squares_y // 2 > 250:
+            return f"squares_x, squares_y: {self.squares_x}x{self.squares_y} needs more markers than a dictionary's 250"
+        for key in ("square_m", "marker_m"):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not 1e-4 <= v <= 1.0:  # NaN fails too
+                return f"{key}: must be a length of 0.0001 to 1 m, got {v!r:.60}"
+        if not self.marker_m < self.square_m:
+            return f"marker_m: {self.marker_m:g} must be smaller than square_m {self.square_m:g}"
+        if self.dictionary not in DICTIONARIES:
+            return f"dictionary: {self.dictionary!r:.60} unknown (known: {', '.join(DICTIONARIES)})"
+        return None

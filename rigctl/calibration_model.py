@@ -123,7 +123,7 @@ class ArrayCalibration:
 def _matrix(path: Path, lines: dict[Any, int], loc: tuple[Any, ...], value: Any, shape: tuple[int, ...]) -> F64:
     try:
         arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # the last: an integer of hundreds of digits
         arr = None
     if arr is None or (shape and arr.shape != shape) or not np.all(np.isfinite(arr)):
         field_name = ".".join(str(p) for p in loc)
@@ -157,9 +157,11 @@ def load_calibration(path: Path) -> ArrayCalibration:
         if abs(np.linalg.det(R) - 1) > 1e-6 or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
             raise RigFileError(f"{path}:{line_of(lines, (*loc, 'R'))}: cameras.{name}.R is not a rotation matrix")
         size = c["image_size"]
-        if not (isinstance(size, list) and len(size) == 2 and all(isinstance(v, int) and v > 0 for v in size)):
+        # at most a take's format side (65,536): a larger integer overflowed the focal length check
+        if not (isinstance(size, list) and len(size) == 2 and all(isinstance(v, int) and 0 < v <= 65536 for v in size)):
             raise RigFileError(
-                f"{path}:{line_of(lines, (*loc, 'image_size'))}: cameras.{name}.image_size must be [width, height]"
+                f"{path}:{line_of(lines, (*loc, 'image_size'))}: cameras.{name}.image_size must be [width, height], "
+                "at most 65536 px a side"
             )
         models[name] = CameraModel(
             name=name,

@@ -65,7 +65,9 @@ def prepare_folder(out: Path, fresh: bool) -> Iterator[Path]:
             unfinished = not (out / "report.md").exists()
             if not fresh and not unfinished:
                 raise ParameterError(f"{out}: exists and is not empty (choose another --out, or --fresh to replace it)")
-            for p in entries:
+            # the report first and the marker last: a run killed while clearing leaves an unfinished demo, which
+            # the next run replaces, never a "finished" one missing its figures or a folder with no marker
+            for p in sorted(entries, key=lambda p: (p.name != "report.md", p.name == MARKER)):
                 shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
         publish_text(out / MARKER, "rigctl demo: until report.md is written, the next demo here replaces this folder\n")
         yield out

@@ -3,8 +3,9 @@ code): ``python fault_runner.py CALL N SIGNAL -- rigctl arguments``.
 
 CALL is the system call whose N-th use (from 1) is the point: ``fsync`` (a file written whole under its
 temporary name, not yet renamed), ``replace`` (just before a rename publishes it), ``write`` (inside a file
-being written: a rectified take's essence). SIGNAL is ``KILL`` or ``TERM``; the process signals itself, so the
-point is exact and the death is the kernel's, as from outside.
+being written: a rectified take's essence), ``unlink`` (a file about to be removed: a folder being cleared).
+SIGNAL is ``KILL`` or ``TERM``; the process signals itself, so the point is exact and the death is the kernel's,
+as from outside.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from typing import Any
 def main() -> int:
     call, nth, sig = sys.argv[1], int(sys.argv[2]), getattr(signal, f"SIG{sys.argv[3]}")
     argv = sys.argv[sys.argv.index("--") + 1 :]
-    name = {"fsync": "fsync", "replace": "replace", "write": "write"}[call]
+    name = {"fsync": "fsync", "replace": "replace", "write": "write", "unlink": "unlink"}[call]
     real: Callable[..., Any] = getattr(os, name)
     count = 0
 

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from rigctl.board import BoardSpec
 from rigctl.calib.inputs import CalibrationViews
-from rigctl.errors import CalibrationError
+from rigctl.errors import CalibrationError, ParameterError
 from rigctl.yamlfile import load_yaml
 
 _SUBPIX = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
@@ -117,6 +117,9 @@ def _chessboard(target: Chessboard) -> Callable[[NDArray[np.uint8]], tuple[NDArr
         grid = np.asarray(c, np.float64).reshape(target.rows, target.columns, 2)
         spacing = float(np.median(np.linalg.norm(np.diff(grid, axis=1), axis=2)))
         win = target.window or int(max(3, min(11, round(0.2 * spacing))))
+        h, w = grey.shape[:2]
+        if min(w, h) < 2 * win + 5:  # what cornerSubPix needs, or it raises cv2.error (a traceback)
+            raise ParameterError(f"--subpix-window {win}: needs images at least {2 * win + 5} px a side, got {w}x{h}")
         c = cv2.cornerSubPix(grey, np.asarray(c, np.float32), (win, win), (-1, -1), _SUBPIX)
         return np.arange(len(c), dtype=np.int64), np.asarray(c, np.float64).reshape(-1, 2)
 

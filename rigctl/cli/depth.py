@@ -56,6 +56,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def refuse_out_over_input(source: Path, out: Path) -> None:
+    """``--out`` may not be the input folder or lie in its ``truth/``: a grid folder's outputs are named as its
+    pictures (``r1c1.png``) and a take's as its truth (``truth/disparity/<frame>/<camera>.pfm``), so depth
+    would write over what it reads."""
+    src, dst = source.resolve(), out.resolve()
+    if dst == src or dst.is_relative_to(src / "truth"):
+        raise ParameterError(f"--out {out}: is the input {source} or its truth: depth would write over its files")
+
+
 def run(ns: argparse.Namespace) -> int:
     frames = parse_frames(ns.frames) if ns.frames else None
     opt = depth_options(ns)
@@ -63,6 +72,7 @@ def run(ns: argparse.Namespace) -> int:
         raise ParameterError(
             "--check renders each computed camera from the others: give at least two --cameras, or none for all"
         )
+    refuse_out_over_input(ns.input, ns.out)
     with output_folder(ns.out, "depth"):  # usable, locked for this run, an interrupted run's leftovers removed
         with Progress(f"depth {ns.input.name}", "cameras", ns.quiet) as bar:
             report = run_depth(

@@ -17,12 +17,13 @@ import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from rigctl.calibration_model import FOCAL_RANGE_WIDTHS
 from rigctl.errors import ParameterError, RigFileError, TakeError
 from rigctl.imagefile import MAX_SIDE, png_size, read_png
 from rigctl.layout import SAFE_CAMERA
@@ -233,7 +234,7 @@ def _png_picture(img: NDArray[Any]) -> NDArray[Any]:
             return np.asarray(cv2.cvtColor(img, cv2.COLOR_GRAY2BGR), np.uint8)
         return np.ascontiguousarray(img[..., :3])
     rgb = img.astype(np.float32) / np.float32(65535.0 if img.dtype == np.uint16 else 255.0)
-    return rgb[..., ::-1][..., :3] if rgb.ndim == 3 else rgb
+    return rgb[..., 2::-1] if rgb.ndim == 3 else rgb  # BGR(A) to RGB: alpha, when there is one, left out
 
 
 def load_grid_folder(folder: Path) -> Grid:
@@ -249,10 +250,15 @@ def load_grid_folder(folder: Path) -> Grid:
         v = spec.get(key)
         if v is None and key in ("spacing_y", "doffs"):
             continue
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise RigFileError(f"{path}: {key}: must be a finite number, got {v!r}")
+        if not _finite(v):
+            raise RigFileError(f"{path}: {key}: must be a finite number, got {v!r:.60}")
         if (key in ("focal_px", "spacing_x") and v <= 0) or (key == "spacing_y" and v < 0):
             raise RigFileError(f"{path}: {key}: must be positive, got {v!r}")
+        # beyond these, depth = focal_px * spacing / (disparity + doffs) is 0 or infinite in float32 everywhere
+        if key.startswith("spacing") and v and not GRID_SPACING[0] <= v <= GRID_SPACING[1]:
+            raise RigFileError(f"{path}: {key}: must be between {GRID_SPACING[0]:g} and {GRID_SPACING[1]:g}, got {v!r}")
+        if key == "doffs" and abs(v) > MAX_SIDE:
+            raise RigFileError(f"{path}: doffs: must be within +-{MAX_SIDE} px, got {v!r}")
     rng = _disparity_range(path, spec.get("disparity_range_px"))
     files = sorted(p for p in folder.glob("r*c*.png") if SAFE_CAMERA.fullmatch(p.stem))
     for p in sorted(set(folder.glob("r*c*.png")) - set(files))[:8]:
@@ -263,6 +269,16 @@ def load_grid_folder(folder: Path) -> Grid:
     total = sum(w * h for w, h in sizes.values())
     if total > MAX_GRID_PIXELS:
         raise RigFileError(f"{folder}: {len(files)} images of {total:,} pixels together: over {MAX_GRID_PIXELS:,}")
+    width = sizes[files[0]][0]
+    lo, hi = FOCAL_RANGE_WIDTHS  # the sense a calibration is held to
+    if not lo * width <= spec["focal_px"] <= hi * width:
+        raise RigFileError(
+            f"{path}: focal_px: {spec['focal_px']!r} is not plausible for pictures {width} px wide "
+            f"(expected {lo * width:g} to {hi * width:g} px)"
+        )
+    rows = {int(m[1]) for p in files if (m := SAFE_CAMERA.fullmatch(p.stem))}
+    if spec.get("spacing_y") == 0 and len(rows) > 1:
+        raise RigFileError(f"{path}: spacing_y: 0 puts the {len(rows)} rows of cameras at one place")
     images = {p.stem: read_png(p) for p in files}
     first = next(iter(images))
     for n, img in images.items():
@@ -287,17 +303,25 @@ def _folder_truth(folder: Path, grid: Grid) -> dict[str, F32] | None:
     with, ``rigctl miv import``): what depth scores its estimates against. None when there are none."""
     if not folder.is_dir():
         return None
-    from rigctl.pfm import read_pfm
-
     truth = {}
     for n in grid.names:
         p = folder / f"{n}.pfm"
         if p.is_file():
-            d = read_pfm(p)
-            if d.shape != grid.shape:
-                raise RigFileError(f"{p}: reference disparity is {d.shape[::-1]} px, the images {grid.shape[::-1]}")
-            truth[n] = d
+            truth[n] = read_truth(p, grid.shape)
     return truth or None
+
+
+def read_truth(path: Path, shape: tuple[int, int]) -> F32:
+    """A reference disparity PFM (+inf where undefined), refused unless it is the pictures' size and free of
+    NaN: scored as it was, a smaller one ended depth in a traceback and one of NaN read as 0 % bad."""
+    from rigctl.pfm import read_pfm
+
+    d = read_pfm(path)
+    if d.shape != shape:
+        raise RigFileError(f"{path}: reference disparity is {d.shape[::-1]} px, the images {shape[::-1]}")
+    if np.isnan(d).any():
+        raise RigFileError(f"{path}: reference disparity holds NaN (undefined is +inf): refused")
+    return d
 
 
 def camera_offsets(
@@ -333,19 +357,27 @@ def _disparity_range(path: Path, rng: object) -> tuple[float, float] | None:
     """``disparity_range_px: [min, max]``: two finite numbers, min below max, within a picture's width."""
     if rng is None:
         return None
-    ok = (
-        isinstance(rng, list)
-        and len(rng) == 2
-        and all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in rng)
-    )
+    ok = isinstance(rng, list) and len(rng) == 2 and all(_finite(v) for v in rng)
     if not ok or not (-MAX_SIDE <= rng[0] < rng[1] <= MAX_SIDE):  # type: ignore[index]
         raise RigFileError(
             f"{path}: disparity_range_px: expected [min, max], two numbers with min < max within "
-            f"+-{MAX_SIDE} px, got {rng!r}"
+            f"+-{MAX_SIDE} px, got {rng!r:.60}"
         )
     return float(rng[0]), float(rng[1])  # type: ignore[index]
 
 
+def _finite(v: object) -> TypeGuard[int | float]:
+    """A YAML number (not a boolean) that is finite as a float: an integer of 400 digits is not (math.isfinite
+    raised OverflowError on it, a traceback)."""
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        return False
+    try:
+        return math.isfinite(v)
+    except OverflowError:
+        return False
+
+
+GRID_SPACING = (1e-6, 1e6)  # spacing_x, spacing_y, in grid.yaml's own unit
 MAX_GRID_PIXELS = 1 << 28  # all pictures of a grid folder together (nine UHD pictures are 75 million)
 GRID_KEYS = ("spacing_x", "spacing_y", "focal_px", "doffs", "disparity_range_px")  # what grid.yaml may hold
 
@@ -416,9 +448,8 @@ class TakeGrid(TakeFrames):
         truth = None
         tdir = self.folder / "truth" / "disparity" / f"{number:06d}"
         if tdir.is_dir():
-            from rigctl.pfm import read_pfm
-
-            truth = {n: read_pfm(tdir / f"{n}.pfm") for n in self.names if (tdir / f"{n}.pfm").exists()}
+            shape = images.shape()
+            truth = {n: read_truth(tdir / f"{n}.pfm", shape) for n in self.names if (tdir / f"{n}.pfm").exists()}
         return Grid(
             list(self.names),
             images,

@@ -16,6 +16,7 @@ and keys another tool added at the top level kept when rigctl rewrites the file.
 from __future__ import annotations
 
 import logging
+import math
 import os
 from pathlib import Path
 from typing import Annotated, Literal, cast
@@ -136,21 +137,46 @@ class Rectification(_Section):
     R: list[list[float]]
     K: list[list[float]]
     image_size: list[int]
-    spacing_x_m: float
-    spacing_y_m: float
-    focal_px: float
+    # what depth computes Z = focal_px * spacing / d with: finite, positive (spacing_y_m 0 for a single row) and
+    # within grid.yaml's bounds, beyond which every depth came out 0 or infinite
+    spacing_x_m: Annotated[float, Field(ge=1e-6, le=1e6, allow_inf_nan=False)]
+    spacing_y_m: Annotated[float, Field(ge=0, le=1e6, allow_inf_nan=False)]
+    focal_px: Annotated[float, Field(gt=0, allow_inf_nan=False)]
     lattice_residual_mm: float
     positions_m: dict[str, list[float]]
     source_take: str | None = None  # rigctl rectify: the take it read
     calibration: str | None = None  # rigctl rectify: the calibration file; an ideal take: "true (simulated)"
     truth_note: str | None = None
 
+    @field_validator("focal_px")
+    @classmethod
+    def _plausible_focal(cls, value: float, info: ValidationInfo) -> float:
+        from rigctl.calibration_model import FOCAL_RANGE_WIDTHS
+
+        size = info.data.get("image_size")
+        lo, hi = FOCAL_RANGE_WIDTHS[0], 2 * FOCAL_RANGE_WIDTHS[1]  # a calibration's, zoomed at most twice by rectify
+        if size and not lo * size[0] <= value <= hi * size[0]:
+            raise ValueError(
+                f"is not plausible for an image {size[0]} px wide (expected {lo * size[0]:g} to {hi * size[0]:g} px)"
+            )
+        return value
+
     @field_validator("positions_m")
     @classmethod
     def _camera_names(cls, value: dict[str, list[float]]) -> dict[str, list[float]]:
-        for name in value:
+        for name, p in value.items():
             if not SAFE_CAMERA.fullmatch(name):
                 raise ValueError(f"{name!r} is not a camera name r{{row}}c{{col}}")
+            # a camera's centre in metres: NaN made every camera's offset NaN, a short list a traceback
+            if len(p) != 3 or not all(math.isfinite(v) and abs(v) <= 1e6 for v in p):
+                raise ValueError(f"{name}: expected [x, y, z], three finite numbers within 1e6, got {p!r:.60}")
+        return value
+
+    @field_validator("R", "K")
+    @classmethod
+    def _matrix(cls, value: list[list[float]]) -> list[list[float]]:
+        if len(value) != 3 or any(len(row) != 3 or not all(math.isfinite(v) for v in row) for row in value):
+            raise ValueError(f"expected 3x3 finite numbers, got {value!r:.60}")
         return value
 
 

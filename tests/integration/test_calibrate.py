@@ -218,8 +218,39 @@ def test_bad_inputs_are_one_line(tmp_path: Path) -> None:
     empty.mkdir()
     code, _, err = calibrate(str(empty), "--out", str(tmp_path / "c.yaml"))
     assert code == 3 and "no images found" in err
+    # a refinement window larger than the images: cv2.error from cornerSubPix, a traceback (exit 1)
+    code, _, err = calibrate(
+        str(STEREO), "--chessboard", "9x6", "--subpix-window", "100000", "--out", str(tmp_path / "c.yaml")
+    )
+    assert code == 2 and "--subpix-window 100000: needs images at least 200005 px a side, got 640x480" in err, err
+    assert len(err.splitlines()) == 1
     odd = tmp_path / "odd"
     odd.mkdir()
     shutil.copy(STEREO / "left01.jpg", odd / "cam01.jpg")
     code, _, err = calibrate(str(odd), "--out", str(tmp_path / "c.yaml"))
     assert code == 3 and "not grid positions" in err
+
+
+@pytest.mark.parametrize(
+    ("line", "says"),
+    [
+        ("squares_x: 100000", "squares_x: must be a whole number of squares 3 to 40, got 100000"),
+        ("squares_y: 1", "squares_y: must be a whole number of squares 3 to 40, got 1"),
+        ("square_m: .nan", "square_m: must be a length of 0.0001 to 1 m, got nan"),
+        ("square_m: 1.0e+300", "square_m: must be a length of 0.0001 to 1 m, got 1e+300"),
+        ("marker_m: 0.08", "marker_m: 0.08 must be smaller than square_m 0.075"),
+    ],
+    ids=["100000-squares", "1-square", "nan", "1e300", "marker-over-square"],
+)
+def test_a_board_description_out_of_what_rigctl_board_makes_is_one_line(tmp_path: Path, line: str, says: str) -> None:
+    """calibrate --board read board.yaml's numbers as given: 100000 squares hung in OpenCV, 1e300 m squares
+    were found in no view, the rest ended in a SystemError traceback from cv2.aruco.CharucoBoard (exit 1)."""
+    take = record(tmp_path, "board", 4)
+    board = BoardSpec().as_dict()
+    key, value = line.split(": ")
+    board[key] = yaml.safe_load(value)
+    path = tmp_path / "board.yaml"
+    path.write_text(yaml.safe_dump(board))
+    res = run_rigctl("calibrate", str(take), "--board", str(path), "--out", str(tmp_path / "c.yaml"), timeout=60)
+    assert res.returncode == 3 and len(res.stderr.splitlines()) == 1, res.stderr
+    assert f"{path}: {says}" in res.stderr

@@ -264,6 +264,84 @@ def test_grid_folder_input(tmp_path: Path) -> None:
     assert np.median(np.abs(d[10:-10, 10:-10] - 6.0)) < 0.5
 
 
+def test_out_over_a_grid_folder_or_its_truth_is_refused_and_leaves_the_pictures(tmp_path: Path) -> None:
+    """A grid folder's outputs are named as its pictures: depth GRID --out GRID wrote the colour-mapped preview
+    over r0c0.png with exit 0; --out GRID/truth would have replaced the reference disparities."""
+    g = plane_grid(6.0, h=40, w=60, rows=1, cols=2)
+    grid = tmp_path / "grid"
+    grid.mkdir()
+    for n, img in g.images.items():
+        cv2.imwrite(str(grid / f"{n}.png"), (img[..., ::-1] * 255).astype(np.uint8))
+    (grid / "grid.yaml").write_text("spacing_x: 0.12\nfocal_px: 1000\ndisparity_range_px: [0, 12]\n")
+    before = {p.name: p.read_bytes() for p in grid.iterdir()}
+    (tmp_path / "link").symlink_to(grid)
+    for out in (grid, tmp_path / "link", grid / "truth", grid / "truth" / "x"):
+        res = run_rigctl("depth", str(grid), "--out", str(out), "--no-key", "--preset", "fast")
+        assert res.returncode == 2 and len(res.stderr.splitlines()) == 1, res.stderr
+        assert "would write over" in res.stderr and str(out) in res.stderr
+    assert {p.name: p.read_bytes() for p in grid.iterdir()} == before
+
+
+@pytest.mark.parametrize("bad", ["small", "nan"])
+def test_a_truth_of_the_wrong_size_or_of_nan_is_named_in_one_line(
+    ideal_take: Path, tmp_path: Path, bad: str
+) -> None:
+    """A take's truth PFM smaller than its frames ended depth in an IndexError traceback (exit 1); one of NaN
+    (undefined is +inf) was scored as 0 % bad. A grid folder's truth of NaN is refused the same way."""
+    import shutil
+
+    from rigctl.pfm import read_pfm, write_pfm
+
+    take = tmp_path / "take"
+    shutil.copytree(ideal_take, take)
+    pfm = take / "truth" / "disparity" / "000000" / "r1c1.pfm"
+    t = read_pfm(pfm)
+    write_pfm(pfm, np.zeros((10, 12), np.float32) if bad == "small" else np.full_like(t, np.nan))
+    res = run_rigctl("depth", str(take), "--out", str(tmp_path / "d"), "--preset", "fast", "--cameras", "r1c1")
+    assert res.returncode == 3 and len(res.stderr.splitlines()) == 1, res.stderr
+    assert str(pfm) in res.stderr and ("(12, 10) px" if bad == "small" else "holds NaN") in res.stderr
+    if bad == "nan":
+        g = plane_grid(6.0, h=40, w=60, rows=1, cols=2)
+        grid = tmp_path / "grid"
+        (grid / "truth").mkdir(parents=True)
+        for n, img in g.images.items():
+            cv2.imwrite(str(grid / f"{n}.png"), (img[..., ::-1] * 255).astype(np.uint8))
+        (grid / "grid.yaml").write_text("spacing_x: 0.12\nfocal_px: 1000\ndisparity_range_px: [0, 12]\n")
+        write_pfm(grid / "truth" / "r0c0.pfm", np.full((40, 60), np.nan, np.float32))
+        res = run_rigctl("depth", str(grid), "--out", str(tmp_path / "g"), "--preset", "fast")
+        assert res.returncode == 3 and "truth/r0c0.pfm: reference disparity holds NaN" in res.stderr, res.stderr
+
+
+@pytest.mark.parametrize(
+    ("key", "line", "value"),
+    [("focal_px", "  focal_px", ".nan"), ("focal_px", "  focal_px", "1.0e+300"), ("focal_px", "  focal_px", "-1838.0"),
+     ("spacing_x_m", "  spacing_x_m", "1.0e-300"), ("spacing_x_m", "  spacing_x_m", "-0.12"),
+     ("spacing_y_m", "  spacing_y_m", ".inf"), ("positions_m", "    r0c0", "[.nan, 0, 0]"),
+     ("positions_m", "    r0c0", "[1]"), ("K", "  K", "[[1838, 0, .nan], [0, 1838, 270], [0, 0, 1]]")],
+)  # fmt: skip
+def test_a_rectified_take_whose_focal_length_or_spacing_makes_no_sense_is_refused(
+    ideal_take: Path, tmp_path: Path, key: str, line: str, value: str
+) -> None:
+    """A rectified take's rectification.focal_px NaN, negative or 1e300, a spacing of 1e-300, negative or
+    infinite, a camera position or K of NaN was read with exit 0: every depth.Z came out 0 and worldToNDC NaN
+    (a position of NaN: 'no camera at a different position'); a position of one number was a traceback."""
+    import re
+    import shutil
+
+    take = tmp_path / "take"
+    shutil.copytree(ideal_take, take)
+    text = (take / "take.yaml").read_text()
+    if key == "K":  # a block list in the file: replaced by a flow one
+        text, n = re.subn(r"\n  K:\n(  - [^\n]+\n){3}", f"\n  K: {value}\n", text)
+    else:
+        text, n = re.subn(rf"(\n{line}: )[^\n]+", rf"\g<1>{value}", text)
+    assert n == 1
+    (take / "take.yaml").write_text(text)
+    res = run_rigctl("depth", str(take), "--out", str(tmp_path / "d"), "--preset", "fast", "--cameras", "r1c1")
+    assert res.returncode == 3 and len(res.stderr.splitlines()) == 1, res.stderr
+    assert "take.yaml:" in res.stderr and f"rectification.{key}" in res.stderr
+
+
 def test_bench_depth_quick(tmp_path: Path) -> None:
     res = run_rigctl("bench", "depth", "--quick", "--json", "--plot", str(tmp_path / "p.png"), timeout=600)
     assert res.returncode == 0, res.stderr

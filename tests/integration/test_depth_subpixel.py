@@ -47,6 +47,16 @@ def test_scenes_have_fractional_mixed_sign_truth_and_round_trip_as_grid_folders(
     assert (tmp_path / "grid" / "truth" / "r1c1.pfm").exists()
 
 
+def test_a_16_bit_picture_with_alpha_reads_as_its_colour_in_a_grid_folder(tmp_path: Path) -> None:
+    """16-bit BGRA was reversed whole and then cut to three channels: (A, R, G) read as (R, G, B)."""
+    g = SCENES["surfaces"]((32, 32))
+    folder = write_grid_folder(g, tmp_path / "grid")
+    bgr = cv2.imread(str(folder / "r0c0.png"))
+    cv2.imwrite(str(folder / "r0c0.png"), cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA).astype(np.uint16) * 257)
+    back = load_grid_folder(folder)
+    assert np.abs(back.images["r0c0"] - bgr[..., ::-1] / np.float32(255)).max() < 1e-6
+
+
 def test_locking_figure_sees_rounded_estimates_and_not_noisy_ones() -> None:
     rng = np.random.default_rng(0)
     truth = rng.uniform(-5, 5, 20000)

@@ -138,3 +138,24 @@ def test_a_killed_command_leaves_only_whole_files_and_the_same_command_finishes(
     assert not list(tmp_path.rglob(f"*{TEMP_SUFFIX}")) and not list(tmp_path.glob(f".*{PARTIAL_SUFFIX}"))
     if verb == "rectify":
         assert check_take(out).ok
+
+
+@pytest.mark.parametrize("nth", [1, 2, 3, 4])
+def test_a_demo_killed_while_clearing_a_finished_one_is_left_unfinished(tmp_path: Path, nth: int) -> None:
+    """demo --fresh cleared a finished demo in directory order: killed there, it could leave report.md beside
+    half its figures (a "finished" demo the next run refuses without --fresh) or the figures without the
+    marker (a folder the next run refuses for ever). Killed at any removal, the folder is now whole or
+    unfinished (marker, no report), which the next demo replaces without asking."""
+    out = tmp_path / "demo"
+    (out / "takes" / "calibration").mkdir(parents=True)
+    files = {".rigctl-demo": "rigctl demo\n", "report.md": "# report\n", "calibration.yaml": "spec: 1\n"}
+    files |= {"depth.png": "png", "takes/calibration/take.yaml": "spec: 1\n"}
+    for name, text in files.items():
+        (out / name).write_text(text)
+    killed = subprocess.run(
+        [sys.executable, str(RUNNER), "unlink", str(nth), "KILL", "--", "demo", "--out", str(out), "--fresh"],
+        capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL,
+    )  # fmt: skip
+    assert killed.returncode == -9, (killed.returncode, killed.stderr)
+    left = {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()}
+    assert left == set(files) or (".rigctl-demo" in left and "report.md" not in left) or not left, left

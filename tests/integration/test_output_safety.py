@@ -470,6 +470,7 @@ def png_header(width: int, height: int) -> bytes:
         ("fifo", "not a regular file"),
         ("bad_range", "disparity_range_px: expected [min, max]"),
         ("reversed_range", "disparity_range_px"),
+        ("absurd_focal", "focal_px: 1e+300 is not plausible for pictures 64 px wide"),
     ],
 )
 def test_grid_folder_pictures_are_checked_before_decoding(tmp_path: Path, case: str, fragment: str) -> None:
@@ -483,6 +484,8 @@ def test_grid_folder_pictures_are_checked_before_decoding(tmp_path: Path, case: 
         (grid / "grid.yaml").write_text("spacing_x: 1\nfocal_px: 100\ndisparity_range_px: [0, .nan]\n")
     elif case == "reversed_range":
         (grid / "grid.yaml").write_text("spacing_x: 1\nfocal_px: 100\ndisparity_range_px: [9, 2]\n")
+    elif case == "absurd_focal":
+        (grid / "grid.yaml").write_text("spacing_x: 1\nfocal_px: 1.0e+300\n")
     else:
         w, h = (int(v) for v in case.split("x"))
         (grid / "r0c1.png").write_bytes(png_header(w, h) + bytes(1 << 20))

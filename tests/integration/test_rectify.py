@@ -123,6 +123,21 @@ def test_bad_input_is_one_line(take: Path, tmp_path: Path, run_cli, problem: str
     assert res.returncode == 3 and message in res.stderr and len(res.stderr.strip().splitlines()) == 1
 
 
+def test_out_inside_the_source_truth_is_one_line_and_copies_nothing(take: Path, tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    """The new take copies the source's truth/: an --out inside it copied the copy into itself until the path
+    was too long (27 MB written, a 123 KB error line, exit 4)."""
+    import shutil
+
+    src = tmp_path / "t"
+    shutil.copytree(take, src)
+    before = sorted(str(p.relative_to(src)) for p in src.rglob("*"))
+    out = src / "truth" / "rect"
+    res = run_cli("rectify", str(src), "--calibration", str(take / "truth" / "calibration.yaml"), "--out", str(out))
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1 and len(res.stderr) < 300, res.stderr
+    assert "lies in the source take's truth/" in res.stderr
+    assert sorted(str(p.relative_to(src)) for p in src.rglob("*")) == before
+
+
 def test_board_writes_a_detectable_target(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
     from rigctl.board import BoardSpec
 

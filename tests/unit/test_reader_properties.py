@@ -147,6 +147,39 @@ def test_calibration_any_text(tmp_path: Path, text: str) -> None:
     bounded(lambda: load_calibration(path))
 
 
+CALIBRATION = """spec: 1
+cameras:
+  r0c0:
+    K: [[1000, 0, 320], [0, 1000, 240], [0, 0, 1]]
+    dist: [0, 0, 0, 0, 0]
+    R: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]
+    t: [0, 0, 0]
+    image_size: [640, 480]
+"""
+
+
+@pytest.mark.parametrize(
+    ("old", "says"),
+    [
+        ("[[1000, 0, 320]", "cameras.r0c0.K must be 3x3 finite numbers"),
+        ("[0, 0, 0, 0, 0]", "cameras.r0c0.dist must be a list of finite numbers"),
+        ("t: [0, 0, 0]", "cameras.r0c0.t must be 3 finite numbers"),
+        ("[640, 480]", "cameras.r0c0.image_size must be [width, height], at most 65536 px a side"),
+    ],
+    ids=["K", "dist", "t", "image_size"],
+)
+def test_calibration_integer_too_large_for_a_float_is_named(tmp_path: Path, old: str, says: str) -> None:
+    """A 401-digit integer in a calibration ended rectify (and every reader of it) in an OverflowError traceback."""
+    from rigctl.errors import RigFileError
+
+    path = tmp_path / "calibration.yaml"
+    path.write_text(CALIBRATION)
+    load_calibration(path)  # the file as it is reads
+    path.write_text(CALIBRATION.replace(old, old.replace("0", "1" + "0" * 400, 1), 1))
+    with pytest.raises(RigFileError, match=re.escape(says)):
+        load_calibration(path)
+
+
 @PROPERTY
 @given(
     spec=st.dictionaries(
@@ -319,6 +352,11 @@ def test_take_with_any_timecodes(module_tmp: Callable[[str], Path], timecodes: l
         ("spacing_x: .nan", "spacing_x: must be a finite number, got nan"),
         ("spacing_x: '0.12'", "spacing_x: must be a finite number, got '0.12'"),
         ("spacing_x: 0.12\nspacing_y: -1", "spacing_y: must be positive, got -1"),
+        # an integer too large for a float: math.isfinite raised OverflowError (a traceback)
+        pytest.param("spacing_x: 1" + "0" * 400, "spacing_x: must be a finite number, got 1000", id="int-spacing"),
+        pytest.param(
+            "spacing_x: 1\ndisparity_range_px: [0, 1" + "0" * 400 + "]", "disparity_range_px: expected", id="int-range"
+        ),
     ],
 )
 def test_a_grid_yaml_value_out_of_range_is_named(tmp_path: Path, line: str, says: str) -> None:
@@ -330,6 +368,34 @@ def test_a_grid_yaml_value_out_of_range_is_named(tmp_path: Path, line: str, says
     focal = "" if "focal_px" in line else "\nfocal_px: 1000"
     (tmp_path / "grid.yaml").write_text(line + focal + "\n")
     cv2.imwrite(str(tmp_path / "r0c0.png"), np.zeros((4, 6, 3), np.uint8))
+    with pytest.raises(RigFileError, match=re.escape(says)):
+        load_grid_folder(tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("spec", "says"),
+    [
+        ("focal_px: 1.0e+300", "focal_px: 1e+300 is not plausible for pictures 24 px wide (expected 1.2 to 2400 px)"),
+        ("focal_px: 1.0e-300", "focal_px: 1e-300 is not plausible for pictures 24 px wide"),
+        ("focal_px: 100\nspacing_x: 1.0e-300", "spacing_x: must be between 1e-06 and 1e+06, got 1e-300"),
+        ("focal_px: 100\nspacing_x: 1.0e+300", "spacing_x: must be between 1e-06 and 1e+06, got 1e+300"),
+        ("focal_px: 100\nspacing_y: 1.0e+300", "spacing_y: must be between 1e-06 and 1e+06, got 1e+300"),
+        ("focal_px: 100\ndoffs: -1.0e+300", "doffs: must be within +-16384 px, got -1e+300"),
+        ("focal_px: 100\nspacing_y: 0", "spacing_y: 0 puts the 2 rows of cameras at one place"),
+    ],
+)
+def test_grid_yaml_numbers_that_make_every_depth_zero_or_infinite_are_refused(
+    tmp_path: Path, spec: str, says: str
+) -> None:
+    """focal_px 1e300 (or 1e-300), a spacing of 1e300 or a doffs of 1e300 were accepted: every depth.Z came out
+    0 and the EXR's worldToNDC infinite, with exit 0; spacing_y 0 was read as spacing_x."""
+    import cv2
+
+    from rigctl.errors import RigFileError
+
+    (tmp_path / "grid.yaml").write_text("spacing_x: 1\n" * ("spacing_x" not in spec) + spec + "\n")
+    for cam in ("r0c0", "r1c0"):
+        cv2.imwrite(str(tmp_path / f"{cam}.png"), np.zeros((16, 24, 3), np.uint8))
     with pytest.raises(RigFileError, match=re.escape(says)):
         load_grid_folder(tmp_path)
 
