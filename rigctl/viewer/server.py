@@ -13,6 +13,7 @@ import logging
 import queue
 import re
 import socket
+import sys
 import threading
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -52,7 +53,10 @@ def static_files() -> dict[str, bytes]:
 
 class ViewerServer(ThreadingHTTPServer):
     daemon_threads = True
-    allow_reuse_address = False
+    # the port of a viewer just stopped is in TIME_WAIT while its browser's connections close: a rerun on the
+    # same --port must not be refused for a minute (a live listener still is); Windows' SO_REUSEADDR would
+    # share a port in use, so not there
+    allow_reuse_address = sys.platform != "win32"
 
     def __init__(self, bundles: Bundles, host: str = "127.0.0.1", port: int = 0, accept_results: bool = False) -> None:
         self.bundles = bundles

@@ -168,3 +168,27 @@ def test_bad_input_is_one_line(take: Path, tmp_path: Path) -> None:
         busy.listen()
         port = busy.getsockname()[1]
         one_line(run_rigctl("view", str(take), "--disparity", truth, "--port", str(port)), "cannot listen", str(port))
+
+
+def test_a_rerun_on_the_same_port_starts_while_the_last_ones_connections_close(take: Path) -> None:
+    """Ctrl-C with a browser connected leaves the port's connections in TIME_WAIT for a minute; the README's
+    fixed --port must serve again at once (a hostile-user review: it said "cannot listen ... in use")."""
+    first = serve(take)
+    conn = http.client.HTTPConnection(first.host, first.port, timeout=30)
+    conn.request("GET", "/")
+    assert conn.getresponse().read()  # kept alive: the server's side closes first, at exit
+    first.proc.send_signal(signal.SIGINT)
+    first.proc.communicate(timeout=30)
+    conn.close()
+    again = serve(take, "--port", str(first.port))
+    try:
+        assert again.port == first.port and again.get("/")[0] == 200
+    finally:
+        again.proc.send_signal(signal.SIGINT)
+        again.proc.communicate(timeout=30)
+
+
+def test_a_second_viewer_on_a_port_in_use_is_refused(served: Served, take: Path) -> None:
+    truth = str(take / "truth" / "disparity")
+    one_line(run_rigctl("view", str(take), "--disparity", truth, "--port", str(served.port)), "cannot listen")
+    assert served.get("/")[0] == 200
