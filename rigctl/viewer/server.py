@@ -21,7 +21,7 @@ from importlib import resources
 from pathlib import Path
 from urllib.parse import parse_qs, unquote, urlsplit
 
-from rigctl.errors import ParameterError
+from rigctl.errors import ParameterError, RigctlError
 from rigctl.viewer.bundle import Bundles
 
 log = logging.getLogger(__name__)
@@ -154,7 +154,13 @@ class _Handler(BaseHTTPRequestHandler):
             info = {**srv.bundles.info, "results": srv.accept_results}
             self._send(HTTPStatus.OK, json.dumps(info).encode(), "application/json")
         elif (m := FRAME.fullmatch(path)) and int(m[1]) in srv.bundles.numbers:
-            self._send(HTTPStatus.OK, srv.bundles.get(int(m[1])), "application/octet-stream")
+            try:
+                bundle = srv.bundles.get(int(m[1]))
+            except RigctlError as exc:  # a damaged file of the take: named on the terminal, the page shows the 500
+                log.error("%s", exc)
+                self._send(HTTPStatus.INTERNAL_SERVER_ERROR, f"frame set {m[1]} could not be read\n".encode())
+                return
+            self._send(HTTPStatus.OK, bundle, "application/octet-stream")
         else:
             self._send(HTTPStatus.NOT_FOUND, b"not found\n")
 

@@ -4,6 +4,7 @@ variants refused), Ctrl-C, and bad input as one line."""
 from __future__ import annotations
 
 import http.client
+import shutil
 import signal
 import socket
 import subprocess
@@ -192,3 +193,24 @@ def test_a_second_viewer_on_a_port_in_use_is_refused(served: Served, take: Path)
     truth = str(take / "truth" / "disparity")
     one_line(run_rigctl("view", str(take), "--disparity", truth, "--port", str(served.port)), "cannot listen")
     assert served.get("/")[0] == 200
+
+
+def test_a_damaged_frame_set_is_a_500_and_one_line_naming_its_file(take: Path, tmp_path: Path) -> None:
+    """A truncated disparity of one frame set (a hostile-user review: the connection was dropped with no
+    response and nothing on the terminal); the other frame sets are still served."""
+    copy = tmp_path / "t"
+    shutil.copytree(take, copy)
+    bad = copy / "truth" / "disparity" / "000001" / "r1c1.pfm"
+    bad.write_bytes(bad.read_bytes()[:100])
+    s = serve(copy)
+    try:
+        status, body = s.get("/api/frame/1.bin")
+        assert status == 500 and b"frame set 1" in body and b"RGFS" not in body
+        status, body = s.get("/api/frame/0.bin")
+        assert status == 200 and body[:4] == b"RGFS"
+    finally:
+        s.proc.send_signal(signal.SIGINT)
+        _out, err = s.proc.communicate(timeout=30)
+    lines = err.strip().splitlines()
+    assert lines[-1] == "rigctl view: stopped" and "Traceback" not in err, err
+    assert len(lines) == 2 and str(bad) in lines[0] and "byte" in lines[0], lines
