@@ -166,7 +166,10 @@ class _Handler(BaseHTTPRequestHandler):
 
     def do_POST(self) -> None:
         url = urlsplit(self.path)
-        length = int(self.headers.get("Content-Length") or 0)
+        try:
+            length = int(self.headers.get("Content-Length") or 0)
+        except ValueError:
+            length = -1  # not a length: refused below as any other unwanted body
         wanted = self.server.accept_results and url.path == "/api/result" and 0 <= length <= MAX_RESULT
         if self._foreign_host() or not wanted:
             self.close_connection = True  # its body is not read

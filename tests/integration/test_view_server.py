@@ -214,3 +214,13 @@ def test_a_damaged_frame_set_is_a_500_and_one_line_naming_its_file(take: Path, t
     lines = err.strip().splitlines()
     assert lines[-1] == "rigctl view: stopped" and "Traceback" not in err, err
     assert len(lines) == 2 and str(bad) in lines[0] and "byte" in lines[0], lines
+
+
+@pytest.mark.parametrize("length", ["abc", "-5", "1e3", "99999999999999999999999", ""])
+def test_a_post_with_a_bad_length_is_a_404_and_the_server_goes_on(served: Served, length: str) -> None:
+    """A Content-Length that is not a number (a hostile-user review: the connection was dropped unanswered)."""
+    with socket.create_connection((served.host, served.port), timeout=30) as s:
+        s.sendall(f"POST /api/result?tag=x HTTP/1.1\r\nHost: localhost\r\nContent-Length: {length}\r\n\r\n".encode())
+        answer = s.makefile("rb").readline()
+    assert answer.startswith(b"HTTP/1.1 404"), (length, answer)
+    assert served.get("/")[0] == 200
