@@ -30,6 +30,8 @@ TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=u
          ".glsl": "text/plain; charset=utf-8", ".png": "image/png"}  # fmt: skip
 FRAME = re.compile(r"/api/frame/(\d{1,9})\.bin")
 MAX_RESULT = 1 << 28  # a 4K RGBA read-back with room to spare
+IDLE_S = 30.0  # a client that sends or takes nothing this long (gone, or holding a connection) is dropped
+CHUNK = 1 << 16  # a body is written in these, each within IDLE_S: a slow but steady reader gets it whole
 
 
 def static_files() -> dict[str, bytes]:
@@ -96,6 +98,10 @@ class _Handler(BaseHTTPRequestHandler):
     server: ViewerServer
     protocol_version = "HTTP/1.1"
 
+    def setup(self) -> None:
+        super().setup()
+        self.connection.settimeout(IDLE_S)  # without it a silent client held its connection and thread for ever
+
     def log_message(self, format: str, *args: object) -> None:
         log.debug("%s %s", self.address_string(), format % args)
 
@@ -107,7 +113,9 @@ class _Handler(BaseHTTPRequestHandler):
         self.send_header("X-Content-Type-Options", "nosniff")
         self.end_headers()
         if self.command != "HEAD":
-            self.wfile.write(body)
+            view = memoryview(body)
+            for at in range(0, len(view), CHUNK):
+                self.wfile.write(view[at : at + CHUNK])
 
     def _path(self) -> str | None:
         """The request's path decoded once, or None when it could name anything outside our list."""

@@ -8,11 +8,16 @@ import shutil
 import signal
 import socket
 import subprocess
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 from tests_support import rigctl_exe, run_rigctl
+
+import rigctl.viewer.server as server_module
+from rigctl.viewer.bundle import Bundles
+from rigctl.viewer.server import ViewerServer
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -224,3 +229,71 @@ def test_a_post_with_a_bad_length_is_a_404_and_the_server_goes_on(served: Served
         answer = s.makefile("rb").readline()
     assert answer.startswith(b"HTTP/1.1 404"), (length, answer)
     assert served.get("/")[0] == 200
+
+
+@pytest.fixture(scope="module")
+def big(module_tmp: Callable[[str], Path]) -> Path:
+    """One frame set at 640x360: a bundle (16 MB) larger than the sockets' buffers."""
+    out = module_tmp("view-big")
+    rig = (REPO / "rigs" / "sim-3x3.yaml").read_text()
+    rig = rig.replace("width_px: 960", "width_px: 640").replace("height_px: 540", "height_px: 360")
+    (out / "big.yaml").write_text(rig)
+    res = run_rigctl(
+        "record", str(out / "big.yaml"), "--take", "t", "--frames", "1", "--out", str(out),
+        "--sim", "ideal=true", "--sim", "motion=false", "--sim", "deterministic=true", "--force",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    return out / "t"
+
+
+@pytest.fixture
+def quick(big: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[ViewerServer]:
+    """The viewer's server dropping a client silent for 1 s (30 s in use)."""
+    monkeypatch.setattr(server_module, "IDLE_S", 1.0, raising=False)
+    srv = ViewerServer(Bundles(big, big / "truth" / "disparity"))
+    srv.start()
+    yield srv
+    srv.shutdown()
+    srv.server_close()
+
+
+def test_a_silent_or_vanished_client_is_dropped(quick: ViewerServer) -> None:
+    """A hostile-user review: a client that sent half a request, or asked for a frame set and read none of
+    it, held its connection and a thread for ever (idle connections exhaust the descriptors: the viewer then
+    accepts no one)."""
+    host, port = quick.server_address[:2]
+    with socket.create_connection((str(host), port), timeout=10) as silent:
+        silent.sendall(b"GET / HTTP/1.1\r\n")
+        assert silent.recv(1 << 16) == b""  # closed by the server well before our 10 s
+    with socket.socket() as stalled:
+        stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        stalled.settimeout(30)
+        stalled.connect((str(host), port))
+        stalled.sendall(b"GET /api/frame/0.bin HTTP/1.1\r\nHost: localhost\r\n\r\n")
+        time.sleep(4)
+        got = b""
+        while chunk := stalled.recv(1 << 20):
+            got += chunk
+        head, _, body = got.partition(b"\r\n\r\n")
+        length = int(head.split(b"Content-Length: ")[1].split(b"\r\n")[0])
+        assert b"200 OK" in head and 0 < len(body) < length  # cut off, not waited for
+    conn = http.client.HTTPConnection(str(host), port, timeout=30)
+    conn.request("GET", "/api/take.json")
+    assert conn.getresponse().status == 200
+
+
+def test_a_slow_but_steady_reader_gets_the_whole_frame_set(quick: ViewerServer) -> None:
+    host, port = quick.server_address[:2]
+    with socket.socket() as slow:
+        slow.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 16)
+        slow.settimeout(30)
+        slow.connect((str(host), port))
+        slow.sendall(b"GET /api/frame/0.bin HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
+        got, start = b"", time.monotonic()
+        while chunk := slow.recv(1 << 16):
+            got += chunk
+            time.sleep(0.005)
+        head, _, body = got.partition(b"\r\n\r\n")
+    length = int(head.split(b"Content-Length: ")[1].split(b"\r\n")[0])
+    assert len(body) == length and body[:4] == b"RGFS"
+    assert time.monotonic() - start > 1.0  # longer in all than the server waits for one write
