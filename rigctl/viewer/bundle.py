@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import struct
 import threading
 from collections import OrderedDict
@@ -23,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from rigctl.errors import ParameterError
+from rigctl.errors import ParameterError, TakeError
 from rigctl.render.inputs import RenderInput, _row_col
 from rigctl.render.kernels import NONE
 
@@ -32,6 +33,20 @@ log = logging.getLogger(__name__)
 MAGIC = b"RGFS"
 CACHE = 16  # bundles kept in memory: the page's read-ahead plus a little
 AHEAD = 8  # bundles made ahead of the last one asked for
+
+
+def _not_finite(value: Any, where: str = "") -> str | None:
+    """Where in a JSON-able ``value`` its first number that is not finite is (``cameras[r1c0].offset[1]``)."""
+    if isinstance(value, float):
+        return None if math.isfinite(value) else where
+    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
+    for key, item in items:
+        if isinstance(item, dict) and "name" in item:
+            key = str(item["name"])  # a camera by its name
+        found = _not_finite(item, f"{where}.{key}" if isinstance(value, dict) else f"{where}[{key}]")
+        if found is not None:
+            return found.lstrip(".")
+    return None
 
 
 def _u8(a: np.ndarray) -> np.ndarray:
@@ -50,6 +65,12 @@ class Bundles:
         first = self.input.frame(self.numbers[0])
         self.height, self.width = first.shape
         self.info = self._describe(first)
+        where = _not_finite(self.info)
+        if where is not None:  # JSON has no inf or NaN: the page could not read take.json at all
+            raise TakeError(
+                f"{source}: {where} of the take's description is not a finite number (the grid's spacings or "
+                "the rectification's positions are out of range)"
+            )
 
     def _describe(self, frame: Any) -> dict[str, Any]:
         views = frame.views

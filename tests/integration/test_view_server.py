@@ -297,3 +297,16 @@ def test_a_slow_but_steady_reader_gets_the_whole_frame_set(quick: ViewerServer) 
     length = int(head.split(b"Content-Length: ")[1].split(b"\r\n")[0])
     assert len(body) == length and body[:4] == b"RGFS"
     assert time.monotonic() - start > 1.0  # longer in all than the server waits for one write
+
+
+def test_a_grid_whose_spacings_put_cameras_at_infinity_is_one_line(tmp_path: Path) -> None:
+    """grid.yaml with spacing_y / spacing_x beyond a float (a hostile-user review: take.json said Infinity,
+    which no JSON reader takes, and the page never started)."""
+    from rigctl.depth.scenes import SCENES, write_grid_folder
+
+    grid = write_grid_folder(SCENES["surfaces"]((32, 32)), tmp_path / "grid")
+    for png in set(grid.glob("r*c*.png")) - {grid / "r1c1.png"}:  # the scene's truth is r1c1's only: every camera's
+        shutil.copyfile(grid / "truth" / "r1c1.pfm", grid / "truth" / f"{png.stem}.pfm")
+    (grid / "grid.yaml").write_text("spacing_x: 1.0e-300\nspacing_y: 1.0e+300\nfocal_px: 100\n")
+    res = run_rigctl("view", str(grid), "--disparity", str(grid / "truth"), "--port", "0", timeout=60)
+    one_line(res, str(grid), "offset", "not a finite number")
