@@ -310,3 +310,21 @@ def test_a_grid_whose_spacings_put_cameras_at_infinity_is_one_line(tmp_path: Pat
     (grid / "grid.yaml").write_text("spacing_x: 1.0e-300\nspacing_y: 1.0e+300\nfocal_px: 100\n")
     res = run_rigctl("view", str(grid), "--disparity", str(grid / "truth"), "--port", "0", timeout=60)
     one_line(res, str(grid), "offset", "not a finite number")
+
+
+@pytest.mark.parametrize("bind", ["::ffff:127.0.0.1", "127.0.0.2"])
+def test_every_loopback_address_refuses_other_hosts_names_and_is_not_warned_about(take: Path, bind: str) -> None:
+    """A hostile-user review: --bind ::ffff:127.0.0.1 (127.0.0.1 written as IPv6) answered a page of any
+    name (DNS rebinding) and, like 127.0.0.2, was warned about as open to the network."""
+    s = serve(take, "--bind", bind)
+    try:
+        conn = http.client.HTTPConnection(s.host, s.port, timeout=30)
+        conn.putrequest("GET", "/api/take.json", skip_host=True, skip_accept_encoding=True)
+        conn.putheader("Host", f"evil.example:{s.port}")
+        conn.endheaders()
+        assert conn.getresponse().status == 403
+        conn.close()
+    finally:
+        s.proc.send_signal(signal.SIGINT)
+        _out, err = s.proc.communicate(timeout=30)
+    assert "anyone who can reach" not in err, err
