@@ -15,10 +15,11 @@ from __future__ import annotations
 import json
 import logging
 import math
+import queue
 import struct
 import threading
 from collections import OrderedDict
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
 
@@ -61,7 +62,8 @@ class Bundles:
         self.numbers = self.input.select(None)
         self._lock = threading.Lock()
         self._cache: OrderedDict[int, Future[bytes]] = OrderedDict()
-        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rigctl-view-bundles")
+        self._jobs: queue.SimpleQueue[tuple[int, Future[bytes]]] = queue.SimpleQueue()
+        self._closed = threading.Event()
         first = self.input.frame(self.numbers[0])
         self.height, self.width = first.shape
         self.info = self._describe(first)
@@ -71,6 +73,9 @@ class Bundles:
                 f"{source}: {where} of the take's description is not a finite number (the grid's spacings or "
                 "the rectification's positions are out of range)"
             )
+        # a daemon: at exit (Ctrl-C) nothing waits for the bundle being made (a pool's thread is joined, and a
+        # second Ctrl-C during that join ended in a traceback)
+        threading.Thread(target=self._work, name="rigctl-view-bundles", daemon=True).start()
 
     def _describe(self, frame: Any) -> dict[str, Any]:
         views = frame.views
@@ -116,15 +121,32 @@ class Bundles:
         return wanted.result()
 
     def close(self) -> None:
-        """Drop the bundles queued ahead (at exit the interpreter waits only for the one being made)."""
-        self._worker.shutdown(wait=False, cancel_futures=True)
+        """Drop the bundles queued ahead and end the thread that makes them (after the one it is making)."""
+        self._closed.set()
+        with self._lock:
+            for made in self._cache.values():
+                made.cancel()
+        self._jobs.put((-1, Future()))  # wakes the thread
+
+    def _work(self) -> None:
+        while not self._closed.is_set():
+            number, made = self._jobs.get()
+            if self._closed.is_set() or not made.set_running_or_notify_cancel():
+                continue
+            try:
+                made.set_result(self._make(number))
+            except BaseException as exc:  # whoever waits for the bundle gets it (a pool's worker does the same)
+                made.set_exception(exc)
 
     def _future(self, number: int) -> Future[bytes]:
         with self._lock:
             if number in self._cache:
                 self._cache.move_to_end(number)
                 return self._cache[number]
-            made = self._worker.submit(self._make, number)
+            made: Future[bytes] = Future()
+            if self._closed.is_set():
+                made.cancel()  # never made: its waiter is not left waiting
+            self._jobs.put((number, made))
             self._cache[number] = made
             while len(self._cache) > CACHE:
                 self._cache.popitem(last=False)

@@ -328,3 +328,29 @@ def test_every_loopback_address_refuses_other_hosts_names_and_is_not_warned_abou
         s.proc.send_signal(signal.SIGINT)
         _out, err = s.proc.communicate(timeout=30)
     assert "anyone who can reach" not in err, err
+
+
+@pytest.fixture(scope="module")
+def full(module_tmp: Callable[[str], Path]) -> Path:
+    """Four frame sets at the simulated rig's own 960x540: a bundle takes about half a second to make."""
+    out = module_tmp("view-full")
+    res = run_rigctl(
+        "record", "sim-3x3", "--take", "t", "--frames", "4", "--out", str(out),
+        "--sim", "ideal=true", "--sim", "motion=false", "--sim", "deterministic=true", "--force",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    return out / "t"
+
+
+def test_ctrl_c_twice_while_frame_sets_are_made_ahead_stops_without_a_traceback(full: Path) -> None:
+    """A hostile-user review: Ctrl-C waited for the bundle being made ahead, and a second Ctrl-C meanwhile
+    printed a traceback of the interpreter's exit."""
+    s = serve(full)
+    assert s.get("/api/frame/0.bin")[0] == 200  # frame sets 1-3 are now being made ahead
+    s.proc.send_signal(signal.SIGINT)
+    time.sleep(0.3)
+    if s.proc.poll() is None:
+        s.proc.send_signal(signal.SIGINT)
+    _out, err = s.proc.communicate(timeout=30)
+    assert "Traceback" not in err, err
+    assert s.proc.returncode == 0 and err.strip().splitlines()[-1] == "rigctl view: stopped", err
