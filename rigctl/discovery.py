@@ -130,7 +130,7 @@ def _not_a_device(path: str) -> str | None:
     those), or None when it is one."""
     try:
         mode = os.stat(path).st_mode
-    except OSError:
+    except (OSError, ValueError):
         return "no such device"
     if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
         return None
