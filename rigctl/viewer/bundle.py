@@ -34,6 +34,7 @@ log = logging.getLogger(__name__)
 MAGIC = b"RGFS"
 CACHE = 16  # bundles kept in memory: the page's read-ahead plus a little
 AHEAD = 8  # bundles made ahead of the last one asked for
+MEMORY = 1 << 31  # bytes of bundles kept at most: 16 of the paper's UHD rig (600 MB each) would be 9.5 GB
 
 
 def _not_finite(value: Any, where: str = "") -> str | None:
@@ -66,6 +67,9 @@ class Bundles:
         self._closed = threading.Event()
         first = self.input.frame(self.numbers[0])
         self.height, self.width = first.shape
+        size = len(first.views) * self.height * self.width * 8  # RGBA8 and float32 disparity a camera
+        self.cache = max(2, min(CACHE, MEMORY // size))
+        self.ahead = min(AHEAD, self.cache - 1)
         self.info = self._describe(first)
         where = _not_finite(self.info)
         if where is not None:  # JSON has no inf or NaN: the page could not read take.json at all
@@ -116,7 +120,8 @@ class Bundles:
             raise ParameterError(f"frame set {number} is not one of the take's with a disparity")
         at = self.numbers.index(number)
         wanted = self._future(number)
-        for later in self.numbers[at + 1 : at + 1 + AHEAD] + self.numbers[: max(0, at + 1 + AHEAD - len(self.numbers))]:
+        ahead = self.ahead
+        for later in self.numbers[at + 1 : at + 1 + ahead] + self.numbers[: max(0, at + 1 + ahead - len(self.numbers))]:
             self._future(later)
         return wanted.result()
 
@@ -148,7 +153,7 @@ class Bundles:
                 made.cancel()  # never made: its waiter is not left waiting
             self._jobs.put((number, made))
             self._cache[number] = made
-            while len(self._cache) > CACHE:
+            while len(self._cache) > self.cache:
                 self._cache.popitem(last=False)
             return made
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 from tests_support import rigctl_exe, run_rigctl
 
+import rigctl.viewer.bundle as bundle_module
 import rigctl.viewer.server as server_module
 from rigctl.viewer.bundle import Bundles
 from rigctl.viewer.server import ViewerServer
@@ -354,3 +355,18 @@ def test_ctrl_c_twice_while_frame_sets_are_made_ahead_stops_without_a_traceback(
     _out, err = s.proc.communicate(timeout=30)
     assert "Traceback" not in err, err
     assert s.proc.returncode == 0 and err.strip().splitlines()[-1] == "rigctl view: stopped", err
+
+
+def test_the_bundles_kept_fit_in_a_memory_budget(full: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A hostile-user review: 16 bundles were kept and 8 made ahead whatever their size: at the paper's UHD
+    rig 600 MB each, 5 GB after the first request and 9.5 GB in all."""
+    monkeypatch.setattr(bundle_module, "MEMORY", 3 * 9 * 960 * 540 * 8, raising=False)  # three bundles
+    bundles = Bundles(full, full / "truth" / "disparity")
+    try:
+        assert bundles.get(0)[:4] == b"RGFS"
+        time.sleep(3)  # what is made ahead is made
+        assert len(bundles._cache) <= 3
+        assert bundles.get(1)[:4] == b"RGFS" and bundles.get(3)[:4] == b"RGFS"
+        assert len(bundles._cache) <= 3
+    finally:
+        bundles.close()
