@@ -233,14 +233,11 @@ def test_a_post_with_a_bad_length_is_a_404_and_the_server_goes_on(served: Served
 
 
 @pytest.fixture(scope="module")
-def big(module_tmp: Callable[[str], Path]) -> Path:
-    """One frame set at 640x360: a bundle (16 MB) larger than the sockets' buffers."""
-    out = module_tmp("view-big")
-    rig = (REPO / "rigs" / "sim-3x3.yaml").read_text()
-    rig = rig.replace("width_px: 960", "width_px: 640").replace("height_px: 540", "height_px: 360")
-    (out / "big.yaml").write_text(rig)
+def full(module_tmp: Callable[[str], Path]) -> Path:
+    """Four frame sets at the simulated rig's own 960x540: a bundle takes about half a second to make."""
+    out = module_tmp("view-full")
     res = run_rigctl(
-        "record", str(out / "big.yaml"), "--take", "t", "--frames", "1", "--out", str(out),
+        "record", "sim-3x3", "--take", "t", "--frames", "4", "--out", str(out),
         "--sim", "ideal=true", "--sim", "motion=false", "--sim", "deterministic=true", "--force",
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
@@ -248,10 +245,11 @@ def big(module_tmp: Callable[[str], Path]) -> Path:
 
 
 @pytest.fixture
-def quick(big: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[ViewerServer]:
-    """The viewer's server dropping a client silent for 1 s (30 s in use)."""
+def quick(full: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[ViewerServer]:
+    """The viewer's server dropping a client silent for 1 s (30 s in use), on bundles of 37 MB: larger than
+    the sockets' buffers."""
     monkeypatch.setattr(server_module, "IDLE_S", 1.0, raising=False)
-    srv = ViewerServer(Bundles(big, big / "truth" / "disparity"))
+    srv = ViewerServer(Bundles(full, full / "truth" / "disparity"))
     srv.start()
     yield srv
     srv.shutdown()
@@ -329,18 +327,6 @@ def test_every_loopback_address_refuses_other_hosts_names_and_is_not_warned_abou
         s.proc.send_signal(signal.SIGINT)
         _out, err = s.proc.communicate(timeout=30)
     assert "anyone who can reach" not in err, err
-
-
-@pytest.fixture(scope="module")
-def full(module_tmp: Callable[[str], Path]) -> Path:
-    """Four frame sets at the simulated rig's own 960x540: a bundle takes about half a second to make."""
-    out = module_tmp("view-full")
-    res = run_rigctl(
-        "record", "sim-3x3", "--take", "t", "--frames", "4", "--out", str(out),
-        "--sim", "ideal=true", "--sim", "motion=false", "--sim", "deterministic=true", "--force",
-    )  # fmt: skip
-    assert res.returncode == 0, res.stderr
-    return out / "t"
 
 
 def test_ctrl_c_twice_while_frame_sets_are_made_ahead_stops_without_a_traceback(full: Path) -> None:
