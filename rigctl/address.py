@@ -64,6 +64,8 @@ def parse_address(text: str, role: str, schemes: tuple[str, ...]) -> Address:
     Raises DeviceError naming the role, the address and the schemes accepted."""
     if not isinstance(text, str) or not text.strip():
         raise DeviceError(f"{role}: empty device address")
+    if "\x00" in text:  # no path holds one: os refuses it with a ValueError, not as a missing device
+        raise DeviceError(f"{role}: device address {text!r}: holds a NUL character")
     scheme, rest, options = _split(text.strip())
     if scheme == "" and rest.startswith("/"):
         # a bare path: a V4L2 node for cameras, a serial port for lines

@@ -4,11 +4,13 @@ the ``rigctl devices`` report. Nothing here opens a device for capture or contro
 from __future__ import annotations
 
 import os
+import stat
 from pathlib import Path
 from typing import Any, NotRequired, TypedDict
 
 from rigctl.address import camera_address, line_address
 from rigctl.errors import DeviceError
+from rigctl.publish import kind
 from rigctl.rig import Rig, UsbIdentity
 
 
@@ -120,7 +122,19 @@ def _line_state(text: str, role: str) -> str:
         return "simulated"
     if not address.is_local_path:
         return "network"
-    return "found" if address.exists() else "MISSING"
+    return "found" if _not_a_device(address.target) is None else "MISSING"
+
+
+def _not_a_device(path: str) -> str | None:
+    """Why a line's ``path`` is no device node (missing, or a folder, file, FIFO or socket: rigctl tally refuses
+    those), or None when it is one."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return "no such device"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return None
+    return f"exists but is {kind(mode)}, not a device"
 
 
 def describe_attached(rig: Rig) -> AttachedReport:
@@ -166,7 +180,8 @@ def describe_attached(rig: Rig) -> AttachedReport:
         state = _line_state(address, f"{role} line")
         lines.append({"role": role, "address": address, "state": state})
         if state == "MISSING":
-            missing.append(f"{role} line ({address})")
+            why = _not_a_device(line_address(address, f"{role} line").target)
+            missing.append(f"{role} line ({address}{'' if why == 'no such device' else f': {why}'})")
     usb: list[UsbEntry] = []
     identities: list[IdentityState] = []
     wanted = rig_usb_identities(rig)

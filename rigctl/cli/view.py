@@ -27,9 +27,12 @@ def port(text: str) -> int:
 def address(text: str) -> str:
     """An IP address to listen on (never a name: what is reachable should be what was typed)."""
     try:
-        return str(ipaddress.ip_address(text))
+        ip = ipaddress.ip_address(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected an IP address such as 127.0.0.1 or 0.0.0.0, got {text!r}") from None
+    # ::ffff:127.0.0.1 is 127.0.0.1 (the same clients reach it), which Python does not call loopback: as IPv4,
+    # the server keeps refusing other hosts' names on it
+    return str(getattr(ip, "ipv4_mapped", None) or ip)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -66,7 +69,7 @@ def run(ns: argparse.Namespace) -> int:
         raise ParameterError(f"{ns.input}: does not exist")
     bundles = Bundles(ns.input, ns.disparity)
     server = ViewerServer(bundles, ns.bind, ns.port)
-    if ns.bind not in ("127.0.0.1", "::1"):
+    if not ipaddress.ip_address(ns.bind).is_loopback:
         log.warning("listening on %s: anyone who can reach this machine there can see the take", ns.bind)
     print(f"rigctl view: {ns.input} ({len(bundles.numbers)} frame sets) at {server.url} (Ctrl-C stops)", flush=True)
     if ns.open:

@@ -14,16 +14,18 @@ from __future__ import annotations
 
 import json
 import logging
+import math
+import queue
 import struct
 import threading
 from collections import OrderedDict
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from rigctl.errors import ParameterError
+from rigctl.errors import ParameterError, TakeError
 from rigctl.render.inputs import RenderInput, _row_col
 from rigctl.render.kernels import NONE
 
@@ -32,6 +34,21 @@ log = logging.getLogger(__name__)
 MAGIC = b"RGFS"
 CACHE = 16  # bundles kept in memory: the page's read-ahead plus a little
 AHEAD = 8  # bundles made ahead of the last one asked for
+MEMORY = 1 << 31  # bytes of bundles kept at most: 16 of the paper's UHD rig (600 MB each) would be 9.5 GB
+
+
+def _not_finite(value: Any, where: str = "") -> str | None:
+    """Where in a JSON-able ``value`` its first number that is not finite is (``cameras[r1c0].offset[1]``)."""
+    if isinstance(value, float):
+        return None if math.isfinite(value) else where
+    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
+    for key, item in items:
+        if isinstance(item, dict) and "name" in item:
+            key = str(item["name"])  # a camera by its name
+        found = _not_finite(item, f"{where}.{key}" if isinstance(value, dict) else f"{where}[{key}]")
+        if found is not None:
+            return found.lstrip(".")
+    return None
 
 
 def _u8(a: np.ndarray) -> np.ndarray:
@@ -46,10 +63,23 @@ class Bundles:
         self.numbers = self.input.select(None)
         self._lock = threading.Lock()
         self._cache: OrderedDict[int, Future[bytes]] = OrderedDict()
-        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rigctl-view-bundles")
+        self._jobs: queue.SimpleQueue[tuple[int, Future[bytes]]] = queue.SimpleQueue()
+        self._closed = threading.Event()
         first = self.input.frame(self.numbers[0])
         self.height, self.width = first.shape
+        size = len(first.views) * self.height * self.width * 8  # RGBA8 and float32 disparity a camera
+        self.cache = max(2, min(CACHE, MEMORY // size))
+        self.ahead = min(AHEAD, self.cache - 1)
         self.info = self._describe(first)
+        where = _not_finite(self.info)
+        if where is not None:  # JSON has no inf or NaN: the page could not read take.json at all
+            raise TakeError(
+                f"{source}: {where} of the take's description is not a finite number (the grid's spacings or "
+                "the rectification's positions are out of range)"
+            )
+        # a daemon: at exit (Ctrl-C) nothing waits for the bundle being made (a pool's thread is joined, and a
+        # second Ctrl-C during that join ended in a traceback)
+        threading.Thread(target=self._work, name="rigctl-view-bundles", daemon=True).start()
 
     def _describe(self, frame: Any) -> dict[str, Any]:
         views = frame.views
@@ -90,22 +120,40 @@ class Bundles:
             raise ParameterError(f"frame set {number} is not one of the take's with a disparity")
         at = self.numbers.index(number)
         wanted = self._future(number)
-        for later in self.numbers[at + 1 : at + 1 + AHEAD] + self.numbers[: max(0, at + 1 + AHEAD - len(self.numbers))]:
+        ahead = self.ahead
+        for later in self.numbers[at + 1 : at + 1 + ahead] + self.numbers[: max(0, at + 1 + ahead - len(self.numbers))]:
             self._future(later)
         return wanted.result()
 
     def close(self) -> None:
-        """Drop the bundles queued ahead (at exit the interpreter waits only for the one being made)."""
-        self._worker.shutdown(wait=False, cancel_futures=True)
+        """Drop the bundles queued ahead and end the thread that makes them (after the one it is making)."""
+        self._closed.set()
+        with self._lock:
+            for made in self._cache.values():
+                made.cancel()
+        self._jobs.put((-1, Future()))  # wakes the thread
+
+    def _work(self) -> None:
+        while not self._closed.is_set():
+            number, made = self._jobs.get()
+            if self._closed.is_set() or not made.set_running_or_notify_cancel():
+                continue
+            try:
+                made.set_result(self._make(number))
+            except BaseException as exc:  # whoever waits for the bundle gets it (a pool's worker does the same)
+                made.set_exception(exc)
 
     def _future(self, number: int) -> Future[bytes]:
         with self._lock:
             if number in self._cache:
                 self._cache.move_to_end(number)
                 return self._cache[number]
-            made = self._worker.submit(self._make, number)
+            made: Future[bytes] = Future()
+            if self._closed.is_set():
+                made.cancel()  # never made: its waiter is not left waiting
+            self._jobs.put((number, made))
             self._cache[number] = made
-            while len(self._cache) > CACHE:
+            while len(self._cache) > self.cache:
                 self._cache.popitem(last=False)
             return made
 

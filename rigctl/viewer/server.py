@@ -13,6 +13,7 @@ import logging
 import queue
 import re
 import socket
+import sys
 import threading
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -20,7 +21,7 @@ from importlib import resources
 from pathlib import Path
 from urllib.parse import parse_qs, unquote, urlsplit
 
-from rigctl.errors import ParameterError
+from rigctl.errors import ParameterError, RigctlError
 from rigctl.viewer.bundle import Bundles
 
 log = logging.getLogger(__name__)
@@ -29,6 +30,8 @@ TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=u
          ".glsl": "text/plain; charset=utf-8", ".png": "image/png"}  # fmt: skip
 FRAME = re.compile(r"/api/frame/(\d{1,9})\.bin")
 MAX_RESULT = 1 << 28  # a 4K RGBA read-back with room to spare
+IDLE_S = 30.0  # a client that sends or takes nothing this long (gone, or holding a connection) is dropped
+CHUNK = 1 << 16  # a body is written in these, each within IDLE_S: a slow but steady reader gets it whole
 
 
 def static_files() -> dict[str, bytes]:
@@ -52,7 +55,10 @@ def static_files() -> dict[str, bytes]:
 
 class ViewerServer(ThreadingHTTPServer):
     daemon_threads = True
-    allow_reuse_address = False
+    # the port of a viewer just stopped is in TIME_WAIT while its browser's connections close: a rerun on the
+    # same --port must not be refused for a minute (a live listener still is); Windows' SO_REUSEADDR would
+    # share a port in use, so not there
+    allow_reuse_address = sys.platform != "win32"
 
     def __init__(self, bundles: Bundles, host: str = "127.0.0.1", port: int = 0, accept_results: bool = False) -> None:
         self.bundles = bundles
@@ -92,6 +98,10 @@ class _Handler(BaseHTTPRequestHandler):
     server: ViewerServer
     protocol_version = "HTTP/1.1"
 
+    def setup(self) -> None:
+        super().setup()
+        self.connection.settimeout(IDLE_S)  # without it a silent client held its connection and thread for ever
+
     def log_message(self, format: str, *args: object) -> None:
         log.debug("%s %s", self.address_string(), format % args)
 
@@ -103,7 +113,9 @@ class _Handler(BaseHTTPRequestHandler):
         self.send_header("X-Content-Type-Options", "nosniff")
         self.end_headers()
         if self.command != "HEAD":
-            self.wfile.write(body)
+            view = memoryview(body)
+            for at in range(0, len(view), CHUNK):
+                self.wfile.write(view[at : at + CHUNK])
 
     def _path(self) -> str | None:
         """The request's path decoded once, or None when it could name anything outside our list."""
@@ -150,13 +162,22 @@ class _Handler(BaseHTTPRequestHandler):
             info = {**srv.bundles.info, "results": srv.accept_results}
             self._send(HTTPStatus.OK, json.dumps(info).encode(), "application/json")
         elif (m := FRAME.fullmatch(path)) and int(m[1]) in srv.bundles.numbers:
-            self._send(HTTPStatus.OK, srv.bundles.get(int(m[1])), "application/octet-stream")
+            try:
+                bundle = srv.bundles.get(int(m[1]))
+            except RigctlError as exc:  # a damaged file of the take: named on the terminal, the page shows the 500
+                log.error("%s", exc)
+                self._send(HTTPStatus.INTERNAL_SERVER_ERROR, f"frame set {m[1]} could not be read\n".encode())
+                return
+            self._send(HTTPStatus.OK, bundle, "application/octet-stream")
         else:
             self._send(HTTPStatus.NOT_FOUND, b"not found\n")
 
     def do_POST(self) -> None:
         url = urlsplit(self.path)
-        length = int(self.headers.get("Content-Length") or 0)
+        try:
+            length = int(self.headers.get("Content-Length") or 0)
+        except ValueError:
+            length = -1  # not a length: refused below as any other unwanted body
         wanted = self.server.accept_results and url.path == "/api/result" and 0 <= length <= MAX_RESULT
         if self._foreign_host() or not wanted:
             self.close_connection = True  # its body is not read

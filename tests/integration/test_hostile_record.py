@@ -128,3 +128,16 @@ def test_a_record_that_fails_leaves_no_folder_it_made(  # type: ignore[no-untype
     assert res.returncode == code and said in res.stderr.splitlines()[-1], res.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mine", "rig.yaml"]
     assert list((tmp_path / "mine").iterdir()) == []
+
+
+def test_a_device_address_holding_a_nul_is_refused_in_one_line(run_cli, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """A hostile-user review: rigctl devices ended in a ValueError traceback (embedded null byte)."""
+    cameras = [dict(c) for c in SIM_RIG["cameras"]]
+    cameras[0]["device"] = "/dev/video0\x00x"
+    rig = str(write_yaml(tmp_path / "cam.yaml", {**SIM_RIG, "cameras": cameras}))
+    one_line(run_cli("devices", rig), EXIT_DEVICE, "camera r0c0: device address '/dev/video0\\x00x': holds a NUL")
+    one_line(run_cli("record", rig, "--take", "t", "--frames", "1", "--out", "takes", *DET), EXIT_DEVICE, "NUL")
+    tally = {"protocol": "tsl-umd-3.1", "port": "/dev/null\x00x"}
+    rig = str(write_yaml(tmp_path / "line.yaml", {**SIM_RIG, "tally": tally}))
+    one_line(run_cli("devices", rig), EXIT_DEVICE, "tally line: device address '/dev/null\\x00x': holds a NUL")
+    assert not (tmp_path / "takes").exists()

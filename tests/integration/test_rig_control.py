@@ -267,6 +267,32 @@ def test_devices_names_ambiguous_or_missing_identity(tmp_path: Path, usb: dict[s
     assert message in out
 
 
+@pytest.mark.parametrize("kind", ["a folder", "a file", "a FIFO"])
+def test_devices_does_not_call_a_line_found_that_is_no_device(tmp_path: Path, kind: str) -> None:
+    """A hostile-user review: a tally port that is a folder, a file or a FIFO was "found" (exit 0), which
+    rigctl tally then refuses; a device node (a pty, /dev/null) still is found."""
+    import os
+
+    port = tmp_path / "port"
+    if kind == "a folder":
+        port.mkdir()
+    elif kind == "a FIFO":
+        os.mkfifo(port)
+    else:
+        port.write_text("")
+    master, slave = os.openpty()
+    tty = os.ttyname(slave)
+    try:
+        rig = write_rig(tmp_path, tally={"protocol": "tsl-umd-3.1", "port": str(port)}, camera_control={"bridge": tty})
+        code, out, err = run_devices(tmp_path, rig)
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert code == 1, out + err
+    assert f"tally: {port}  MISSING" in out and f"bridge: {tty}  found" in out
+    assert f"tally line ({port}: exists but is {kind}, not a device)" in out.splitlines()[-1]
+
+
 def test_a_new_host_session_is_not_taken_for_a_retry() -> None:
     sim = SimSdiBridge(None, IDS)
     try:
