@@ -19,9 +19,9 @@ from rigctl.depth.grid import (
     TakeGrid,
     camera_offsets,
     grid_order,
-    load_grid_folder,
     rectified_frame,
 )
+from rigctl.depth.grid_folder import load_grid_folder
 from rigctl.errors import ParameterError
 from rigctl.timecode import Timecode
 

@@ -12,7 +12,8 @@ import pytest
 from tests_support import run_rigctl
 
 from rigctl.depth.estimate import estimate
-from rigctl.depth.grid import grid_from_arrays, load_grid_folder
+from rigctl.depth.grid import grid_from_arrays
+from rigctl.depth.grid_folder import load_grid_folder
 from rigctl.depth.metrics import locking, score
 from rigctl.depth.presets import PRESETS
 from rigctl.depth.scenes import SCENES, write_grid_folder

@@ -22,7 +22,7 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from rigctl.calibration_model import load_calibration
-from rigctl.depth.grid import load_grid_folder
+from rigctl.depth.grid_folder import load_grid_folder
 from rigctl.errors import RigctlError
 from rigctl.exr import read_exr, write_exr
 from rigctl.pfm import read_pfm

@@ -1,0 +1,137 @@
+"""Grid folders (``r{row}c{col}.png`` + ``grid.yaml``, optional ``truth/<camera>.pfm``) read as a
+:class:`~rigctl.depth.grid.Grid`: any rectified camera grid, so that external data can be processed and
+checked. Every number of ``grid.yaml`` is held to sense (finite, within a float's reach for the depths made
+from it, a focal length a picture of that width can have) and every picture header to the size budget before
+any picture is decoded."""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+from typing import Any, TypeGuard
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from rigctl.calibration_model import FOCAL_RANGE_WIDTHS
+from rigctl.depth.grid import F32, Grid, grid_from_arrays, read_truth
+from rigctl.errors import RigFileError
+from rigctl.imagefile import MAX_SIDE, png_size, read_png
+from rigctl.layout import SAFE_CAMERA
+from rigctl.yamlfile import load_yaml_with_lines, refuse_unknown_keys
+
+log = logging.getLogger(__name__)
+
+GRID_SPACING = (1e-6, 1e6)  # spacing_x, spacing_y, in grid.yaml's own unit
+MAX_GRID_PIXELS = 1 << 28  # all pictures of a grid folder together (nine UHD pictures are 75 million)
+GRID_KEYS = ("spacing_x", "spacing_y", "focal_px", "doffs", "disparity_range_px")  # what grid.yaml may hold
+
+
+def _png_picture(img: NDArray[Any]) -> NDArray[Any]:
+    """A PNG as read by OpenCV: 8-bit kept as BGR bytes, 16-bit as float RGB in [0, 1]."""
+    if img.dtype == np.uint8:
+        if img.ndim == 2:
+            return np.asarray(cv2.cvtColor(img, cv2.COLOR_GRAY2BGR), np.uint8)
+        return np.ascontiguousarray(img[..., :3])
+    rgb = img.astype(np.float32) / np.float32(65535.0 if img.dtype == np.uint16 else 255.0)
+    return rgb[..., 2::-1] if rgb.ndim == 3 else rgb  # BGR(A) to RGB: alpha, when there is one, left out
+
+
+def load_grid_folder(folder: Path) -> Grid:
+    path = folder / "grid.yaml"
+    spec, lines = load_yaml_with_lines(path)
+    if not isinstance(spec, dict):
+        raise RigFileError(f"{path}: expected spacing_x, spacing_y, focal_px")
+    refuse_unknown_keys(path, spec, GRID_KEYS, lines)  # a misspelt key is not silently left out, as in a rig file
+    for key in ("spacing_x", "focal_px"):
+        if key not in spec:
+            raise RigFileError(f"{path}: {key} is required")
+    for key in ("focal_px", "spacing_x", "spacing_y", "doffs"):
+        v = spec.get(key)
+        if v is None and key in ("spacing_y", "doffs"):
+            continue
+        if not _finite(v):
+            raise RigFileError(f"{path}: {key}: must be a finite number, got {v!r:.60}")
+        if (key in ("focal_px", "spacing_x") and v <= 0) or (key == "spacing_y" and v < 0):
+            raise RigFileError(f"{path}: {key}: must be positive, got {v!r}")
+        # beyond these, depth = focal_px * spacing / (disparity + doffs) is 0 or infinite in float32 everywhere
+        if key.startswith("spacing") and v and not GRID_SPACING[0] <= v <= GRID_SPACING[1]:
+            raise RigFileError(f"{path}: {key}: must be between {GRID_SPACING[0]:g} and {GRID_SPACING[1]:g}, got {v!r}")
+        if key == "doffs" and abs(v) > MAX_SIDE:
+            raise RigFileError(f"{path}: doffs: must be within +-{MAX_SIDE} px, got {v!r}")
+    rng = _disparity_range(path, spec.get("disparity_range_px"))
+    files = sorted(p for p in folder.glob("r*c*.png") if SAFE_CAMERA.fullmatch(p.stem))
+    for p in sorted(set(folder.glob("r*c*.png")) - set(files))[:8]:
+        log.warning("%s: not named r{row}c{col}.png: left out of the grid", p)
+    if not files:
+        raise RigFileError(f"{folder}: no r{{row}}c{{col}}.png images")
+    sizes = {p: png_size(p) for p in files}  # every header within the budget before any picture is decoded
+    total = sum(w * h for w, h in sizes.values())
+    if total > MAX_GRID_PIXELS:
+        raise RigFileError(f"{folder}: {len(files)} images of {total:,} pixels together: over {MAX_GRID_PIXELS:,}")
+    width = sizes[files[0]][0]
+    lo, hi = FOCAL_RANGE_WIDTHS  # the sense a calibration is held to
+    if not lo * width <= spec["focal_px"] <= hi * width:
+        raise RigFileError(
+            f"{path}: focal_px: {spec['focal_px']!r} is not plausible for pictures {width} px wide "
+            f"(expected {lo * width:g} to {hi * width:g} px)"
+        )
+    rows = {int(m[1]) for p in files if (m := SAFE_CAMERA.fullmatch(p.stem))}
+    if spec.get("spacing_y") == 0 and len(rows) > 1:
+        raise RigFileError(f"{path}: spacing_y: 0 puts the {len(rows)} rows of cameras at one place")
+    images = {p.stem: read_png(p) for p in files}
+    first = next(iter(images))
+    for n, img in images.items():
+        if img.shape[:2] != images[first].shape[:2]:
+            h, w = img.shape[:2]
+            h0, w0 = images[first].shape[:2]
+            raise RigFileError(f"{folder / (n + '.png')}: image is {w}x{h}, but {first}.png is {w0}x{h0}: sizes differ")
+    grid = grid_from_arrays(
+        {n: _png_picture(img) for n, img in images.items()},
+        float(spec["focal_px"]),
+        float(spec["spacing_x"]),
+        float(spec.get("spacing_y") or spec["spacing_x"]),
+        float(spec.get("doffs") or 0.0),
+        rng,
+    )
+    grid.truth = _folder_truth(folder / "truth", grid)
+    return grid
+
+
+def _folder_truth(folder: Path, grid: Grid) -> dict[str, F32] | None:
+    """A grid folder's reference disparities, ``truth/<camera>.pfm`` (e.g. the depth MIV content came
+    with, ``rigctl miv import``): what depth scores its estimates against. None when there are none."""
+    if not folder.is_dir():
+        return None
+    truth = {}
+    for n in grid.names:
+        p = folder / f"{n}.pfm"
+        if p.is_file():
+            truth[n] = read_truth(p, grid.shape)
+    return truth or None
+
+
+def _disparity_range(path: Path, rng: object) -> tuple[float, float] | None:
+    """``disparity_range_px: [min, max]``: two finite numbers, min below max, within a picture's width."""
+    if rng is None:
+        return None
+    ok = isinstance(rng, list) and len(rng) == 2 and all(_finite(v) for v in rng)
+    if not ok or not (-MAX_SIDE <= rng[0] < rng[1] <= MAX_SIDE):  # type: ignore[index]
+        raise RigFileError(
+            f"{path}: disparity_range_px: expected [min, max], two numbers with min < max within "
+            f"+-{MAX_SIDE} px, got {rng!r:.60}"
+        )
+    return float(rng[0]), float(rng[1])  # type: ignore[index]
+
+
+def _finite(v: object) -> TypeGuard[int | float]:
+    """A YAML number (not a boolean) that is finite as a float: an integer of 400 digits is not (math.isfinite
+    raised OverflowError on it, a traceback)."""
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        return False
+    try:
+        return math.isfinite(v)
+    except OverflowError:
+        return False
