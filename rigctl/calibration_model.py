@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from rigctl.errors import CalibrationError, RigFileError
 from rigctl.publish import publish_text
-from rigctl.rig import CAMERA_NAME
+from rigctl.rig import CAMERA_NAME, FOCAL_RANGE_WIDTHS
 from rigctl.yamlfile import check_spec, line_of, load_yaml_with_lines
 
 CALIBRATION_SPEC = 1
@@ -198,8 +198,6 @@ def load_calibration(path: Path) -> ArrayCalibration:
 
 MAX_ARRAY_SPAN_M = 1000.0  # the rig file allows 64 cameras 10 m apart (630 m); a calibration of one array no more
 
-# A rectilinear lens seen by the model: from a 170 degree to a 0.6 degree field of view.
-FOCAL_RANGE_WIDTHS = (0.05, 100.0)
 RADIAL_SCALE_RANGE = (0.25, 4.0)  # distorted over undistorted radius anywhere in the image
 DIST_LENGTHS = (4, 5, 8, 12, 14)
 

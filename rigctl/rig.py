@@ -25,6 +25,10 @@ PIXEL_FORMATS = ("UYVY", "YUYV", "BGR3", "GREY", "Y210", "v210")  # Y210, v210: 
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 Millimetres = Annotated[float, Field(gt=0, le=1000, allow_inf_nan=False)]  # a sensor, a lens: under a metre
+# A rectilinear lens's focal length in picture widths, from a 170 degree to a 0.6 degree field of view: what a
+# calibration, a grid folder and a rectified take are held to (``calibration_model``, ``depth.grid_folder``,
+# ``take.manifest``)
+FOCAL_RANGE_WIDTHS = (0.05, 100.0)
 MAX_FRAME_PIXELS = 1 << 27  # 134 million pixels (16384 x 8192); rigctl.take.proof holds takes to the same
 PositiveInt = Annotated[int, Field(gt=0)]
 

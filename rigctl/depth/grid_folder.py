@@ -15,11 +15,11 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.calibration_model import FOCAL_RANGE_WIDTHS
 from rigctl.depth.grid import F32, Grid, grid_from_arrays, read_truth
 from rigctl.errors import RigFileError
 from rigctl.imagefile import MAX_SIDE, png_size, read_png
 from rigctl.layout import SAFE_CAMERA
+from rigctl.rig import FOCAL_RANGE_WIDTHS
 from rigctl.yamlfile import load_yaml_with_lines, refuse_unknown_keys
 
 log = logging.getLogger(__name__)

@@ -38,6 +38,7 @@ from pydantic.main import IncEx
 from rigctl.errors import TakeError
 from rigctl.layout import SAFE_CAMERA
 from rigctl.publish import kind
+from rigctl.rig import FOCAL_RANGE_WIDTHS
 from rigctl.timecode import Timecode, TimecodeError, rate_of
 from rigctl.yamlfile import check_spec, describe_validation_error, load_yaml_with_lines
 
@@ -151,8 +152,6 @@ class Rectification(_Section):
     @field_validator("focal_px")
     @classmethod
     def _plausible_focal(cls, value: float, info: ValidationInfo) -> float:
-        from rigctl.calibration_model import FOCAL_RANGE_WIDTHS
-
         size = info.data.get("image_size")
         lo, hi = FOCAL_RANGE_WIDTHS[0], 2 * FOCAL_RANGE_WIDTHS[1]  # a calibration's, zoomed at most twice by rectify
         if size and not lo * size[0] <= value <= hi * size[0]:
