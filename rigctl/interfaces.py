@@ -235,3 +235,6 @@ class SimulatedArray(Protocol):
     def truth(self, state: int) -> tuple[list[NDArray[np.float32]], list[NDArray[np.bool_]]]: ...
 
     def near_far(self) -> tuple[float, float]: ...
+
+    def close(self) -> None:
+        """Stop its background work (rendering) and wait for what is under way."""

@@ -50,6 +50,8 @@ class DeviceSet:
                 cam.close()
             except Exception as exc:  # closing must reach every camera
                 log.warning("closing %s: %s", cam.name, exc)
+        if self.simulation is not None:  # its background rendering stopped and waited for before the process exits
+            self.simulation.close()
 
 
 def camera_addresses(rig: Rig) -> dict[str, Address]:

@@ -174,3 +174,16 @@ def test_deterministic_slow_reader_loses_nothing() -> None:
     assert after.sequence == first.sequence + 1 and drops == 0
     assert after.capture_ns - first.capture_ns == round(1e9 / FMT.fps)
     assert after.host_ns - after.capture_ns == 800_000  # the simulated latency, not this machine's
+
+
+@pytest.mark.parametrize("motion", ["true", "false"])
+def test_closing_the_devices_stops_and_waits_for_the_background_render(motion: str) -> None:
+    """A process that closed its devices and exits must not leave the simulator's render thread inside OpenCV:
+    the C++ runtime then aborted it after the command's own error line (``rigctl control`` with a bad bridge
+    address: "terminate called without an active exception", exit 134, on a loaded machine). Opened and
+    closed at once, as that command does, no render thread is left running (the simulator's defaults, motion
+    on, and a still scene)."""
+    ds = open_cameras(RIG, ["noise=0", f"motion={motion}"])
+    assert any(t.name == "sim-render" and t.is_alive() for t in threading.enumerate())  # rendering as it opened
+    ds.close()
+    assert not [t for t in threading.enumerate() if t.name == "sim-render" and t.is_alive()]
