@@ -34,6 +34,7 @@ log = logging.getLogger(__name__)
 MAGIC = b"RGFS"
 CACHE = 16  # bundles kept in memory: the page's read-ahead plus a little
 AHEAD = 8  # bundles made ahead of the last one asked for
+CLOSE_WAIT_S = 30.0  # the longest close waits for the bundle being made (seconds at UHD)
 MEMORY = 1 << 31  # bytes of bundles kept at most: 16 of the paper's UHD rig (600 MB each) would be 9.5 GB
 
 
@@ -79,7 +80,8 @@ class Bundles:
             )
         # a daemon: at exit (Ctrl-C) nothing waits for the bundle being made (a pool's thread is joined, and a
         # second Ctrl-C during that join ended in a traceback)
-        threading.Thread(target=self._work, name="rigctl-view-bundles", daemon=True).start()
+        self._thread = threading.Thread(target=self._work, name="rigctl-view-bundles", daemon=True)
+        self._thread.start()
 
     def _describe(self, frame: Any) -> dict[str, Any]:
         views = frame.views
@@ -125,13 +127,22 @@ class Bundles:
             self._future(later)
         return wanted.result()
 
-    def close(self) -> None:
-        """Drop the bundles queued ahead and end the thread that makes them (after the one it is making)."""
+    def close(self, wait_s: float = CLOSE_WAIT_S) -> None:
+        """Drop the bundles queued ahead and end the thread that makes them, waiting up to ``wait_s`` for the one
+        it is making: a process that exits while that thread is inside OpenCV or OpenEXR is aborted by the C++
+        runtime ("terminate called without an active exception"). A second Ctrl-C does not cut the wait short
+        into a traceback."""
         self._closed.set()
         with self._lock:
             for made in self._cache.values():
                 made.cancel()
         self._jobs.put((-1, Future()))  # wakes the thread
+        if self._thread is threading.current_thread():
+            return
+        try:
+            self._thread.join(wait_s)
+        except KeyboardInterrupt:
+            self._thread.join(wait_s)
 
     def _work(self) -> None:
         while not self._closed.is_set():

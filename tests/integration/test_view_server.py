@@ -249,11 +249,13 @@ def quick(full: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[ViewerServer]
     """The viewer's server dropping a client silent for 1 s (30 s in use), on bundles of 37 MB: larger than
     the sockets' buffers."""
     monkeypatch.setattr(server_module, "IDLE_S", 1.0, raising=False)
-    srv = ViewerServer(Bundles(full, full / "truth" / "disparity"))
+    bundles = Bundles(full, full / "truth" / "disparity")
+    srv = ViewerServer(bundles)
     srv.start()
     yield srv
     srv.shutdown()
     srv.server_close()
+    bundles.close()  # its thread and the take's open files end here, not with the test process
 
 
 def test_a_silent_or_vanished_client_is_dropped(quick: ViewerServer) -> None:
