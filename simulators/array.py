@@ -50,9 +50,6 @@ F64 = NDArray[np.float64]
 NOISE_BANK = 8
 
 
-CLOSE_WAIT_S = 30.0  # the longest a close waits for the state being rendered (seconds at UHD)
-
-
 class SimArray:
     """All simulated cameras of one rig, sharing one scene, one clock and one render cache."""
 
@@ -340,11 +337,9 @@ class SimArray:
         if self.settings.noise:
             self._noise  # noqa: B018  (drawn here, not on the first frame)
 
-    def close(self, wait_s: float = CLOSE_WAIT_S) -> None:
-        """Stop rendering in the background and wait, up to ``wait_s``, for the state being rendered. A process
-        that exits while that thread is inside OpenCV is aborted by the C++ runtime ("terminate called without
-        an active exception", exit 134 after the command's own error line): ``rigctl control`` with a bad
-        bridge address did so on one run in seven on a loaded machine."""
+    def close(self, wait_s: float = 30.0) -> None:
+        """Stop rendering in the background, waiting up to ``wait_s`` for the state under way: a process exiting
+        while that thread is in OpenCV is aborted by the C++ runtime (exit 134 after the command's error)."""
         self.states.stop()
         self.states.join(wait_s)
 
