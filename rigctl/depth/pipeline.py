@@ -154,7 +154,7 @@ class FrameFailed:
 
 
 @dataclass
-class _Computed:
+class Computed:
     """A frame set whose depth is done and whose export is not: :meth:`write` exports it and times it, elapsed
     and CPU seconds. (Exporting it in a thread while the next frame set's depth runs was measured on two cores
     and not kept: -6 % to +15 % wall time, more CPU seconds; it reads only its own grid and results.)"""
@@ -310,10 +310,11 @@ class TakeProcessor:
 
     def process(self, number: int, progress: Progress | None = None) -> FrameDone:
         """One frame set, start to end: read, depth, export, report."""
-        return self._computed(number, progress).write()
+        return self.computed(number, progress).write()
 
-    def _computed(self, number: int, progress: Progress | None) -> _Computed:
-        """One frame set read and its depth computed, its export still to do (:meth:`_Computed.write`)."""
+    def computed(self, number: int, progress: Progress | None = None) -> Computed:
+        """One frame set read and its depth computed, its export still to do (:meth:`Computed.write`): what
+        :meth:`process` does in two steps, for a bench that measures them apart."""
         t0 = time.perf_counter()
         grid = self.source.grid(number)
         t_load = time.perf_counter() - t0
@@ -326,7 +327,7 @@ class TakeProcessor:
         # the report is made now: the next frame set's depth changes the range and the widenings it reads
         report = self.frame_report(grid, results, Timings(load=t_load, depth=t_depth))
         timing = self.source.timing(number) if self.exporter is not None else (None, None)
-        return _Computed(number, grid, results, report, self.exporter, self.d_range, timing)
+        return Computed(number, grid, results, report, self.exporter, self.d_range, timing)
 
     def frame_report(self, grid: Grid, results: dict[str, DepthResult], timings: Timings) -> FrameReport:
         full = unplanned_range(grid.shape[1])

@@ -13,7 +13,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,6 +21,8 @@ from numpy.typing import NDArray
 from rigctl.depth.grid import Grid
 from rigctl.depth.options import DepthOptions
 from rigctl.errors import ParameterError
+
+T = TypeVar("T")
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +62,14 @@ def _peak_rss() -> int:
         if line.startswith("VmHWM:"):
             return int(line.split()[1]) * 1024
     return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024  # kB on Linux
+
+
+def phase_peak(run: Callable[[], T]) -> tuple[T, int]:
+    """``run()`` and the peak resident memory while it ran (the peak counter restarted from the resident memory
+    at its start: what was held before counts, what an earlier phase freed does not)."""
+    _reset_peak()
+    out = run()
+    return out, _peak_rss()
 
 
 def _reset_peak() -> None:
@@ -183,7 +193,14 @@ def format_speed(r: dict[str, Any]) -> str:
                 else ""
             ),
             f"pixel-levels evaluated: {work}",
-            f"peak memory {r['peak_rss_bytes'] / 2**30:.2f} GiB (input images {r['input_bytes'] / 2**30:.2f} GiB, "
+            f"peak memory {r['peak_rss_bytes'] / 2**30:.2f} GiB ("
+            + (
+                f"depth {r['peak_rss_depth_bytes'] / 2**30:.2f} GiB, write {r['peak_rss_write_bytes'] / 2**30:.2f} "
+                "GiB; "
+                if "peak_rss_write_bytes" in r
+                else ""
+            )
+            + f"input images {r['input_bytes'] / 2**30:.2f} GiB, "
             f"{r['peak_rss_while_building_input_bytes'] / 2**30:.2f} GiB while the input was built)",
             f"real-time factor at {r['fps']:g} fps: {sm['realtime_factor']['1']:.0f} s of compute per s of footage "
             f"on one worker, {sm['realtime_factor'][n]:.1f} on {n} workers "
@@ -204,14 +221,16 @@ def _measure(make: Callable[[], Any], width: int, height: int, preset: str, came
     del ds
     gc.collect()
     before = _peak_rss()
-    _reset_peak()
     opt = DepthOptions(preset=preset, disparity_range=d_range, cameras=cameras)
     t0, c0 = time.perf_counter(), time.process_time()
     with tempfile.TemporaryDirectory() as tmp:
-        # one frame set through the pipeline as a worker runs it: depth, then staged and published by rename
-        done = TakeProcessor(OneGrid(grid), opt, exporter=Exporter(Path(tmp), atomic=True)).process(0)
+        # one frame set through the pipeline as a worker runs it (TakeProcessor.process, in its two steps to
+        # tell their peaks apart): depth, then staged and published by rename
+        processor = TakeProcessor(OneGrid(grid), opt, exporter=Exporter(Path(tmp), atomic=True))
+        computed, peak_depth = phase_peak(lambda: processor.computed(0))
+        done, peak_write = phase_peak(computed.write)
+        del computed
     seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
-    peak = _peak_rss()
     stats = done.report
     cams: list[dict[str, Any]] = [dict(c) for c in stats.cameras.values()]
     stages = {k: sum(float(c.get(f"{k}_s", 0.0)) for c in cams) for k in STAGES}
@@ -233,7 +252,9 @@ def _measure(make: Callable[[], Any], width: int, height: int, preset: str, came
         "stages_s": stages,
         "pixel_levels": work,
         "sgbm": sgbm,
-        "peak_rss_bytes": peak,
+        "peak_rss_bytes": max(peak_depth, peak_write),
+        "peak_rss_depth_bytes": peak_depth,
+        "peak_rss_write_bytes": peak_write,
         "peak_rss_while_building_input_bytes": before,
         "input_bytes": int(sum(grid.bgr8(n).nbytes for n in grid.names)),  # as given: 8-bit BGR
     }

@@ -384,6 +384,9 @@ def test_a_frame_set_stays_within_the_worker_memory_bound(tmp_path: Path) -> Non
     assert r["size"] == [480, 270] and len(r["cameras"]) == 9 and r["seconds"] > 0
     assert r["input_bytes"] == 9 * 480 * 270 * 3  # 8-bit BGR, as a rectified take reaches a worker
     assert r["input_bytes"] < r["peak_rss_bytes"] < worker_memory_bytes(480, 270, 9)
+    # the frame set's peak is the larger of its depth's and its write's, each above the input held through both
+    assert r["peak_rss_bytes"] == max(r["peak_rss_depth_bytes"], r["peak_rss_write_bytes"])
+    assert min(r["peak_rss_depth_bytes"], r["peak_rss_write_bytes"]) > r["input_bytes"]
     # where the depth went: stages none of which lies within another, these work the presenter's first frame set
     # needs (no previous frame set to stabilise against, no cross-check in `best`: 0 s)
     stages = r["stages_s"]

@@ -3,10 +3,11 @@ the real-time factor. No timing is measured here."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from rigctl.errors import ParameterError
-from rigctl.farm.membench import format_speed, speed_summary
+from rigctl.farm.membench import format_speed, phase_peak, speed_summary
 
 
 def test_ratio_stages_write_share_and_realtime_factor() -> None:
@@ -87,3 +88,42 @@ def test_the_writes_cpu_seconds_and_their_share_of_the_frame_sets() -> None:
     for bad in (-0.1, 20.5):  # a write cannot take more CPU than the frame set it belongs to
         with pytest.raises(ParameterError):
             speed_summary(12.0, 3.0, {}, 0.5, 25.0, 1, cpu=(20.0, 0.5), write_cpu_s=bad)
+
+
+def test_each_phase_has_its_own_peak() -> None:
+    """The bench tells the depth's peak from the write's: a phase's peak counts what it allocated and what was
+    held when it started, not what an earlier phase allocated and freed."""
+    mib = 2**20
+
+    def big() -> int:
+        a = np.ones(256 * mib, np.uint8)  # touched: resident
+        return int(a[::4096].sum())
+
+    held = np.ones(64 * mib, np.uint8)
+    n, first = phase_peak(big)
+    assert n == 256 * mib // 4096
+    _, second = phase_peak(lambda: None)
+    assert first - second > 200 * mib  # the first phase's array is gone from the second's peak
+    assert second > held.nbytes  # what is held across the phases counts in each
+
+
+def test_the_text_gives_the_depths_and_the_writes_peaks() -> None:
+    summary = speed_summary(8.0, 2.0, {}, 0.25, 25.0, 4)
+    r = {
+        "size": [3840, 2160],
+        "preset": "best",
+        "cameras": ["c"] * 9,
+        "seconds": 10.0,
+        "timings_s": {"depth": 8.0, "write": 2.0},
+        "pixel_levels": {},
+        "sgbm": {"seconds": 0.25, "levels": 128, "threads": 2},
+        "peak_rss_bytes": 3 * 2**30,
+        "peak_rss_depth_bytes": 3 * 2**30,
+        "peak_rss_write_bytes": 2**30,
+        "input_bytes": 2**28,
+        "peak_rss_while_building_input_bytes": 2**29,
+        "fps": 25.0,
+        "workers": 4,
+        "summary": summary,
+    }
+    assert "peak memory 3.00 GiB (depth 3.00 GiB, write 1.00 GiB; input images 0.25 GiB" in format_speed(r)
