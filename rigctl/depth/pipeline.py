@@ -276,6 +276,7 @@ class TakeProcessor:
         if self.preset.cross_check and len(results) > 1:
             cross_check_all(grid, results)
         self.temporal.advance(grid, results)
+        grid.frames.drop_made()  # the estimates' greys and 8-bit copies: the write needs none of them
         return results
 
     def run_chunk(

@@ -230,3 +230,15 @@ def test_a_frame_set_is_let_go_of_once_the_next_one_is_done_but_for_what_the_nex
         assert all(p.shape == ((h + 1) // 2, (w + 1) // 2, 3) for p in kept.pictures.pictures.values())
         del done, kept
     assert blended[0] == 0.0 and max(blended[1:]) > 0  # the later frame sets were stabilised against the earlier
+
+
+def test_a_frame_sets_greys_and_8_bit_copies_are_let_go_of_before_its_write(moving_ideal: Any) -> None:
+    """Issue 24, the write's peak: the estimates keep every camera's grey (and a take's 8-bit copies) for the
+    frame set; once its depth is done nothing made from the pictures is held through the write."""
+    processor = TakeProcessor(moving_ideal, DepthOptions(cameras=("r1c1", "r1c2")))
+    grid = moving_ideal.grid(0)
+    made: list[int] = []
+    processor.depth(grid, 0, progress=lambda cam: made.append(grid.frames.made_bytes()))
+    h, w = grid.shape
+    assert made[1] >= 9 * h * w * 4  # the first camera's estimate made the nine greys the second one read
+    assert grid.frames.made_bytes() == 0

@@ -218,6 +218,22 @@ def test_the_grid_gives_the_matcher_8_bit_without_making_float_first(tmp_path: P
     assert images.shape() == (H, W)
 
 
+def test_what_the_grid_made_from_its_pictures_is_let_go_of_and_made_again_alike() -> None:
+    rgb = np.random.default_rng(3).random((H, W, 3), dtype=np.float32)
+    packed = from_rgb(rgb, "UYVY").reshape(-1)
+    images = FrameImages.captured({"r0c0": packed}, "UYVY", W, H)
+    bgr, grey, picture = images.bgr8("r0c0").copy(), images.grey("r0c0").copy(), images["r0c0"].copy()
+    assert images.made_bytes() == bgr.nbytes + grey.nbytes + picture.nbytes
+    images.drop_made()
+    assert images.made_bytes() == 0
+    assert np.array_equal(images.bgr8("r0c0"), bgr) and np.array_equal(images.grey("r0c0"), grey)
+    given = (rgb * 255).astype(np.uint8)
+    own = FrameImages({"r0c0": given})
+    own.grey("r0c0")
+    own.drop_made()
+    assert own.bgr8("r0c0") is given and own.made_bytes() == 0  # a picture given as 8 bits is kept
+
+
 def test_a_frame_pool_is_bounded_by_count_and_memory() -> None:
     """``--buffers 999999999`` was an ENOMEM traceback from the pool's mmap; now one line before allocating."""
     assert check_buffers(2, 1 << 20, 9, memory=64 << 30) == 2
