@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from rigctl.depth.cost import F32, TRUNCATE
 from rigctl.depth.edge import DEPTH_COVERAGE, coverage, sensor_fixed
 from rigctl.depth.grid import Grid
+from rigctl.depth.packed import PackedField, PackedPlane
 from rigctl.depth.pair_fusion import pairs_engine
 from rigctl.depth.presets import Preset
 from rigctl.depth.search import EstimateStats, SearchJob
@@ -34,12 +35,18 @@ class DepthResult:
     confidence: F32  # 0..1
     unreliable: NDArray[np.bool_]  # textureless or saturated: an estimate, not to be trusted
     bound_hit: NDArray[np.bool_]  # the best match lay at the edge of the planned range
-    matte: F32
+    # the keyer's matte, held packed (``packed.py``: about 1 byte a pixel, not 4) until the write; each read
+    # makes the plane again (a descriptor, the field's storage: no default shared between results)
+    matte: PackedField = PackedField()  # noqa: RUF009
     filled: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 0), bool))
     stats: EstimateStats = field(default_factory=lambda: EstimateStats())
     # the keyer whose matte of the camera's picture ``matte`` is (the export's soft key starts from it rather
     # than keying the picture again); None when the caller gave the matte or nothing was keyed
     keyed_by: Keyer | None = None
+
+    def keyed_a_screen(self) -> bool:
+        """Whether the matte is below 1 anywhere (a screen was keyed), without making the plane."""
+        return PackedField.held(self, "matte").any_below_one()
 
 
 def choose_views(grid: Grid, ref: str, mode: str) -> list[str]:
@@ -99,18 +106,10 @@ def estimate(
         matte = keyer.matte(grid.images[ref]) if keyer is not None else np.ones((h, w), np.float32)
     # depth where the subject covers at least half the pixel (``edge.py``): not on the screen beside it
     fg = coverage(grid.images[ref], matte) >= DEPTH_COVERAGE
+    key = PackedPlane.of(matte)  # what the result holds (``packed.py``); the plane is not needed again here
+    del matte
     stats["key_s"] = time.perf_counter() - t0
     stats["keyed_background_share"] = float(1.0 - fg.mean())
-    empty = DepthResult(
-        np.full((h, w), np.inf, np.float32),
-        np.zeros((h, w), np.float32),
-        np.zeros((h, w), bool),
-        np.zeros((h, w), bool),
-        matte,
-        np.zeros((h, w), bool),
-        stats,
-        keyed_by,
-    )
     views = choose_views(grid, ref, preset.views)
     moving = [
         n
@@ -127,7 +126,16 @@ def estimate(
     if any(nothing.values()):
         stats["note"] = next(why for why, so in nothing.items() if so)
         stats["seconds"] = time.perf_counter() - t_start
-        return empty
+        return DepthResult(
+            np.full((h, w), np.inf, np.float32),
+            np.zeros((h, w), np.float32),
+            np.zeros((h, w), bool),
+            np.zeros((h, w), bool),
+            key,
+            np.zeros((h, w), bool),
+            stats,
+            keyed_by,
+        )
     box = subject_box(fg, margin=preset.window)
     assert box is not None
     stats["searched_share"] = float((box[1] - box[0]) * (box[3] - box[2]) / (h * w))
@@ -170,7 +178,7 @@ def estimate(
     if crop.filled is not None:
         filled[y0:y1, x0:x1] = valid & crop.filled
         stats["filled_from_background_pixels"] = int(filled.sum())
-    return DepthResult(out, conf, unreliable, bound_hit, matte, filled, stats, keyed_by)
+    return DepthResult(out, conf, unreliable, bound_hit, key, filled, stats, keyed_by)
 
 
 def _drop_sensor_fixed(

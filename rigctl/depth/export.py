@@ -145,8 +145,9 @@ def soft_key(image: F32, res: DepthResult) -> SoftKey:
     """The picture's soft key, from the hard matte depth already computed when it is :data:`KEYER`'s of the
     same picture (within [0, 1], so clipping it first, as the soft key does, changes nothing); the same key as
     ``KEYER.soft(image)``, without keying the picture a second time."""
-    same = res.keyed_by == KEYER and res.matte.shape == image.shape[:2]
-    hard = res.matte if same and float(image.min()) >= 0.0 and float(image.max()) <= 1.0 else None
+    matte = res.matte
+    same = res.keyed_by == KEYER and matte.shape == image.shape[:2]
+    hard = matte if same and float(image.min()) >= 0.0 and float(image.max()) <= 1.0 else None
     return KEYER.soft(image, hard)
 
 
@@ -169,7 +170,7 @@ def write_all(
     with ThreadPoolExecutor(1, thread_name_prefix="soft-key") as beside:
 
         def start(i: int) -> Future[SoftKey] | None:
-            if i >= len(cams) or "exr" not in formats or not bool((results[cams[i]].matte < 1).any()):
+            if i >= len(cams) or "exr" not in formats or not results[cams[i]].keyed_a_screen():
                 return None
             return beside.submit(soft_key, grid.images[cams[i]], results[cams[i]])
 
