@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 from pathlib import Path
 from typing import Any, TypeGuard
 
@@ -15,7 +16,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.depth.grid import F32, Grid, grid_from_arrays, read_truth
+from rigctl.depth.grid import F32, Grid, grid_from_arrays, read_truths
 from rigctl.errors import RigFileError
 from rigctl.imagefile import MAX_SIDE, png_size, read_png
 from rigctl.layout import SAFE_CAMERA
@@ -102,15 +103,13 @@ def load_grid_folder(folder: Path) -> Grid:
 
 def _folder_truth(folder: Path, grid: Grid) -> dict[str, F32] | None:
     """A grid folder's reference disparities, ``truth/<camera>.pfm`` (e.g. the depth MIV content came
-    with, ``rigctl miv import``): what depth scores its estimates against. None when there are none."""
-    if not folder.is_dir():
+    with, ``rigctl miv import``): what depth scores its estimates against. None when there are none. A
+    ``truth`` that is there but no folder, or a camera's PFM that is there but no regular file, is refused."""
+    if not os.path.lexists(folder):
         return None
-    truth = {}
-    for n in grid.names:
-        p = folder / f"{n}.pfm"
-        if p.is_file():
-            truth[n] = read_truth(p, grid.shape)
-    return truth or None
+    if not folder.is_dir():
+        raise RigFileError(f"{folder}: reference disparities: expected a folder of <camera>.pfm: refused")
+    return read_truths(folder, grid.names, grid.shape) or None
 
 
 def _disparity_range(path: Path, rng: object) -> tuple[float, float] | None:

@@ -501,6 +501,35 @@ def test_a_stray_png_beside_the_grid_is_left_out_not_misreported(tmp_path: Path)
     assert sorted(p.name for p in (tmp_path / "d").glob("*.pfm")) == ["r0c0.pfm", "r0c1.pfm"]
 
 
+@pytest.mark.parametrize("kind", ["a FIFO", "a device", "a folder", "a symlink loop", "a dangling symlink"])
+def test_a_truth_pfm_that_is_there_but_no_regular_file_is_refused_not_skipped(tmp_path: Path, kind: str) -> None:
+    """truth/<camera>.pfm as a FIFO, a device, a folder or a symlink loop was skipped as if absent (depth ran
+    unscored, exit 0); a FIFO must be refused without being waited on (the timeout would end the run)."""
+    grid = grid_folder(tmp_path / "g")
+    pfm = grid / "truth" / "r0c0.pfm"
+    pfm.parent.mkdir()
+    if kind == "a FIFO":
+        os.mkfifo(pfm)
+    elif kind == "a device":
+        pfm.symlink_to("/dev/null")
+    elif kind == "a folder":
+        pfm.mkdir()
+    elif kind == "a symlink loop":
+        pfm.symlink_to(pfm.name)
+    else:
+        pfm.symlink_to(tmp_path / "nowhere.pfm")
+    res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=60)
+    one_line(res, EXIT_BAD_INPUT, f"{pfm}: ")
+    assert not (tmp_path / "d" / "r0c0.pfm").exists()
+
+
+def test_a_truth_that_is_no_folder_is_refused(tmp_path: Path) -> None:
+    grid = grid_folder(tmp_path / "g")
+    os.mkfifo(grid / "truth")
+    res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=60)
+    one_line(res, EXIT_BAD_INPUT, f"{grid / 'truth'}: reference disparities: expected a folder")
+
+
 def test_bench_depth_size_is_checked_against_the_memory_it_needs() -> None:
     from rigctl.cli.bench import check_depth_bench_memory
     from rigctl.errors import ParameterError
