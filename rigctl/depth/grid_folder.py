@@ -63,11 +63,7 @@ def load_grid_folder(folder: Path) -> Grid:
         if key == "doffs" and abs(v) > MAX_SIDE:
             raise RigFileError(f"{path}: doffs: must be within +-{MAX_SIDE} px, got {v!r}")
     rng = _disparity_range(path, spec.get("disparity_range_px"))
-    files = sorted(p for p in folder.glob("r*c*.png") if SAFE_CAMERA.fullmatch(p.stem))
-    for p in sorted(set(folder.glob("r*c*.png")) - set(files))[:8]:
-        log.warning("%s: not named r{row}c{col}.png: left out of the grid", p)
-    if not files:
-        raise RigFileError(f"{folder}: no r{{row}}c{{col}}.png images")
+    files = _grid_files(folder)
     sizes = {p: png_size(p) for p in files}  # every header within the budget before any picture is decoded
     total = sum(w * h for w, h in sizes.values())
     if total > MAX_GRID_PIXELS:
@@ -99,6 +95,31 @@ def load_grid_folder(folder: Path) -> Grid:
     )
     grid.truth = _folder_truth(folder / "truth", grid)
     return grid
+
+
+def _grid_files(folder: Path) -> list[Path]:
+    """The folder's pictures ``r{row}c{col}.png``, one per grid position and named as the position is written
+    (no leading zeros: ``r01c0.png`` beside ``r1c0.png`` read as two cameras at one place). A name that is no
+    grid position is left out with a warning."""
+    files = sorted(p for p in folder.glob("r*c*.png") if SAFE_CAMERA.fullmatch(p.stem))
+    for p in sorted(set(folder.glob("r*c*.png")) - set(files))[:8]:
+        log.warning("%s: not named r{row}c{col}.png: left out of the grid", p)
+    if not files:
+        raise RigFileError(f"{folder}: no r{{row}}c{{col}}.png images")
+    by_position: dict[str, list[Path]] = {}
+    for p in files:
+        m = SAFE_CAMERA.fullmatch(p.stem)
+        assert m is not None
+        by_position.setdefault(f"r{int(m[1])}c{int(m[2])}", []).append(p)
+    for camera, named in by_position.items():
+        if len(named) > 1:
+            raise RigFileError(
+                f"{' and '.join(str(p) for p in named)}: {len(named)} pictures of camera {camera} (a grid position "
+                f"is written without leading zeros: keep {camera}.png alone)"
+            )
+        if named[0].stem != camera:
+            raise RigFileError(f"{named[0]}: grid position written with a leading zero: name it {camera}.png")
+    return files
 
 
 def _folder_truth(folder: Path, grid: Grid) -> dict[str, F32] | None:

@@ -530,6 +530,22 @@ def test_a_truth_that_is_no_folder_is_refused(tmp_path: Path) -> None:
     one_line(res, EXIT_BAD_INPUT, f"{grid / 'truth'}: reference disparities: expected a folder")
 
 
+@pytest.mark.parametrize("names", [("r01c0", "r1c0"), ("r0c00", "r0c0"), ("r01c0",)])
+def test_a_grid_position_with_a_leading_zero_is_refused_naming_the_files(
+    tmp_path: Path, names: tuple[str, ...]
+) -> None:
+    """r01c0.png beside r1c0.png read as two cameras at one grid position (exit 0, two depth maps of one place);
+    positions are written without leading zeros, so one alone is refused too, naming the name to use."""
+    grid = grid_folder(tmp_path / "g")
+    for n in names:
+        (grid / f"{n}.png").write_bytes((grid / "r0c1.png").read_bytes())
+    res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=60)
+    camera = names[-1] if len(names) > 1 else "r1c0"
+    said = one_line(res, EXIT_BAD_INPUT, *(f"{grid / n}.png" for n in names), f"{camera}.png")
+    assert ("2 pictures of camera" if len(names) > 1 else "leading zero") in said
+    assert not (tmp_path / "d").exists() or nothing_in(tmp_path / "d")
+
+
 def test_bench_depth_size_is_checked_against_the_memory_it_needs() -> None:
     from rigctl.cli.bench import check_depth_bench_memory
     from rigctl.errors import ParameterError
