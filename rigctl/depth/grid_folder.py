@@ -78,6 +78,8 @@ def load_grid_folder(folder: Path) -> Grid:
     rows = {int(m[1]) for p in files if (m := SAFE_CAMERA.fullmatch(p.stem))}
     if spec.get("spacing_y") == 0 and len(rows) > 1:
         raise RigFileError(f"{path}: spacing_y: 0 puts the {len(rows)} rows of cameras at one place")
+    ratio = float(spec.get("spacing_y") or spec["spacing_x"]) / float(spec["spacing_x"])
+    _refuse_isolated(files, sizes[files[0]], ratio, rng)
     images = {p.stem: read_png(p) for p in files}
     first = next(iter(images))
     for n, img in images.items():
@@ -120,6 +122,33 @@ def _grid_files(folder: Path) -> list[Path]:
         if named[0].stem != camera:
             raise RigFileError(f"{named[0]}: grid position written with a leading zero: name it {camera}.png")
     return files
+
+
+def _refuse_isolated(files: list[Path], size: tuple[int, int], ratio: float, rng: tuple[float, float] | None) -> None:
+    """Refuse a camera that shares no view with any other: between cameras (dx, dy) horizontal spacings apart
+    a point of disparity d moves (d dx, d dy) px, so past ``w / |dx|`` (or ``h / |dy|``) it lies outside the
+    other's picture. A camera for which that happens at 1 px (or at the planned range's largest disparity,
+    when smaller) for every other camera was matched against nothing its depth could come from: a misnamed
+    ``r9999c9999.png`` beside a 3x3 set was left out of every other camera's views and estimated alone from
+    disparities under 0.01 px, exit 0. ``ratio`` is spacing_y / spacing_x."""
+    if len(files) < 2:
+        return
+    w, h = size
+    probe = min(1.0, max(abs(rng[0]), abs(rng[1]))) if rng else 1.0
+    pos = {}
+    for p in files:
+        m = SAFE_CAMERA.fullmatch(p.stem)
+        assert m is not None
+        pos[p] = (int(m[2]), int(m[1]) * ratio)
+    for p, (x, y) in pos.items():
+        gaps = {q: (abs(qx - x), abs(qy - y)) for q, (qx, qy) in pos.items() if q != p}
+        if all(probe * dx >= w or probe * dy >= h for dx, dy in gaps.values()):
+            near = min(gaps, key=lambda q: (max(gaps[q][0] / w, gaps[q][1] / h), gaps[q][0] / w + gaps[q][1] / h))
+            raise RigFileError(
+                f"{p}: shares no view with any other camera: the nearest, {near.name}, is {gaps[near][0]:g} across "
+                f"and {gaps[near][1]:g} down (in spacing_x), so a point of {probe:g} px disparity moves out of the "
+                f"{w}x{h} picture between them (a misnamed picture?)"
+            )
 
 
 def _folder_truth(folder: Path, grid: Grid) -> dict[str, F32] | None:

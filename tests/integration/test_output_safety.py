@@ -546,6 +546,20 @@ def test_a_grid_position_with_a_leading_zero_is_refused_naming_the_files(
     assert not (tmp_path / "d").exists() or nothing_in(tmp_path / "d")
 
 
+def test_a_camera_that_shares_no_view_with_the_grid_is_refused_a_gap_is_not(tmp_path: Path) -> None:
+    """r9999c9999.png beside the grid was left out of every other camera's views and estimated alone from
+    disparities under 0.01 px, exit 0. A camera a few steps off (a gap in the grid) still shares a view."""
+    grid = grid_folder(tmp_path / "g")
+    (grid / "r9999c9999.png").write_bytes((grid / "r0c1.png").read_bytes())
+    res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=60)
+    one_line(res, EXIT_BAD_INPUT, f"{grid / 'r9999c9999.png'}: shares no view with any other camera", "r0c1.png")
+    assert nothing_in(tmp_path / "d")
+    (grid / "r9999c9999.png").rename(grid / "r1c7.png")
+    res = rigctl("depth", str(grid), "--out", str(tmp_path / "d2"), "--preset", "fast", timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert sorted(p.name for p in (tmp_path / "d2").glob("*.pfm")) == ["r0c0.pfm", "r0c1.pfm", "r1c7.pfm"]
+
+
 def test_bench_depth_size_is_checked_against_the_memory_it_needs() -> None:
     from rigctl.cli.bench import check_depth_bench_memory
     from rigctl.errors import ParameterError
