@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import stat
 import sys
 from pathlib import Path
 
@@ -65,6 +67,7 @@ def run(ns: argparse.Namespace) -> int:
         if ns.colmap.exists() and not ns.colmap.is_dir():
             raise OutputError(f"--colmap {ns.colmap}: is {kind(ns.colmap.stat().st_mode)}, not a folder")
         check_creatable(ns.colmap, "--colmap", noun="folder")
+    refuse_outputs_over_inputs(ns)
     if ns.chessboard:
         try:
             cols, rows = (int(v) for v in ns.chessboard.lower().split("x"))
@@ -113,3 +116,49 @@ def run(ns: argparse.Namespace) -> int:
     if not ns.json:
         print("wrote " + ", ".join(str(p) for p in written))
     return 0
+
+
+def _input_files(folder: Path, depth: int = 2) -> list[Path]:
+    """The files calibrate may read from its input: a take's (``take.yaml``, ``cameras/``, ``truth/``) or an image
+    folder's (``<frame>/<camera>.png``, ``<camera><frame>.png``), at most ``depth`` folders down, through
+    symlinked folders as the readers go; nothing is opened (a FIFO among them is the reader's to refuse)."""
+    try:
+        entries = list(folder.iterdir()) if folder.is_dir() else [folder]
+    except OSError:
+        return []  # unreadable: the reader names it
+    files = []
+    for p in entries:
+        if p.is_dir() and depth > 1 and p != folder:
+            files += _input_files(p, depth - 1)
+        else:
+            files.append(p)
+    return files
+
+
+def refuse_outputs_over_inputs(ns: argparse.Namespace) -> None:
+    """Refuse, before any work, an output that is one of calibrate's inputs (an input picture, a take's file, the
+    --board file): compared as files (device and inode, as os.path.samefile), so a symlink or a hard link to an
+    input, or a path spelt another way, is caught too. The plots beside --out count as outputs."""
+    read: dict[tuple[int, int], Path] = {}
+    for p in [*_input_files(ns.input), *([ns.board] if ns.board else [])]:
+        try:
+            st = os.stat(p)
+        except OSError:
+            continue  # missing, a loop: the reader names it
+        if stat.S_ISREG(st.st_mode):
+            read.setdefault((st.st_dev, st.st_ino), p)
+    outputs = [("--out", ns.out)]
+    if not ns.no_plots:
+        stem = ns.out.with_suffix("")
+        outputs += [("--out's plot", stem.with_name(f"{stem.name}_{k}.png")) for k in ("coverage", "residuals")]
+    if ns.opencv:
+        outputs.append(("--opencv", ns.opencv))
+    for what, out in outputs:
+        try:
+            st = os.stat(out)
+        except OSError:
+            continue  # not there yet: no input
+        source = read.get((st.st_dev, st.st_ino))
+        if source is not None:
+            role = "the --board file" if ns.board and source == ns.board else f"an input file of {ns.input}"
+            raise ParameterError(f"{what} {out}: is {source}, {role}: calibrate would write over what it reads")

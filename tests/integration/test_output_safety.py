@@ -713,6 +713,42 @@ def test_calibrate_refuses_its_outputs_before_reading_the_input(tmp_path: Path) 
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
 
 
+@pytest.mark.parametrize("how", ["picture", "spelt another way", "symlink", "hard link", "board", "opencv"])
+def test_calibrate_refuses_an_output_that_is_one_of_its_inputs(tmp_path: Path, how: str) -> None:
+    """calibrate --out (or --opencv) named onto an input picture or the --board file was accepted and would
+    replace it after the solve; refused before any work (exit 2), through symlinks and hard links."""
+    pictures = tmp_path / "cb"
+    pictures.mkdir()
+    source = SHARED / "data" / "opencv-stereo-chessboard"
+    for name in ("left01.jpg", "left02.jpg", "right01.jpg", "right02.jpg"):
+        (pictures / name).write_bytes((source / name).read_bytes())
+    board = tmp_path / "board.yaml"
+    board.write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.025\n")
+    target, victim = ["--chessboard", "9x6"], pictures / "left01.jpg"
+    out = tmp_path / "c.yaml"
+    extra: list[str] = []
+    if how == "picture":
+        out = victim
+    elif how == "spelt another way":
+        out = pictures / ".." / "cb" / "left01.jpg"
+    elif how == "symlink":
+        out = tmp_path / "link.yaml"
+        out.symlink_to(victim)
+    elif how == "hard link":
+        out = tmp_path / "hard.yaml"
+        os.link(victim, out)
+    elif how == "board":
+        target, victim, out = ["--board", str(board)], board, board
+    else:
+        extra = ["--opencv", str(pictures / "right02.jpg")]
+        victim = pictures / "right02.jpg"
+    before = victim.read_bytes()
+    run = rigctl("calibrate", str(pictures), *target, "--out", str(out), *extra, timeout=60)
+    said = one_line(run, EXIT_USAGE, "calibrate would write over what it reads", str(victim.name))
+    assert ("the --board file" if how == "board" else f"an input file of {pictures}") in said
+    assert victim.read_bytes() == before
+
+
 @pytest.mark.parametrize(("errno_", "code", "fragment"), [(30, EXIT_DEVICE, "read-only"), (28, 4, "no space left")])
 def test_an_os_error_no_verb_caught_is_still_one_line(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], errno_: int, code: int, fragment: str
