@@ -9,6 +9,7 @@ import stat
 import sys
 from pathlib import Path
 
+from rigctl.calib import CHESSBOARD_SQUARE
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
 from rigctl.errors import CalibrationError, OutputError, ParameterError
@@ -37,7 +38,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     target = p.add_mutually_exclusive_group()
     target.add_argument("--board", type=Path, metavar="FILE", help="board description (rigctl board writes one)")
     target.add_argument("--chessboard", metavar="CxR", help="a plain chessboard of C x R inner corners")
-    p.add_argument("--square", type=float, default=1.0, help="chessboard square size (default 1: one square)")
+    lo, hi = CHESSBOARD_SQUARE
+    p.add_argument(
+        "--square",
+        type=float,
+        default=1.0,
+        help=f"chessboard square side, {lo:g} to {hi:g} in the unit the calibration is to be in (metres, millimetres; "
+        "default 1: one square)",
+    )
     p.add_argument(
         "--subpix-window", type=int, default=0, metavar="PX", help="chessboard corner refinement half-window (0: auto)"
     )
@@ -73,8 +81,14 @@ def run(ns: argparse.Namespace) -> int:
             cols, rows = (int(v) for v in ns.chessboard.lower().split("x"))
         except ValueError:
             raise ParameterError(f"--chessboard {ns.chessboard!r}: expected inner corners such as 9x6") from None
-        if cols < 3 or rows < 3 or not ns.square > 0 or ns.subpix_window < 0:
-            raise ParameterError("--chessboard needs at least 3x3 inner corners, --square > 0, --subpix-window >= 0")
+        if cols < 3 or rows < 3 or ns.subpix_window < 0:
+            raise ParameterError("--chessboard needs at least 3x3 inner corners, --subpix-window >= 0")
+        lo, hi = CHESSBOARD_SQUARE
+        if not lo <= ns.square <= hi:  # NaN fails too
+            raise ParameterError(
+                f"--square {ns.square:g}: must be {lo:g} to {hi:g} (the square's side in metres, millimetres or "
+                "squares: 0.025 or 25 for 25 mm)"
+            )
         target: Target | None = Chessboard(cols, rows, ns.square, ns.subpix_window)
     elif ns.board:
         target = load_target(ns.board)

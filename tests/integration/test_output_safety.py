@@ -644,6 +644,35 @@ def test_board_sizes_that_need_terabytes_are_one_line(tmp_path: Path, argv: tupl
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize(
+    ("argv", "fragment"),
+    [
+        (("--marker-mm", "1e-300"), "--marker-mm 1e-300 must be at least 0.1 mm and smaller than --square-mm 75"),
+        (("--marker-mm", "0.85"), "--marker-mm 0.85 at 150 dpi is 5 px: a DICT_5X5_250 marker needs at least 7 px"),
+    ],
+)
+def test_a_board_marker_too_small_to_draw_is_one_line(tmp_path: Path, argv: tuple[str, ...], fragment: str) -> None:
+    """A marker of 1e-300 mm ended in a SystemError traceback from cv2.aruco.CharucoBoard, one of 0.85 mm (5 px,
+    fewer than its 5x5 bits and border) in OpenCV's assertion text."""
+    one_line(rigctl("board", "--out", str(tmp_path / "b"), *argv), EXIT_USAGE, fragment)
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("square", ["1e300", "1e-300", "nan", "0"])
+def test_a_chessboard_square_out_of_sense_is_one_line_naming_square(tmp_path: Path, square: str) -> None:
+    """--square 1e300 ended in OpenCV's assertion text and 1e-300 in 'points all at one place'; the same square in
+    a chessboard board file too. Refused before any work, stating the bounds."""
+    source = str(SHARED / "data" / "opencv-stereo-chessboard")
+    run = rigctl("calibrate", source, "--chessboard", "9x6", "--square", square, "--out", str(tmp_path / "c.yaml"))
+    said = one_line(run, EXIT_USAGE, "--square ", "must be 0.0001 to 1000")
+    assert "Assertion" not in said and "one place" not in said
+    board = tmp_path / "board.yaml"
+    board.write_text(f"type: chessboard\ncolumns: 9\nrows: 6\nsquare: {float(square)!r}\n".replace("nan", ".nan"))
+    run = rigctl("calibrate", source, "--board", str(board), "--out", str(tmp_path / "c.yaml"))
+    one_line(run, EXIT_BAD_INPUT, f"{board}: square: must be 0.0001 to 1000")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["board.yaml"]
+
+
 def test_a_fifo_among_the_calibration_pictures_is_refused_not_waited_on(tmp_path: Path) -> None:
     pictures = tmp_path / "cb"
     pictures.mkdir()
