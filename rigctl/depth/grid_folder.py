@@ -135,20 +135,44 @@ def _refuse_isolated(files: list[Path], size: tuple[int, int], ratio: float, rng
         return
     w, h = size
     probe = min(1.0, max(abs(rng[0]), abs(rng[1]))) if rng else 1.0
+    # positions scaled so that two cameras share a view when both coordinates differ by under 1: a camera alone in
+    # its unit cell is checked against the 8 cells around it only (linear in the cameras, not quadratic)
     pos = {}
     for p in files:
         m = SAFE_CAMERA.fullmatch(p.stem)
         assert m is not None
-        pos[p] = (int(m[2]), int(m[1]) * ratio)
+        pos[p] = (int(m[2]) * probe / w, int(m[1]) * ratio * probe / h)
+    cells: dict[tuple[int, int], list[Path]] = {}
     for p, (x, y) in pos.items():
-        gaps = {q: (abs(qx - x), abs(qy - y)) for q, (qx, qy) in pos.items() if q != p}
-        if all(probe * dx >= w or probe * dy >= h for dx, dy in gaps.values()):
-            near = min(gaps, key=lambda q: (max(gaps[q][0] / w, gaps[q][1] / h), gaps[q][0] / w + gaps[q][1] / h))
-            raise RigFileError(
-                f"{p}: shares no view with any other camera: the nearest, {near.name}, is {gaps[near][0]:g} across "
-                f"and {gaps[near][1]:g} down (in spacing_x), so a point of {probe:g} px disparity moves out of the "
-                f"{w}x{h} picture between them (a misnamed picture?)"
-            )
+        cells.setdefault((math.floor(x), math.floor(y)), []).append(p)
+    for (cx, cy), here in cells.items():
+        if len(here) > 1:
+            continue
+        p = here[0]
+        x, y = pos[p]
+        around = [
+            q for i in (-1, 0, 1) for j in (-1, 0, 1) if (i, j) != (0, 0) for q in cells.get((cx + i, cy + j), ())
+        ]
+        if not any(abs(pos[q][0] - x) < 1 and abs(pos[q][1] - y) < 1 for q in around):
+            raise _isolated(p, pos, (w / probe, h / probe), probe, size)
+
+
+def _isolated(
+    p: Path, pos: dict[Path, tuple[float, float]], unit: tuple[float, float], probe: float, size: tuple[int, int]
+) -> RigFileError:
+    """The refusal of camera ``p``, which shares no view: naming its nearest camera and how far it is."""
+    x, y = pos[p]
+
+    def apart(q: Path) -> tuple[float, float]:
+        return abs(pos[q][0] - x), abs(pos[q][1] - y)
+
+    near = min((q for q in pos if q != p), key=lambda q: (max(apart(q)), sum(apart(q))))
+    dx, dy = apart(near)
+    return RigFileError(
+        f"{p}: shares no view with any other camera: the nearest, {near.name}, is {dx * unit[0]:g} across and "
+        f"{dy * unit[1]:g} down (in spacing_x), so a point of {probe:g} px disparity moves out of the "
+        f"{size[0]}x{size[1]} picture between them (a misnamed picture?)"
+    )
 
 
 def _folder_truth(folder: Path, grid: Grid) -> dict[str, F32] | None:
