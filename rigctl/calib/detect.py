@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.board import BoardSpec
+from rigctl.calib import CHESSBOARD_SQUARE
 from rigctl.calib.inputs import CalibrationViews
 from rigctl.errors import CalibrationError, ParameterError
 from rigctl.yamlfile import load_yaml
@@ -60,9 +61,15 @@ def load_target(path: Path) -> Target:
     data = load_yaml(path)
     if isinstance(data, dict) and data.get("type") == "chessboard":
         try:
-            return Chessboard(int(data["columns"]), int(data["rows"]), float(data.get("square", 1.0)))
-        except (KeyError, TypeError, ValueError):
+            board = Chessboard(int(data["columns"]), int(data["rows"]), float(data.get("square", 1.0)))
+        except (KeyError, TypeError, ValueError, OverflowError):
             raise CalibrationError(f"{path}: a chessboard needs columns, rows (inner corners) and square") from None
+        lo, hi = CHESSBOARD_SQUARE
+        if not lo <= board.square <= hi:  # NaN fails too
+            raise CalibrationError(
+                f"{path}: square: must be {lo:g} to {hi:g} (metres, millimetres or squares), got {board.square:g}"
+            )
+        return board
     return BoardSpec.load(path)
 
 

@@ -30,7 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=Path("board"), metavar="STEM", help="output stem (default: board)")
     p.add_argument("--squares", default="8x6", metavar="XxY", help="squares across x down (default 8x6)")
     p.add_argument("--square-mm", type=float, default=75.0, metavar="MM", help="square side (default 75)")
-    p.add_argument("--marker-mm", type=float, default=55.0, metavar="MM", help="marker side (default 55)")
+    marker_help = "marker side, 0.1 mm to below --square-mm (default 55)"
+    p.add_argument("--marker-mm", type=float, default=55.0, metavar="MM", help=marker_help)
     p.add_argument("--dictionary", default="DICT_5X5_250", choices=sorted(DICTIONARIES))
     p.add_argument("--dpi", type=float, default=150.0, help="print resolution (default 150)")
     p.add_argument("--margin-mm", type=float, default=10.0, metavar="MM", help="white margin (default 10)")
@@ -60,8 +61,10 @@ def run(ns: argparse.Namespace) -> int:
         raise ParameterError(f"--out {str(ns.out)!r}: give a file stem such as board")
     if not (ns.square_mm > 0 and math.isfinite(ns.square_mm)):
         raise ParameterError(f"--square-mm {ns.square_mm:g}: must be a positive length")
-    if not 0 < ns.marker_mm < ns.square_mm:
-        raise ParameterError(f"--marker-mm {ns.marker_mm} must be positive and smaller than --square-mm {ns.square_mm}")
+    if not 0.1 <= ns.marker_mm < ns.square_mm:  # 0.1 mm: what a board file's marker_m is held to
+        raise ParameterError(
+            f"--marker-mm {ns.marker_mm:g} must be at least 0.1 mm and smaller than --square-mm {ns.square_mm:g}"
+        )
     if not 30 <= ns.dpi <= 2400 or ns.margin_mm < 0:
         raise ParameterError("--dpi must be 30..2400 and --margin-mm at least 0")
     if not (math.isfinite(ns.square_mm) and ns.square_mm <= 1000 and math.isfinite(ns.margin_mm)):
@@ -76,6 +79,13 @@ def run(ns: argparse.Namespace) -> int:
         )
     if px_per_square < 20:
         raise ParameterError(f"{ns.square_mm} mm at {ns.dpi} dpi is {px_per_square} px per square: raise --dpi")
+    bits = int(ns.dictionary.split("_")[1].split("X")[0])  # DICT_5X5_250: 5 x 5 bits
+    marker_px = math.floor(px_per_square * ns.marker_mm / ns.square_mm)
+    if marker_px < bits + 2:  # its bits and a black border: below that OpenCV's assertion ended the run
+        raise ParameterError(
+            f"--marker-mm {ns.marker_mm:g} at {ns.dpi:g} dpi is {marker_px} px: a {ns.dictionary} marker needs at "
+            f"least {bits + 2} px (raise --marker-mm or --dpi)"
+        )
     png, yml = ns.out.with_suffix(".png"), ns.out.with_suffix(".yaml")
     for path in (png, yml):  # a name held by a folder, FIFO or device is refused before any drawing
         utf8_path(path)

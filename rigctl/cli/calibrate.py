@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import stat
 import sys
 from pathlib import Path
 
+from rigctl.calib import CHESSBOARD_SQUARE
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
 from rigctl.errors import CalibrationError, OutputError, ParameterError
@@ -35,7 +38,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     target = p.add_mutually_exclusive_group()
     target.add_argument("--board", type=Path, metavar="FILE", help="board description (rigctl board writes one)")
     target.add_argument("--chessboard", metavar="CxR", help="a plain chessboard of C x R inner corners")
-    p.add_argument("--square", type=float, default=1.0, help="chessboard square size (default 1: one square)")
+    lo, hi = CHESSBOARD_SQUARE
+    p.add_argument(
+        "--square",
+        type=float,
+        default=1.0,
+        help=f"chessboard square side, {lo:g} to {hi:g} in the unit the calibration is to be in (metres, millimetres; "
+        "default 1: one square)",
+    )
     p.add_argument(
         "--subpix-window", type=int, default=0, metavar="PX", help="chessboard corner refinement half-window (0: auto)"
     )
@@ -65,13 +75,20 @@ def run(ns: argparse.Namespace) -> int:
         if ns.colmap.exists() and not ns.colmap.is_dir():
             raise OutputError(f"--colmap {ns.colmap}: is {kind(ns.colmap.stat().st_mode)}, not a folder")
         check_creatable(ns.colmap, "--colmap", noun="folder")
+    refuse_outputs_over_inputs(ns)
     if ns.chessboard:
         try:
             cols, rows = (int(v) for v in ns.chessboard.lower().split("x"))
         except ValueError:
             raise ParameterError(f"--chessboard {ns.chessboard!r}: expected inner corners such as 9x6") from None
-        if cols < 3 or rows < 3 or not ns.square > 0 or ns.subpix_window < 0:
-            raise ParameterError("--chessboard needs at least 3x3 inner corners, --square > 0, --subpix-window >= 0")
+        if cols < 3 or rows < 3 or ns.subpix_window < 0:
+            raise ParameterError("--chessboard needs at least 3x3 inner corners, --subpix-window >= 0")
+        lo, hi = CHESSBOARD_SQUARE
+        if not lo <= ns.square <= hi:  # NaN fails too
+            raise ParameterError(
+                f"--square {ns.square:g}: must be {lo:g} to {hi:g} (the square's side in metres, millimetres or "
+                "squares: 0.025 or 25 for 25 mm)"
+            )
         target: Target | None = Chessboard(cols, rows, ns.square, ns.subpix_window)
     elif ns.board:
         target = load_target(ns.board)
@@ -113,3 +130,49 @@ def run(ns: argparse.Namespace) -> int:
     if not ns.json:
         print("wrote " + ", ".join(str(p) for p in written))
     return 0
+
+
+def _input_files(folder: Path, depth: int = 2) -> list[Path]:
+    """The files calibrate may read from its input: a take's (``take.yaml``, ``cameras/``, ``truth/``) or an image
+    folder's (``<frame>/<camera>.png``, ``<camera><frame>.png``), at most ``depth`` folders down, through
+    symlinked folders as the readers go; nothing is opened (a FIFO among them is the reader's to refuse)."""
+    try:
+        entries = list(folder.iterdir()) if folder.is_dir() else [folder]
+    except OSError:
+        return []  # unreadable: the reader names it
+    files = []
+    for p in entries:
+        if p.is_dir() and depth > 1 and p != folder:
+            files += _input_files(p, depth - 1)
+        else:
+            files.append(p)
+    return files
+
+
+def refuse_outputs_over_inputs(ns: argparse.Namespace) -> None:
+    """Refuse, before any work, an output that is one of calibrate's inputs (an input picture, a take's file, the
+    --board file): compared as files (device and inode, as os.path.samefile), so a symlink or a hard link to an
+    input, or a path spelt another way, is caught too. The plots beside --out count as outputs."""
+    read: dict[tuple[int, int], Path] = {}
+    for p in [*_input_files(ns.input), *([ns.board] if ns.board else [])]:
+        try:
+            st = os.stat(p)
+        except OSError:
+            continue  # missing, a loop: the reader names it
+        if stat.S_ISREG(st.st_mode):
+            read.setdefault((st.st_dev, st.st_ino), p)
+    outputs = [("--out", ns.out)]
+    if not ns.no_plots:
+        stem = ns.out.with_suffix("")
+        outputs += [("--out's plot", stem.with_name(f"{stem.name}_{k}.png")) for k in ("coverage", "residuals")]
+    if ns.opencv:
+        outputs.append(("--opencv", ns.opencv))
+    for what, out in outputs:
+        try:
+            st = os.stat(out)
+        except OSError:
+            continue  # not there yet: no input
+        source = read.get((st.st_dev, st.st_ino))
+        if source is not None:
+            role = "the --board file" if ns.board and source == ns.board else f"an input file of {ns.input}"
+            raise ParameterError(f"{what} {out}: is {source}, {role}: calibrate would write over what it reads")

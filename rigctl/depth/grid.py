@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -253,6 +254,13 @@ def read_truth(path: Path, shape: tuple[int, int]) -> F32:
     return d
 
 
+def read_truths(folder: Path, names: list[str], shape: tuple[int, int]) -> dict[str, F32]:
+    """The reference disparity ``folder/<camera>.pfm`` of each camera that has one. One is there when its name
+    is (``os.path.lexists``): a FIFO, a device, a folder, a symlink loop or a dangling symlink in its place is
+    refused in one line by :func:`read_truth` (opened without blocking), not skipped as if it were absent."""
+    return {n: read_truth(folder / f"{n}.pfm", shape) for n in names if os.path.lexists(folder / f"{n}.pfm")}
+
+
 def camera_offsets(
     positions_m: Mapping[str, Any], names: list[str], spacing: float, where: str
 ) -> dict[str, tuple[float, float]]:
@@ -348,8 +356,7 @@ class TakeGrid(TakeFrames):
         truth = None
         tdir = self.folder / "truth" / "disparity" / f"{number:06d}"
         if tdir.is_dir():
-            shape = images.shape()
-            truth = {n: read_truth(tdir / f"{n}.pfm", shape) for n in self.names if (tdir / f"{n}.pfm").exists()}
+            truth = read_truths(tdir, self.names, images.shape())
         return Grid(
             list(self.names),
             images,

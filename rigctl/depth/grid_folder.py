@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 from pathlib import Path
 from typing import Any, TypeGuard
 
@@ -15,7 +16,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.depth.grid import F32, Grid, grid_from_arrays, read_truth
+from rigctl.depth.grid import F32, Grid, grid_from_arrays, read_truths
 from rigctl.errors import RigFileError
 from rigctl.imagefile import MAX_SIDE, png_size, read_png
 from rigctl.layout import SAFE_CAMERA
@@ -62,11 +63,7 @@ def load_grid_folder(folder: Path) -> Grid:
         if key == "doffs" and abs(v) > MAX_SIDE:
             raise RigFileError(f"{path}: doffs: must be within +-{MAX_SIDE} px, got {v!r}")
     rng = _disparity_range(path, spec.get("disparity_range_px"))
-    files = sorted(p for p in folder.glob("r*c*.png") if SAFE_CAMERA.fullmatch(p.stem))
-    for p in sorted(set(folder.glob("r*c*.png")) - set(files))[:8]:
-        log.warning("%s: not named r{row}c{col}.png: left out of the grid", p)
-    if not files:
-        raise RigFileError(f"{folder}: no r{{row}}c{{col}}.png images")
+    files = _grid_files(folder)
     sizes = {p: png_size(p) for p in files}  # every header within the budget before any picture is decoded
     total = sum(w * h for w, h in sizes.values())
     if total > MAX_GRID_PIXELS:
@@ -81,6 +78,8 @@ def load_grid_folder(folder: Path) -> Grid:
     rows = {int(m[1]) for p in files if (m := SAFE_CAMERA.fullmatch(p.stem))}
     if spec.get("spacing_y") == 0 and len(rows) > 1:
         raise RigFileError(f"{path}: spacing_y: 0 puts the {len(rows)} rows of cameras at one place")
+    ratio = float(spec.get("spacing_y") or spec["spacing_x"]) / float(spec["spacing_x"])
+    _refuse_isolated(files, sizes[files[0]], ratio, rng)
     images = {p.stem: read_png(p) for p in files}
     first = next(iter(images))
     for n, img in images.items():
@@ -100,17 +99,91 @@ def load_grid_folder(folder: Path) -> Grid:
     return grid
 
 
+def _grid_files(folder: Path) -> list[Path]:
+    """The folder's pictures ``r{row}c{col}.png``, one per grid position and named as the position is written
+    (no leading zeros: ``r01c0.png`` beside ``r1c0.png`` read as two cameras at one place). A name that is no
+    grid position is left out with a warning."""
+    files = sorted(p for p in folder.glob("r*c*.png") if SAFE_CAMERA.fullmatch(p.stem))
+    for p in sorted(set(folder.glob("r*c*.png")) - set(files))[:8]:
+        log.warning("%s: not named r{row}c{col}.png: left out of the grid", p)
+    if not files:
+        raise RigFileError(f"{folder}: no r{{row}}c{{col}}.png images")
+    by_position: dict[str, list[Path]] = {}
+    for p in files:
+        m = SAFE_CAMERA.fullmatch(p.stem)
+        assert m is not None
+        by_position.setdefault(f"r{int(m[1])}c{int(m[2])}", []).append(p)
+    for camera, named in by_position.items():
+        if len(named) > 1:
+            raise RigFileError(
+                f"{' and '.join(str(p) for p in named)}: {len(named)} pictures of camera {camera} (a grid position "
+                f"is written without leading zeros: keep {camera}.png alone)"
+            )
+        if named[0].stem != camera:
+            raise RigFileError(f"{named[0]}: grid position written with a leading zero: name it {camera}.png")
+    return files
+
+
+def _refuse_isolated(files: list[Path], size: tuple[int, int], ratio: float, rng: tuple[float, float] | None) -> None:
+    """Refuse a camera that shares no view with any other: between cameras (dx, dy) horizontal spacings apart
+    a point of disparity d moves (d dx, d dy) px, so past ``w / |dx|`` (or ``h / |dy|``) it lies outside the
+    other's picture. A camera for which that happens at 1 px (or at the planned range's largest disparity,
+    when smaller) for every other camera was matched against nothing its depth could come from: a misnamed
+    ``r9999c9999.png`` beside a 3x3 set was left out of every other camera's views and estimated alone from
+    disparities under 0.01 px, exit 0. ``ratio`` is spacing_y / spacing_x."""
+    if len(files) < 2:
+        return
+    w, h = size
+    probe = min(1.0, max(abs(rng[0]), abs(rng[1]))) if rng else 1.0
+    # positions scaled so that two cameras share a view when both coordinates differ by under 1: a camera alone in
+    # its unit cell is checked against the 8 cells around it only (linear in the cameras, not quadratic)
+    pos = {}
+    for p in files:
+        m = SAFE_CAMERA.fullmatch(p.stem)
+        assert m is not None
+        pos[p] = (int(m[2]) * probe / w, int(m[1]) * ratio * probe / h)
+    cells: dict[tuple[int, int], list[Path]] = {}
+    for p, (x, y) in pos.items():
+        cells.setdefault((math.floor(x), math.floor(y)), []).append(p)
+    for (cx, cy), here in cells.items():
+        if len(here) > 1:
+            continue
+        p = here[0]
+        x, y = pos[p]
+        around = [
+            q for i in (-1, 0, 1) for j in (-1, 0, 1) if (i, j) != (0, 0) for q in cells.get((cx + i, cy + j), ())
+        ]
+        if not any(abs(pos[q][0] - x) < 1 and abs(pos[q][1] - y) < 1 for q in around):
+            raise _isolated(p, pos, (w / probe, h / probe), probe, size)
+
+
+def _isolated(
+    p: Path, pos: dict[Path, tuple[float, float]], unit: tuple[float, float], probe: float, size: tuple[int, int]
+) -> RigFileError:
+    """The refusal of camera ``p``, which shares no view: naming its nearest camera and how far it is."""
+    x, y = pos[p]
+
+    def apart(q: Path) -> tuple[float, float]:
+        return abs(pos[q][0] - x), abs(pos[q][1] - y)
+
+    near = min((q for q in pos if q != p), key=lambda q: (max(apart(q)), sum(apart(q))))
+    dx, dy = apart(near)
+    return RigFileError(
+        f"{p}: shares no view with any other camera: the nearest, {near.name}, is {dx * unit[0]:g} across and "
+        f"{dy * unit[1]:g} down (in spacing_x), so a point of {probe:g} px disparity moves out of the "
+        f"{size[0]}x{size[1]} picture between them (a misnamed picture?)"
+    )
+
+
 def _folder_truth(folder: Path, grid: Grid) -> dict[str, F32] | None:
     """A grid folder's reference disparities, ``truth/<camera>.pfm`` (e.g. the depth MIV content came
-    with, ``rigctl miv import``): what depth scores its estimates against. None when there are none."""
-    if not folder.is_dir():
+    with, ``rigctl miv import``): what depth scores its estimates against. None when there are none. A
+    ``truth`` that is there but no folder, or a camera's PFM that is there but no regular file, is refused."""
+    if not os.path.lexists(folder):
         return None
-    truth = {}
-    for n in grid.names:
-        p = folder / f"{n}.pfm"
-        if p.is_file():
-            truth[n] = read_truth(p, grid.shape)
-    return truth or None
+    if not folder.is_dir():
+        raise RigFileError(f"{folder}: reference disparities: expected a folder of <camera>.pfm: refused")
+    return read_truths(folder, grid.names, grid.shape) or None
 
 
 def _disparity_range(path: Path, rng: object) -> tuple[float, float] | None:

@@ -501,6 +501,65 @@ def test_a_stray_png_beside_the_grid_is_left_out_not_misreported(tmp_path: Path)
     assert sorted(p.name for p in (tmp_path / "d").glob("*.pfm")) == ["r0c0.pfm", "r0c1.pfm"]
 
 
+@pytest.mark.parametrize("kind", ["a FIFO", "a device", "a folder", "a symlink loop", "a dangling symlink"])
+def test_a_truth_pfm_that_is_there_but_no_regular_file_is_refused_not_skipped(tmp_path: Path, kind: str) -> None:
+    """truth/<camera>.pfm as a FIFO, a device, a folder or a symlink loop was skipped as if absent (depth ran
+    unscored, exit 0); a FIFO must be refused without being waited on (the timeout would end the run)."""
+    grid = grid_folder(tmp_path / "g")
+    pfm = grid / "truth" / "r0c0.pfm"
+    pfm.parent.mkdir()
+    if kind == "a FIFO":
+        os.mkfifo(pfm)
+    elif kind == "a device":
+        pfm.symlink_to("/dev/null")
+    elif kind == "a folder":
+        pfm.mkdir()
+    elif kind == "a symlink loop":
+        pfm.symlink_to(pfm.name)
+    else:
+        pfm.symlink_to(tmp_path / "nowhere.pfm")
+    res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=60)
+    one_line(res, EXIT_BAD_INPUT, f"{pfm}: ")
+    assert not (tmp_path / "d" / "r0c0.pfm").exists()
+
+
+def test_a_truth_that_is_no_folder_is_refused(tmp_path: Path) -> None:
+    grid = grid_folder(tmp_path / "g")
+    os.mkfifo(grid / "truth")
+    res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=60)
+    one_line(res, EXIT_BAD_INPUT, f"{grid / 'truth'}: reference disparities: expected a folder")
+
+
+@pytest.mark.parametrize("names", [("r01c0", "r1c0"), ("r0c00", "r0c0"), ("r01c0",)])
+def test_a_grid_position_with_a_leading_zero_is_refused_naming_the_files(
+    tmp_path: Path, names: tuple[str, ...]
+) -> None:
+    """r01c0.png beside r1c0.png read as two cameras at one grid position (exit 0, two depth maps of one place);
+    positions are written without leading zeros, so one alone is refused too, naming the name to use."""
+    grid = grid_folder(tmp_path / "g")
+    for n in names:
+        (grid / f"{n}.png").write_bytes((grid / "r0c1.png").read_bytes())
+    res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=60)
+    camera = names[-1] if len(names) > 1 else "r1c0"
+    said = one_line(res, EXIT_BAD_INPUT, *(f"{grid / n}.png" for n in names), f"{camera}.png")
+    assert ("2 pictures of camera" if len(names) > 1 else "leading zero") in said
+    assert not (tmp_path / "d").exists() or nothing_in(tmp_path / "d")
+
+
+def test_a_camera_that_shares_no_view_with_the_grid_is_refused_a_gap_is_not(tmp_path: Path) -> None:
+    """r9999c9999.png beside the grid was left out of every other camera's views and estimated alone from
+    disparities under 0.01 px, exit 0. A camera a few steps off (a gap in the grid) still shares a view."""
+    grid = grid_folder(tmp_path / "g")
+    (grid / "r9999c9999.png").write_bytes((grid / "r0c1.png").read_bytes())
+    res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=60)
+    one_line(res, EXIT_BAD_INPUT, f"{grid / 'r9999c9999.png'}: shares no view with any other camera", "r0c1.png")
+    assert nothing_in(tmp_path / "d")
+    (grid / "r9999c9999.png").rename(grid / "r1c7.png")
+    res = rigctl("depth", str(grid), "--out", str(tmp_path / "d2"), "--preset", "fast", timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert sorted(p.name for p in (tmp_path / "d2").glob("*.pfm")) == ["r0c0.pfm", "r0c1.pfm", "r1c7.pfm"]
+
+
 def test_bench_depth_size_is_checked_against_the_memory_it_needs() -> None:
     from rigctl.cli.bench import check_depth_bench_memory
     from rigctl.errors import ParameterError
@@ -585,6 +644,35 @@ def test_board_sizes_that_need_terabytes_are_one_line(tmp_path: Path, argv: tupl
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize(
+    ("argv", "fragment"),
+    [
+        (("--marker-mm", "1e-300"), "--marker-mm 1e-300 must be at least 0.1 mm and smaller than --square-mm 75"),
+        (("--marker-mm", "0.85"), "--marker-mm 0.85 at 150 dpi is 5 px: a DICT_5X5_250 marker needs at least 7 px"),
+    ],
+)
+def test_a_board_marker_too_small_to_draw_is_one_line(tmp_path: Path, argv: tuple[str, ...], fragment: str) -> None:
+    """A marker of 1e-300 mm ended in a SystemError traceback from cv2.aruco.CharucoBoard, one of 0.85 mm (5 px,
+    fewer than its 5x5 bits and border) in OpenCV's assertion text."""
+    one_line(rigctl("board", "--out", str(tmp_path / "b"), *argv), EXIT_USAGE, fragment)
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("square", ["1e300", "1e-300", "nan", "0"])
+def test_a_chessboard_square_out_of_sense_is_one_line_naming_square(tmp_path: Path, square: str) -> None:
+    """--square 1e300 ended in OpenCV's assertion text and 1e-300 in 'points all at one place'; the same square in
+    a chessboard board file too. Refused before any work, stating the bounds."""
+    source = str(SHARED / "data" / "opencv-stereo-chessboard")
+    run = rigctl("calibrate", source, "--chessboard", "9x6", "--square", square, "--out", str(tmp_path / "c.yaml"))
+    said = one_line(run, EXIT_USAGE, "--square ", "must be 0.0001 to 1000")
+    assert "Assertion" not in said and "one place" not in said
+    board = tmp_path / "board.yaml"
+    board.write_text(f"type: chessboard\ncolumns: 9\nrows: 6\nsquare: {float(square)!r}\n".replace("nan", ".nan"))
+    run = rigctl("calibrate", source, "--board", str(board), "--out", str(tmp_path / "c.yaml"))
+    one_line(run, EXIT_BAD_INPUT, f"{board}: square: must be 0.0001 to 1000")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["board.yaml"]
+
+
 def test_a_fifo_among_the_calibration_pictures_is_refused_not_waited_on(tmp_path: Path) -> None:
     pictures = tmp_path / "cb"
     pictures.mkdir()
@@ -652,6 +740,42 @@ def test_calibrate_refuses_its_outputs_before_reading_the_input(tmp_path: Path) 
     ):
         one_line(rigctl("calibrate", missing, *argv), EXIT_DEVICE, fragment)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
+
+
+@pytest.mark.parametrize("how", ["picture", "spelt another way", "symlink", "hard link", "board", "opencv"])
+def test_calibrate_refuses_an_output_that_is_one_of_its_inputs(tmp_path: Path, how: str) -> None:
+    """calibrate --out (or --opencv) named onto an input picture or the --board file was accepted and would
+    replace it after the solve; refused before any work (exit 2), through symlinks and hard links."""
+    pictures = tmp_path / "cb"
+    pictures.mkdir()
+    source = SHARED / "data" / "opencv-stereo-chessboard"
+    for name in ("left01.jpg", "left02.jpg", "right01.jpg", "right02.jpg"):
+        (pictures / name).write_bytes((source / name).read_bytes())
+    board = tmp_path / "board.yaml"
+    board.write_text("type: chessboard\ncolumns: 9\nrows: 6\nsquare: 0.025\n")
+    target, victim = ["--chessboard", "9x6"], pictures / "left01.jpg"
+    out = tmp_path / "c.yaml"
+    extra: list[str] = []
+    if how == "picture":
+        out = victim
+    elif how == "spelt another way":
+        out = pictures / ".." / "cb" / "left01.jpg"
+    elif how == "symlink":
+        out = tmp_path / "link.yaml"
+        out.symlink_to(victim)
+    elif how == "hard link":
+        out = tmp_path / "hard.yaml"
+        os.link(victim, out)
+    elif how == "board":
+        target, victim, out = ["--board", str(board)], board, board
+    else:
+        extra = ["--opencv", str(pictures / "right02.jpg")]
+        victim = pictures / "right02.jpg"
+    before = victim.read_bytes()
+    run = rigctl("calibrate", str(pictures), *target, "--out", str(out), *extra, timeout=60)
+    said = one_line(run, EXIT_USAGE, "calibrate would write over what it reads", str(victim.name))
+    assert ("the --board file" if how == "board" else f"an input file of {pictures}") in said
+    assert victim.read_bytes() == before
 
 
 @pytest.mark.parametrize(("errno_", "code", "fragment"), [(30, EXIT_DEVICE, "read-only"), (28, 4, "no space left")])

@@ -150,7 +150,8 @@ def test_board_writes_a_detectable_target(tmp_path: Path, run_cli) -> None:  # t
     _, ids, _, _ = detector.detectBoard(img)
     assert ids is not None and len(ids) == 5 * 3  # every inner corner
     res = run_cli("board", "--out", str(tmp_path / "c"), "--marker-mm", "80")
-    assert res.returncode == 2 and "--marker-mm 80.0 must be positive and smaller" in res.stderr
+    assert res.returncode == 2, res.stderr
+    assert "--marker-mm 80 must be at least 0.1 mm and smaller than --square-mm 75" in res.stderr
 
 
 def test_rectified_take_keeps_the_source_timecodes(take: Path, tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
