@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hostile_support import one_line  # type: ignore[import-not-found]
@@ -34,3 +36,51 @@ def test_camera_file_in_a_symlink_loop_is_one_line(tiny: Path, tmp_path: Path, v
         assert "r0c0.essence" in res.stderr and "loop of symbolic links" in res.stderr, res.stderr
     else:
         one_line(res, 3, "r0c0.essence", "loop of symbolic links")
+
+
+@pytest.fixture(scope="module")
+def content(module_tmp: Callable[[str], Path]) -> Path:
+    """MIV content of an ideal tiny take and its true disparity."""
+    take = record_tiny(module_tmp("rel-miv"), "ideal", 1, "ideal=true", "motion=false")
+    out = take.parent / "content"
+    res = rigctl("miv", "export", str(take), str(take / "truth" / "disparity"), "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    return out
+
+
+def edited_content(content: Path, tmp_path: Path, edit: Callable[[list[dict[str, Any]]], None]) -> Path:
+    """A copy of ``content`` (YUV files linked) whose cameras.json is changed by ``edit(cameras)``."""
+    copy = tmp_path / "content"
+    copy.mkdir()
+    for f in content.iterdir():
+        (copy / f.name).symlink_to(f)
+    (copy / "cameras.json").unlink()
+    doc = json.loads((content / "cameras.json").read_text())
+    edit(doc["cameras"])
+    (copy / "cameras.json").write_text(json.dumps(doc))
+    return copy / "cameras.json"
+
+
+def _set(i: int, key: str, value: object) -> Callable[[list[dict[str, Any]]], None]:
+    return lambda cams: cams[i].__setitem__(key, value)
+
+
+@pytest.mark.parametrize(
+    ("edit", "fragment"),
+    [
+        # two cameras named alike read one camera's files: a grid position showed another camera's view, exit 0
+        (lambda cams: cams[1].__setitem__("Name", cams[0]["Name"]), "is used twice"),
+        (_set(0, "Name", "r0c0\0"), "no usable Name"),  # a NUL byte: ValueError traceback from open()
+        (_set(0, "Depth_range", [1e-300, 3.0]), "Depth_range"),  # disparity overflowed to inf, exit 0
+        (_set(0, "Position", [1e308, 0.0, 0.0]), "Position"),  # 'inf mm' off the plane, and a RuntimeWarning
+    ],
+    ids=["duplicate-name", "nul-name", "near-1e-300", "position-1e308"],
+)
+def test_hostile_camera_json_is_one_line(
+    content: Path, tmp_path: Path, edit: Callable[[list[dict[str, Any]]], None], fragment: str
+) -> None:
+    cameras = edited_content(content, tmp_path, edit)
+    res = rigctl("miv", "import", str(cameras), "--out", str(tmp_path / "grid"))
+    one_line(res, 3, "cameras.json", fragment)
+    assert "inf" not in res.stderr.replace("info", "") and "Warning" not in res.stderr
+    assert not (tmp_path / "grid").exists()
