@@ -39,9 +39,15 @@ def test_camera_file_in_a_symlink_loop_is_one_line(tiny: Path, tmp_path: Path, v
 
 
 @pytest.fixture(scope="module")
-def content(module_tmp: Callable[[str], Path]) -> Path:
-    """MIV content of an ideal tiny take and its true disparity."""
-    take = record_tiny(module_tmp("rel-miv"), "ideal", 1, "ideal=true", "motion=false")
+def ideal(module_tmp: Callable[[str], Path]) -> Path:
+    """An ideal tiny take: already rectified, with its true disparity."""
+    return record_tiny(module_tmp("rel-ideal"), "ideal", 1, "ideal=true", "motion=false")
+
+
+@pytest.fixture(scope="module")
+def content(ideal: Path) -> Path:
+    """MIV content of the ideal take and its true disparity."""
+    take = ideal
     out = take.parent / "content"
     res = rigctl("miv", "export", str(take), str(take / "truth" / "disparity"), "--out", str(out))
     assert res.returncode == 0, res.stderr
@@ -84,3 +90,23 @@ def test_hostile_camera_json_is_one_line(
     one_line(res, 3, "cameras.json", fragment)
     assert "inf" not in res.stderr.replace("info", "") and "Warning" not in res.stderr
     assert not (tmp_path / "grid").exists()
+
+
+@pytest.mark.parametrize("where", ["proc", "under-a-file"])
+def test_usd_into_a_place_that_cannot_be_written_is_one_line(ideal: Path, tmp_path: Path, where: str) -> None:
+    """pxr raised its own Tf.ErrorException: a traceback, exit 1."""
+    (tmp_path / "file").write_text("x")
+    out = Path("/proc/rigctl-rel.usda") if where == "proc" else tmp_path / "file" / "rig.usda"
+    res = rigctl("usd", str(ideal), "--out", str(out))
+    one_line(res, 4, str(out))
+
+
+def test_usd_is_published_whole_and_never_replaced(ideal: Path, tmp_path: Path) -> None:
+    for suffix in (".usda", ".usdc"):
+        out = tmp_path / f"rig{suffix}"
+        assert rigctl("usd", str(ideal), "--out", str(out)).returncode == 0
+        first = out.read_bytes()
+        assert first.startswith(b"#usda 1.0" if suffix == ".usda" else b"PXR-USDC")
+        one_line(rigctl("usd", str(ideal), "--out", str(out)), 2, "already exists")
+        assert out.read_bytes() == first
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.usda", "rig.usdc"]  # no temporary file left
