@@ -110,3 +110,11 @@ def test_usd_is_published_whole_and_never_replaced(ideal: Path, tmp_path: Path) 
         one_line(rigctl("usd", str(ideal), "--out", str(out)), 2, "already exists")
         assert out.read_bytes() == first
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.usda", "rig.usdc"]  # no temporary file left
+
+
+@pytest.mark.parametrize("json_out", [False, True])
+def test_plan_refuses_a_budget_that_puts_the_subject_beyond_1000_km(json_out: bool) -> None:
+    """--budget 1e-300 solved near = far = 4.8e149 m for a subject 1 m deep (its depth lost in rounding), exit 0."""
+    res = rigctl("plan", "sim-3x3", "--budget", "1e-300", *(["--json"] if json_out else []))
+    one_line(res, 2, "--budget 1e-300", "beyond 1,000 km")
+    assert res.stdout == ""
