@@ -118,3 +118,22 @@ def test_plan_refuses_a_budget_that_puts_the_subject_beyond_1000_km(json_out: bo
     res = rigctl("plan", "sim-3x3", "--budget", "1e-300", *(["--json"] if json_out else []))
     one_line(res, 2, "--budget 1e-300", "beyond 1,000 km")
     assert res.stdout == ""
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["take", "export", "{take}", "--out", "{take}"],
+        ["take", "export", "{take}", "--out", "{take}/export"],
+        ["process", "{take}", "--out", "{take}/depth"],
+        ["miv", "export", "{take}", "{take}/truth/disparity", "--out", "{take}/miv"],
+    ],
+    ids=["export-into-take", "export-under-take", "process-under-take", "miv-under-take"],
+)
+def test_an_output_inside_the_take_is_refused_before_any_work(ideal: Path, tmp_path: Path, argv: list[str]) -> None:
+    """They wrote their pictures into the recording, exit 0: the take then held files no camera recorded."""
+    take = copy(ideal, tmp_path)
+    before = sorted(p.relative_to(take) for p in take.rglob("*"))
+    res = rigctl(*(a.format(take=take) for a in argv))
+    one_line(res, 2, "is inside the take")
+    assert sorted(p.relative_to(take) for p in take.rglob("*")) == before
