@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 from hostile_support import one_line  # type: ignore[import-not-found]
-from reliab_support import record_tiny, rigctl  # type: ignore[import-not-found]
+from reliab_support import edit_manifest, record_tiny, rigctl  # type: ignore[import-not-found]
 
 
 @pytest.fixture(scope="module")
@@ -137,3 +137,16 @@ def test_an_output_inside_the_take_is_refused_before_any_work(ideal: Path, tmp_p
     res = rigctl(*(a.format(take=take) for a in argv))
     one_line(res, 2, "is inside the take")
     assert sorted(p.relative_to(take) for p in take.rglob("*")) == before
+
+
+@pytest.mark.parametrize(("row", "value"), [(0, [0.0, 0.0, 47.5]), (0, [1e300, 0.0, 47.5]), (1, [0.0, 183.8, 1e300])])
+def test_a_rectified_take_whose_camera_matrix_is_no_camera_is_refused(
+    ideal: Path, tmp_path: Path, row: int, value: list[float]
+) -> None:
+    """fx 0 wrote a USD stage with horizontalAperture = inf, exit 0; the take read as sound."""
+    take = copy(ideal, tmp_path)
+    edit_manifest(take, lambda m: m["rectification"]["K"].__setitem__(row, value))
+    out = tmp_path / "rig.usda"
+    one_line(rigctl("usd", str(take), "--out", str(out)), 3, "take.yaml", "camera matrix K")
+    assert not out.exists()
+    one_line(rigctl("take", "info", str(take)), 3, "camera matrix K")
