@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import socket
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -150,3 +151,21 @@ def test_a_rectified_take_whose_camera_matrix_is_no_camera_is_refused(
     one_line(rigctl("usd", str(take), "--out", str(out)), 3, "take.yaml", "camera matrix K")
     assert not out.exists()
     one_line(rigctl("take", "info", str(take)), 3, "camera matrix K")
+
+
+def test_process_says_nothing_when_another_dask_holds_port_8787(ideal: Path, tmp_path: Path) -> None:
+    """The local cluster's HTTP server took Dask's default port: with it busy (another cluster on the machine) a
+    successful run printed 'UserWarning: Port 8787 is already in use' and three more lines on stderr."""
+    holder = socket.socket()
+    try:
+        holder.bind(("127.0.0.1", 8787))
+        holder.listen()
+    except OSError:
+        pass  # held already by someone else: the case itself
+    try:
+        out = str(tmp_path / "p")
+        res = rigctl("process", str(ideal), "--out", out, "--workers", "1", "--quiet", "--preset", "fast")
+    finally:
+        holder.close()
+    assert res.returncode == 0, res.stderr
+    assert res.stderr == ""
