@@ -80,6 +80,17 @@ def prepare_output(out: Path, what: str = "--out") -> Path:
     return out
 
 
+def refuse_inside(out: Path, source: Path, noun: str = "take") -> None:
+    """``--out`` may not be the input folder nor lie inside it: a run would write its pictures into what it reads
+    (a take then holds files no camera recorded, and the next run over it reads them too)."""
+    try:
+        src, dst = source.resolve(), out.resolve()
+    except (RuntimeError, OSError):  # a loop of links: the reader or the output side names it
+        return
+    if dst == src or dst.is_relative_to(src):
+        raise ParameterError(f"--out {out}: is inside the {noun} {source}; choose a folder outside it")
+
+
 def check_creatable(path: Path, what: str = "--out", noun: str = "file") -> None:
     """Refuse, before any work, a ``path`` that cannot be made: its nearest existing ancestor must be a folder
     this process can write (nothing is created here, so a run that then fails on its input leaves nothing)."""

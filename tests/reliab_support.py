@@ -42,6 +42,19 @@ def make_tiny(root: Path, frames: int = 3, width: int = 96, height: int = 54) ->
     return root / "t", root / "rect"
 
 
+def record_tiny(root: Path, name: str, frames: int = 2, *sim: str) -> Path:
+    """A take ``root/name`` of the simulated 3x3 rig at 96x54, deterministic, with ``sim`` settings (KEY=VALUE)."""
+    rig = dict(SIM_RIG, format={**SIM_RIG["format"], "width_px": 96, "height_px": 54})
+    write_yaml(root / "tiny.yaml", rig)
+    settings = [a for kv in ("deterministic=true", *sim) for a in ("--sim", kv)]
+    res = rigctl(
+        "record", str(root / "tiny.yaml"), "--take", name, "--frames", str(frames), "--out", str(root), "--force",
+        *settings,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    return root / name
+
+
 def copy_take(take: Path, dest: Path) -> Path:
     shutil.copytree(take, dest)
     return dest

@@ -125,7 +125,9 @@ def cmd_ivpsnr(ns: argparse.Namespace) -> int:
 
 def cmd_export(ns: argparse.Namespace) -> int:
     from rigctl.interop.miv import export_miv
+    from rigctl.publish import refuse_inside
 
+    refuse_inside(ns.out, ns.take)
     files = export_miv(ns.take, ns.disparity, ns.out, parse_frames(ns.frames) if ns.frames else None)
     print(f"wrote {len(files)} files of MIV content to {ns.out} (listed in {ns.out / 'README.txt'})")
     return 0

@@ -50,9 +50,8 @@ def _check_distances(ns: argparse.Namespace) -> None:
 
 def _check_near(ns: argparse.Namespace, near_m: float) -> None:
     """A near side the plan derived (solved from --subject-depth, or --far minus it) closer than 1 mm to the lens."""
-    given = " and ".join(
-        f"{o} {v:g} m" for o, v in (("--far", ns.far), ("--subject-depth", ns.subject_depth)) if v is not None
-    )
+    options = (("--far", ns.far, " m"), ("--subject-depth", ns.subject_depth, " m"), ("--budget", ns.budget, ""))
+    given = " and ".join(f"{o} {v:g}{u}" for o, v, u in options if v is not None)
     check_derived_near(near_m, given or "the rig file plan section", "a deeper subject, or --near and --far")
 
 

@@ -15,7 +15,7 @@ from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
 from rigctl.depth.presets import PRESETS
 from rigctl.errors import DeviceError
-from rigctl.publish import output_folder
+from rigctl.publish import output_folder, refuse_inside
 from rigctl.take.framesets import parse_frames
 
 WORKERS_PER_CORE = 4  # local workers beyond this only queue for the cores (and each holds a frame set)
@@ -135,6 +135,7 @@ def run(ns: argparse.Namespace) -> int:
 
     from rigctl.farm.run import FarmOptions, Status, process_take, scheduler_url
 
+    refuse_inside(ns.out, ns.take)
     if ns.scheduler:
         probe_scheduler(scheduler_url(ns.scheduler))
     opt = FarmOptions(

@@ -13,7 +13,7 @@ from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
 from rigctl.cli.record import format_summary
 from rigctl.errors import EXIT_DAMAGED
-from rigctl.publish import output_folder, utf8_path
+from rigctl.publish import output_folder, refuse_inside, utf8_path
 from rigctl.take.check import check_take
 from rigctl.take.export import export_take
 from rigctl.take.manifest import DamagedFrame
@@ -86,6 +86,7 @@ def run_check(ns: argparse.Namespace) -> int:
 
 def run_export(ns: argparse.Namespace) -> int:
     utf8_path(ns.out)
+    refuse_inside(ns.out, ns.take)
     reader = TakeReader(ns.take, skip_damaged=ns.skip_damaged)
     with (
         output_folder(ns.out, "take export"),  # locked for this run; an interrupted run's leftovers removed

@@ -302,7 +302,7 @@ def dask_client(options: FarmOptions) -> Iterator[Any]:
             processes=True,
             memory_limit=limit,
             host="127.0.0.1",
-            dashboard_address=None,
+            dashboard_address="127.0.0.1:0",  # None meant port 8787: busy, a 4-line UserWarning on stderr
             scheduler_kwargs={"dashboard": False},
             preload=["rigctl.farm.quiet"],  # each worker: SIGINT ignored, its shutdown notice dropped
         ) as cluster,

@@ -105,6 +105,8 @@ def _field(path: Path, cam: dict[str, Any], key: str, n: int | None = None) -> A
     return v
 
 
+MIN_NEAR_M = 1e-3  # as `rigctl plan` and `usd` hold distances: 1 mm to 1,000 km
+MAX_POSITION_M = 1e6
 MAX_INT_DIGITS = 100  # no field of a camera file needs more; Python itself stops at 4300 and names its own knob
 
 
@@ -138,10 +140,16 @@ def read_content(path: Path) -> MivContent:
     focal = _field(path, first, "Focal", 2)
     pp = _field(path, first, "Principle_point", 2)
     rot = _field(path, first, "Rotation", 3)
+    if not 0.05 * size[0] <= focal[0] <= 100 * size[0]:  # the sense a calibration is held to
+        raise RigFileError(f"{path}: Focal {focal}: must be 0.05 to 100 image widths ({size[0]} px)")
+    seen: set[str] = set()
     for c in cams:
         name = c.get("Name")
-        if not isinstance(name, str) or not name or "/" in name:
+        if not isinstance(name, str) or not name or "/" in name or "\0" in name:
             raise RigFileError(f"{path}: a camera has no usable Name ({name!r})")
+        if name in seen:  # both would read one camera's files: one grid position would show another's view
+            raise RigFileError(f"{path}: camera Name {name!r} is used twice")
+        seen.add(name)
         if c.get("Projection", "Perspective") != "Perspective":
             raise RigFileError(
                 f"{path}: camera {name}: {c.get('Projection')} projection: only perspective views form a grid"
@@ -152,10 +160,13 @@ def read_content(path: Path) -> MivContent:
                 raise RigFileError(
                     f"{path}: camera {name}: {key} {got} differs from {first.get('Name')}'s {want}: not one planar grid"
                 )
-        _field(path, c, "Position", 3)
+        if max(abs(v) for v in _field(path, c, "Position", 3)) > MAX_POSITION_M:
+            raise RigFileError(f"{path}: camera {name}: Position {c['Position']} lies beyond {MAX_POSITION_M:g} m")
         near, far = _field(path, c, "Depth_range", 2)
-        if not 0 < near < far:
-            raise RigFileError(f"{path}: camera {name}: Depth_range {[near, far]} must have 0 < near < far")
+        if not MIN_NEAR_M <= near < far:  # nearer, the disparity overflows (1e-300 m came out infinite)
+            raise RigFileError(
+                f"{path}: camera {name}: Depth_range {[near, far]} must have {MIN_NEAR_M * 1e3:g} mm <= near < far"
+            )
         for key, default, top in (("BitDepthColor", 10, 14), ("BitDepthDepth", 16, 16)):
             bits = c.get(key, default)
             if isinstance(bits, bool) or not isinstance(bits, int) or not 8 <= bits <= top:

@@ -21,14 +21,18 @@ camera centres span, as a mesh.
 
 from __future__ import annotations
 
+import errno
 import logging
+import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.calibration_model import ArrayCalibration, CameraModel
-from rigctl.errors import ParameterError
+from rigctl.errors import OutputError, ParameterError
+from rigctl.publish import check_creatable, publishing
 
 log = logging.getLogger(__name__)
 
@@ -72,9 +76,10 @@ def write_stage(
         raise ParameterError(f"clipping range {near:g}-{far:g} m: needs 0 < near < far")
     if out.suffix not in (".usda", ".usd", ".usdc"):
         raise ParameterError(f"{out}: a USD stage is .usda, .usd or .usdc")
-    if out.exists():
+    if out.exists() or out.is_symlink():
         raise ParameterError(f"{out}: already exists")
-    stage = Usd.Stage.CreateNew(str(out))
+    check_creatable(out)  # a place that cannot be written is one line before any work, not pxr's exception
+    stage = Usd.Stage.CreateInMemory()
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
     root = UsdGeom.Xform.Define(stage, "/rig")
@@ -103,8 +108,26 @@ def write_stage(
         mesh.CreatePointsAttr([Gf.Vec3f(*map(float, p)) for p in corners])
         mesh.CreateFaceVertexCountsAttr([4])
         mesh.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
-    stage.GetRootLayer().Save()
+    save_new(stage.GetRootLayer(), out)
     return out
+
+
+def save_new(layer: Any, out: Path) -> None:
+    """Publish ``layer`` as the new file ``out``, whole or not at all: exported under a hidden temporary name
+    (with ``out``'s extension, which picks USD's file format) and linked to ``out`` only if nothing holds the
+    name by then. A killed run leaves no half stage under ``out``; a failed write is one line."""
+    from pxr import Tf
+
+    with publishing(out, exists="already exists") as tmp:
+        named = tmp.with_name(tmp.name + out.suffix)
+        try:
+            if not layer.Export(str(named)):
+                raise OSError(errno.EIO, "USD could not write the stage")
+        except Tf.ErrorException as exc:
+            named.unlink(missing_ok=True)
+            said = str(exc).strip().splitlines()[-1].rsplit(" : ", 1)[-1].strip(" '")  # pxr's own words, last
+            raise OutputError(f"{out}: cannot write: {said}") from None
+        os.rename(named, tmp)
 
 
 def window_corners(calib: ArrayCalibration) -> F64:

@@ -54,6 +54,11 @@ def check_derived_near(near_m: float, given: str, instead: str) -> None:
             f"{given}: the subject's near side would be {near_m:.3g} m from the lens, under "
             f"{NEAREST_M * 1e3:g} mm: no shot to plan ({instead})"
         )
+    if near_m > FARTHEST_M:  # a budget of 1e-300 solved near = far = 4.8e149 m, the subject's depth lost
+        raise ParameterError(
+            f"{given}: the subject's near side would be {near_m:.3g} m from the lens, beyond "
+            f"{FARTHEST_M / 1e3:,.0f} km: no shot to plan (a larger budget)"
+        )
 
 
 def checked(name: str, value: ArrayLike, *, allow_inf: bool = False, allow_zero: bool = False) -> Array:

@@ -32,6 +32,7 @@ from pydantic import (
     ValidationInfo,
     field_serializer,
     field_validator,
+    model_validator,
 )
 from pydantic.main import IncEx
 
@@ -177,6 +178,23 @@ class Rectification(_Section):
         if len(value) != 3 or any(len(row) != 3 or not all(math.isfinite(v) for v in row) for row in value):
             raise ValueError(f"expected 3x3 finite numbers, got {value!r:.60}")
         return value
+
+    @model_validator(mode="after")
+    def _camera_matrix(self) -> Rectification:
+        """K is a camera: focal lengths as plausible as ``focal_px``, square to within 2:1, the principal point
+        inside the image, last row [0, 0, 1] (fx 0 wrote a USD aperture of infinity, exit 0)."""
+        (fx, _, cx), (_, fy, cy), last = self.K
+        if len(self.image_size) != 2:
+            raise ValueError(f"image_size must be [width, height], got {self.image_size!r:.40}")
+        w, h = self.image_size
+        lo, hi = FOCAL_RANGE_WIDTHS[0] * w, 2 * FOCAL_RANGE_WIDTHS[1] * w
+        if not (lo <= fx <= hi and lo <= fy <= hi and 0.5 <= fx / fy <= 2 and -1 <= cx <= w and -1 <= cy <= h):
+            raise ValueError(
+                f"camera matrix K (fx {fx:g}, fy {fy:g}, cx {cx:g}, cy {cy:g}) is not a camera for {w}x{h} px images"
+            )
+        if last != [0, 0, 1]:
+            raise ValueError(f"camera matrix K must end in the row [0, 0, 1], got {last!r:.40}")
+        return self
 
 
 class DamagedFrame(_Section):

@@ -162,7 +162,11 @@ class TakeReader:
         if "\0" in text:  # no file system has such a name (and resolving it raises ValueError)
             raise TakeError(f"{self.folder / 'take.yaml'}: cameras.{name}.{kind} {text!r} holds a NUL byte: refused")
         p = self.folder / text
-        real = p.resolve()
+        try:
+            real = p.resolve()
+        except (RuntimeError, OSError) as exc:  # a symlink loop: RuntimeError up to Python 3.12, OSError after
+            why = exc.strerror if isinstance(exc, OSError) else "a loop of symbolic links"
+            raise TakeError(f"{p}: {kind} file of camera {name} cannot be resolved: {why}: refused") from None
         try:
             real.relative_to(self.folder.resolve())
         except ValueError:
