@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 from hostile_support import REPO, SIM_RIG, one_line, rig_with, write_yaml  # type: ignore[import-not-found]
-from tests_support import rigctl_exe  # type: ignore[import-not-found]
+from tests_support import make_non_device, rigctl_exe  # type: ignore[import-not-found]
 
 from rigctl.errors import EXIT_BAD_INPUT, EXIT_DEVICE, EXIT_USAGE
 
@@ -48,13 +48,7 @@ def test_tally_transport_failures_are_device_errors_naming_the_port(run_cli, tmp
 @pytest.mark.parametrize("kind", ["a folder", "a regular file", "a FIFO"])
 def test_a_tally_port_that_exists_but_is_no_device_says_what_it_is(run_cli, tmp_path: Path, kind: str) -> None:  # type: ignore[no-untyped-def]
     """It said 'no such serial port' for a folder, which exists."""
-    port = tmp_path / "port"
-    if kind == "a folder":
-        port.mkdir()
-    elif kind == "a FIFO":
-        os.mkfifo(port)
-    else:
-        port.write_text("")
+    port = make_non_device(tmp_path / "port", kind)
     rig = rig_with(tmp_path, tally={"protocol": "tsl-umd-3.1", "port": str(port)})
     one_line(run_cli("tally", str(rig), "--program", "r0c0"), EXIT_DEVICE, f"{port}: exists but is {kind}, not a")
 
