@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from rigctl.cli import args
 from rigctl.cli.args import add_layout, add_pipeline_options, depth_options, distance, far_distance
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
@@ -35,7 +36,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "blue far), and report.json (--layout sequence: <camera>/<camera>.<frame>.exr). Presets: "
         + "; ".join(f"{p.name}: {p.description}" for p in PRESETS.values()),
     )
-    p.add_argument("input", type=Path, metavar="INPUT", help="rectified take, ideal simulated take, or grid folder")
+    p.add_argument(
+        "input",
+        type=args.InputPath("INPUT"),
+        metavar="INPUT",
+        help="rectified take, ideal simulated take, or grid folder",
+    )
     p.add_argument("--out", type=Path, required=True, metavar="DIR")
     p.add_argument("--preset", choices=list(PRESETS), default="best")
     p.add_argument("--near", type=distance, metavar="M", help="nearest subject distance (planner range)")

@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from rigctl.cli import args
 from rigctl.cli.args import distance
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
@@ -58,8 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--path). --leave-one-out renders each camera from the others and scores it against its own image "
         "(PSNR, SSIM on the keyed subject).",
     )
-    p.add_argument("input", type=Path, metavar="INPUT", help="rectified take, ideal simulated take, or grid folder")
-    p.add_argument("--disparity", type=Path, required=True, metavar="DIR", help="depth output or truth/disparity")
+    args.add_views_input(p)
     p.add_argument("--at", type=position, action="append", metavar="COL,ROW", help="view position (grid units)")
     p.add_argument("--stereo", type=distance, metavar="IPD_M", help="an eye pair this far apart (metres)")
     p.add_argument("--path", type=position, nargs="+", metavar="COL,ROW", help="a sequence along these positions")

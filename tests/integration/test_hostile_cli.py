@@ -461,3 +461,45 @@ def test_tally_service_never_dies_silently(tmp_path: Path) -> None:
     assert not svc.running and not svc.connected
     assert svc.last_error == svc.stopped_by == "tally service stopped: ValueError: a bug in an output driver"
     svc.set(TallyState(program=frozenset({"r0c0"})))  # setting state on a stopped service does not hang
+
+
+LONG_PATH = "a/" * 2500  # 5,000 characters: more than PATH_MAX (4,096)
+
+
+@pytest.mark.parametrize("problem", ["too long", "a loop"])
+@pytest.mark.parametrize(
+    ("argv", "what"),
+    [
+        (("depth", "{p}", "--out", "out"), "INPUT"),
+        (("take", "info", "{p}"), "TAKE"),
+        (("take", "export", "{p}", "--out", "out"), "TAKE"),
+        (("render", "{p}", "--disparity", ".", "--at", "0,0", "--out", "o.png"), "INPUT"),
+        (("render", ".", "--disparity", "{p}", "--path", "0,0", "1,0", "--out", "o.mp4"), "--disparity"),
+        (("rectify", "{p}", "--calibration", "c.yaml", "--out", "out"), "TAKE"),
+        (("rectify", ".", "--calibration", "{p}", "--out", "out"), "--calibration"),
+        (("plan", "{p}"), "RIG"),
+        (("view", "{p}", "--disparity", "."), "INPUT"),
+    ],
+)
+def test_an_input_path_the_system_cannot_look_up_is_the_inputs_fault(  # type: ignore[no-untyped-def]
+    run_cli, tmp_path: Path, argv: tuple[str, ...], what: str, problem: str
+) -> None:
+    """A 5,000-character input path (ENAMETOOLONG) or a loop of symbolic links (ELOOP) ended in 'cannot write'
+    with exit 4 (the output side's catch-all), or a RuntimeError traceback: it is the input's fault, exit 3, in
+    one line naming the argument, the path shortened, and refused before any output folder is made."""
+    if problem == "a loop":
+        (tmp_path / "loop").symlink_to("loop")
+        path, says = "loop/x", f"{what} loop/x: a loop of symbolic links"
+    else:
+        path, says = LONG_PATH, "(5,000 characters): the path is too long for the file system"
+    line = one_line(run_cli(*(a.replace("{p}", path) for a in argv)), EXIT_BAD_INPUT, f"error: {what} ", says)
+    assert len(line) < 200 and "cannot write" not in line
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("argv", [("board", "--out", LONG_PATH + "b"), ("depth", ".", "--out", LONG_PATH)])
+def test_an_output_path_too_long_still_cannot_be_written(run_cli, argv: tuple[str, ...]) -> None:  # type: ignore[no-untyped-def]
+    """The other side of the above: a too-long output path is the destination's problem (exit 4), said in one
+    line with the path shortened."""
+    line = one_line(run_cli(*argv), EXIT_DEVICE, "a/a/a/...", "characters): cannot write: File name too long")
+    assert len(line) < 200
