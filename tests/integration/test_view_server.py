@@ -366,8 +366,8 @@ def test_the_bundles_kept_fit_in_a_memory_budget(full: Path, monkeypatch: pytest
     try:
         assert bundles.get(0)[:4] == b"RGFS"
         time.sleep(3)  # what is made ahead is made
-        assert len(bundles._cache) <= 3
+        assert len(bundles.made.kept()) <= 3
         assert bundles.get(1)[:4] == b"RGFS" and bundles.get(3)[:4] == b"RGFS"
-        assert len(bundles._cache) <= 3
+        assert len(bundles.made.kept()) <= 3
     finally:
         bundles.close()
