@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 
 from rigctl.cli import args
@@ -66,7 +67,7 @@ def refuse_out_over_input(source: Path, out: Path) -> None:
     """``--out`` may not be the input folder or lie in its ``truth/``: a grid folder's outputs are named as its
     pictures (``r1c1.png``) and a take's as its truth (``truth/disparity/<frame>/<camera>.pfm``), so depth
     would write over what it reads."""
-    src, dst = source.resolve(), out.resolve()
+    src, dst = Path(os.path.realpath(source)), Path(os.path.realpath(out))  # resolve() raises on a symlink loop
     if dst == src or dst.is_relative_to(src / "truth"):
         raise ParameterError(f"--out {out}: is the input {source} or its truth: depth would write over its files")
 

@@ -503,3 +503,12 @@ def test_an_output_path_too_long_still_cannot_be_written(run_cli, argv: tuple[st
     line with the path shortened."""
     line = one_line(run_cli(*argv), EXIT_DEVICE, "a/a/a/...", "characters): cannot write: File name too long")
     assert len(line) < 200
+
+
+def test_an_output_path_in_a_loop_of_symbolic_links_cannot_be_written(run_cli, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """depth's and rectify's check of --out against the input ended in a RuntimeError traceback (Path.resolve on
+    a symlink loop): the destination's problem, exit 4, one line."""
+    (tmp_path / "loop").symlink_to("loop")
+    one_line(run_cli("depth", ".", "--out", "loop/x"), EXIT_DEVICE, "loop/x: ", "Too many levels of symbolic links")
+    res = run_cli("rectify", ".", "--calibration", "c.yaml", "--out", "loop/x")
+    assert res.returncode in (EXIT_BAD_INPUT, EXIT_DEVICE) and "Traceback" not in res.stderr, res.stderr
