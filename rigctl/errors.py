@@ -11,7 +11,7 @@ Exit codes, one per class of error, so a script can tell a missing device from a
 1     a check failed (``take check`` found problems, ``control`` a setting not confirmed, ...)
 2     usage: a bad option or parameter value (:class:`ParameterError`, argparse)
 3     bad input file: rig file, take, calibration, grid (:class:`RigFileError`, :class:`TakeError`,
-      :class:`CalibrationError`)
+      :class:`CalibrationError`); an input path too long or looping (:class:`InputPathError`)
 4     device: missing, busy, failing, or speaking garbage (:class:`DeviceError`, :class:`ProtocolError`);
       an output destination that is read-only, full or busy (:class:`OutputError`, :class:`DiskFullError`)
 5     data damaged: a frame fails its checksum or is missing (:class:`DamagedDataError`); also the exit
@@ -21,6 +21,8 @@ Exit codes, one per class of error, so a script can tell a missing device from a
 """
 
 from __future__ import annotations
+
+import os
 
 EXIT_OK = 0
 EXIT_CHECK_FAILED = 1
@@ -35,6 +37,22 @@ class RigctlError(Exception):
     """Base of every error a user can cause or act on. Exit code 2 (usage) at the CLI unless a subclass says."""
 
     exit_code = EXIT_USAGE
+
+
+class InputPathError(RigctlError):
+    """An input path the system cannot even look up: too long for it (``ENAMETOOLONG``) or a loop of symbolic
+    links (``ELOOP``). Exit status 3 (bad input): the path given is at fault, not a destination."""
+
+    exit_code = EXIT_BAD_INPUT
+
+
+def short_path(path: str | os.PathLike[str] | bytes, keep: int = 40) -> str:
+    """``path`` for a one-line message: whole when short, else its start and end around ``...`` and its length
+    (a 5,000-character path would bury the message)."""
+    text = os.fsdecode(path).encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    if len(text) <= 3 * keep:
+        return text
+    return f"{text[:keep]}...{text[-keep:]} ({len(text):,} characters)"
 
 
 class RigFileError(RigctlError):

@@ -30,7 +30,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
-from rigctl.errors import DiskFullError, OutputError, ParameterError, RigctlError, TakeError
+from rigctl.errors import DiskFullError, OutputError, ParameterError, RigctlError, TakeError, short_path
 
 if TYPE_CHECKING:  # numpy and OpenCV load when a picture is written, not with every command line
     import numpy as np
@@ -52,14 +52,16 @@ def utf8_path(path: Path, what: str = "--out") -> None:
 
 
 def output_error(path: Path, exc: OSError) -> RigctlError:
-    """One line for a write that failed: the file and why (full disk and read-only said plainly)."""
+    """One line for a write that failed: the file (shortened when long) and why (full disk and read-only said
+    plainly)."""
+    shown = short_path(path)
     if exc.errno in (errno.ENOSPC, errno.EDQUOT):
-        return DiskFullError(f"{path}: no space left on the device; the file was not written")
+        return DiskFullError(f"{shown}: no space left on the device; the file was not written")
     if exc.errno == errno.EROFS:
-        return OutputError(f"{path}: the file system is read-only")
+        return OutputError(f"{shown}: the file system is read-only")
     if exc.errno in (errno.EACCES, errno.EPERM):
-        return OutputError(f"{path}: permission denied")
-    return OutputError(f"{path}: cannot write: {exc.strerror or exc}")
+        return OutputError(f"{shown}: permission denied")
+    return OutputError(f"{shown}: cannot write: {exc.strerror or exc}")
 
 
 def prepare_output(out: Path, what: str = "--out") -> Path:

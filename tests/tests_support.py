@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -10,6 +11,18 @@ from pathlib import Path
 def rigctl_exe() -> list[str]:
     exe = Path(sys.executable).with_name("rigctl")
     return [str(exe)]
+
+
+def make_non_device(path: Path, kind: str) -> Path:
+    """Put at ``path`` something that exists but is no device: ``kind`` is "a folder", "a FIFO" or (anything
+    else) a regular file. Returns ``path``."""
+    if kind == "a folder":
+        path.mkdir()
+    elif kind == "a FIFO":
+        os.mkfifo(path)
+    else:
+        path.write_text("")
+    return path
 
 
 def run_rigctl(*argv: str, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess[str]:

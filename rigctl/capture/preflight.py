@@ -26,11 +26,12 @@ import errno
 import logging
 import mmap
 import os
-import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+
+from rigctl.diskspace import free_bytes
 
 log = logging.getLogger(__name__)
 
@@ -102,7 +103,7 @@ def measure_write(
     most a quarter of the free space, and a destination that fills up while measuring ends the measurement
     with what it has: free space is the space check's business, not the speed test's."""
     folder.mkdir(parents=True, exist_ok=True)
-    free = shutil.disk_usage(folder).free
+    free = free_bytes(folder)
     sample_bytes = max(BLOCK_BYTES, min(sample_bytes, free // 4 // BLOCK_BYTES * BLOCK_BYTES))
     path = folder / f".rigctl-speedtest-{os.getpid()}"
     block = mmap.mmap(-1, BLOCK_BYTES)  # page-aligned, as O_DIRECT requires
@@ -322,7 +323,7 @@ def check_destinations(
     buffer_bytes_per_camera: int = 0,
     dirty_headroom: int | None = None,
     measure: Callable[[Path], WriteSpeed] = measure_write,
-    free_space: Callable[[Path], int] = lambda folder: shutil.disk_usage(folder).free,
+    free_space: Callable[[Path], int] = free_bytes,
 ) -> PreflightReport:
     """A verdict per destination for the cameras that write to it. ``speeds``: measured earlier (a
     destination measured while cameras stream in this process reads slower: the test writes wait for the

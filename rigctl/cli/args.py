@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import math
+import os
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 from rigctl.cli.helptext import HelpFormatter
+from rigctl.errors import InputPathError, short_path
 from rigctl.exr import COLOURS
 from rigctl.layout import LAYOUTS
 
@@ -27,6 +31,42 @@ class OneLineParser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         sys.stderr.write(f"{self.prog}: error: {message} (see {self.prog} --help)\n")
         sys.exit(2)
+
+
+class InputPath:
+    """Argument type of a path that is read (a take, a rig file, a calibration, a disparity folder): a path the
+    system cannot look up at all, too long or a loop of symbolic links, is refused as the input's fault (exit 3)
+    while the command line is read, naming ``what`` and the path shortened, before any output is made. A path
+    that does not exist passes: the command says what it wanted there. ``text=True`` keeps the string (a rig
+    argument may be a shipped rig's name)."""
+
+    def __init__(self, what: str, text: bool = False) -> None:
+        self.what = what
+        self.text = text
+
+    def __call__(self, value: str) -> Path | str:
+        try:
+            os.stat(value)
+        except OSError as exc:
+            shown = f"{self.what} {short_path(value)}"
+            if exc.errno == errno.ENAMETOOLONG:
+                raise InputPathError(f"{shown}: the path is too long for the file system") from None
+            if exc.errno == errno.ELOOP:
+                raise InputPathError(f"{shown}: a loop of symbolic links") from None
+        except ValueError:  # a NUL byte: the command's own checks say what is wrong
+            pass
+        return value if self.text else Path(value)
+
+
+def add_views_input(p: argparse.ArgumentParser) -> None:
+    """INPUT and --disparity of the verbs that make views from colour + disparity (render, view)."""
+    p.add_argument(
+        "input", type=InputPath("INPUT"), metavar="INPUT", help="rectified take, ideal simulated take, or grid folder"
+    )
+    p.add_argument(
+        "--disparity", type=InputPath("--disparity"), required=True, metavar="DIR",
+        help="depth output or truth/disparity",
+    )  # fmt: skip
 
 
 def _number(text: str) -> float:

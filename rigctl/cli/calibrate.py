@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from rigctl.calib import CHESSBOARD_SQUARE
+from rigctl.cli import args
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
 from rigctl.errors import CalibrationError, OutputError, ParameterError
@@ -33,10 +34,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "and its rectification residuals measured on held-out frames. A take that cannot constrain a "
         "calibration ends with a diagnosis naming the camera and what to shoot, and nothing is written.",
     )
-    p.add_argument("input", type=Path, metavar="INPUT")
+    p.add_argument("input", type=args.InputPath("INPUT"), metavar="INPUT")
     p.add_argument("--out", type=Path, required=True, metavar="FILE", help="calibration.yaml to write")
     target = p.add_mutually_exclusive_group()
-    target.add_argument("--board", type=Path, metavar="FILE", help="board description (rigctl board writes one)")
+    target.add_argument(
+        "--board", type=args.InputPath("--board"), metavar="FILE", help="board description (rigctl board writes one)"
+    )
     target.add_argument("--chessboard", metavar="CxR", help="a plain chessboard of C x R inner corners")
     lo, hi = CHESSBOARD_SQUARE
     p.add_argument(

@@ -10,6 +10,7 @@ import argparse
 from importlib import resources
 from pathlib import Path
 
+from rigctl.cli import args
 from rigctl.cli.helptext import examples
 
 SHELLS = ("bash", "zsh", "tcsh")
@@ -102,7 +103,7 @@ def _mark(parser: argparse.ArgumentParser) -> None:
             action.complete = {"bash": "_rigctl_cameras", "zsh": "_rigctl_cameras"}  # type: ignore[attr-defined]
         elif action.metavar in ("DIR", "OUT", "RECTIFIED_TAKE"):
             action.complete = {**shtab.DIRECTORY, "bash": "_rigctl_compgen_dirs"}  # type: ignore[attr-defined]
-        elif action.type is Path:
+        elif action.type is Path or isinstance(action.type, args.InputPath):
             action.complete = {**shtab.FILE, "bash": "_rigctl_compgen_files"}  # type: ignore[attr-defined]
 
 

@@ -8,6 +8,7 @@ import json
 from dataclasses import asdict
 
 from rigctl.camera_control import REFERENCE_SOURCES, check_settings, format_results, worst
+from rigctl.cli import args
 from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
 from rigctl.registry import DeviceSet, open_cameras, open_control
@@ -28,7 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "Each setting is reported per camera as confirmed (the camera reports the value), unconfirmed (the "
         "path cannot read values back), MISMATCH or FAILED; the exit status is 1 if any is MISMATCH or FAILED.",
     )
-    p.add_argument("rig", nargs="?", help="rig file or shipped rig name (default: sim-3x3)")
+    p.add_argument(
+        "rig", nargs="?", type=args.InputPath("RIG", text=True), help="rig file or shipped rig name (default: sim-3x3)"
+    )
     p.add_argument("--exposure-us", type=float, metavar="N", help="exposure (shutter) time in microseconds")
     p.add_argument("--gain", type=float, metavar="N", help="sensor gain, protocol value: 1 = ISO 100, 2, 4, 8, 16")
     p.add_argument("--white-balance-k", type=float, metavar="N", help="white balance in kelvin")

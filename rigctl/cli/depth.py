@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 
+from rigctl.cli import args
 from rigctl.cli.args import add_layout, add_pipeline_options, depth_options, distance, far_distance
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
@@ -35,7 +37,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "blue far), and report.json (--layout sequence: <camera>/<camera>.<frame>.exr). Presets: "
         + "; ".join(f"{p.name}: {p.description}" for p in PRESETS.values()),
     )
-    p.add_argument("input", type=Path, metavar="INPUT", help="rectified take, ideal simulated take, or grid folder")
+    p.add_argument(
+        "input",
+        type=args.InputPath("INPUT"),
+        metavar="INPUT",
+        help="rectified take, ideal simulated take, or grid folder",
+    )
     p.add_argument("--out", type=Path, required=True, metavar="DIR")
     p.add_argument("--preset", choices=list(PRESETS), default="best")
     p.add_argument("--near", type=distance, metavar="M", help="nearest subject distance (planner range)")
@@ -60,7 +67,7 @@ def refuse_out_over_input(source: Path, out: Path) -> None:
     """``--out`` may not be the input folder or lie in its ``truth/``: a grid folder's outputs are named as its
     pictures (``r1c1.png``) and a take's as its truth (``truth/disparity/<frame>/<camera>.pfm``), so depth
     would write over what it reads."""
-    src, dst = source.resolve(), out.resolve()
+    src, dst = Path(os.path.realpath(source)), Path(os.path.realpath(out))  # resolve() raises on a symlink loop
     if dst == src or dst.is_relative_to(src / "truth"):
         raise ParameterError(f"--out {out}: is the input {source} or its truth: depth would write over its files")
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from rigctl.cli import args
 from rigctl.cli.helptext import examples
 from rigctl.discovery import describe_attached
 from rigctl.rig import load_rig
@@ -20,7 +21,9 @@ def register(sub: argparse._SubParsersAction) -> None:
             ("the simulated rig's cameras, tally and bridge, as JSON", "rigctl devices sim-3x3 --json"),
         ),
     )
-    p.add_argument("rig", nargs="?", help="rig file or shipped rig name (default: sim-3x3)")
+    p.add_argument(
+        "rig", nargs="?", type=args.InputPath("RIG", text=True), help="rig file or shipped rig name (default: sim-3x3)"
+    )
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run)
 

@@ -10,6 +10,7 @@ import logging
 import re
 from pathlib import Path
 
+from rigctl.cli import args
 from rigctl.cli.args import non_negative_int
 from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
@@ -52,12 +53,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="IV-PSNR as MPEG defines it (search range 2, global colour offset tolerated up to 1 % of "
         "the peak, components 4:1:1), written from the paper; the same figures as the authors' software.",
     )
-    iv.add_argument("reference", type=Path, help="raw .yuv file (the original)")
-    iv.add_argument("test", type=Path, help="raw .yuv file (the synthesised or compressed picture)")
+    iv.add_argument("reference", type=args.InputPath("reference"), help="raw .yuv file (the original)")
+    iv.add_argument("test", type=args.InputPath("test"), help="raw .yuv file (the synthesised or compressed picture)")
     iv.add_argument("--size", type=_size, required=True, metavar="WxH")
     iv.add_argument("--pix-fmt", default="yuv420p", help="yuv420p (8 bits) or yuv420p10le, 12le, 14le")
     iv.add_argument("--frame", type=non_negative_int, default=0, help="frame index in both files (default 0)")
-    iv.add_argument("--mask", type=Path, help="raw 8-bit 4:2:0 .yuv: compare only where its luma is non-zero")
+    iv.add_argument(
+        "--mask", type=args.InputPath("--mask"), help="raw 8-bit 4:2:0 .yuv: compare only where its luma is non-zero"
+    )
     iv.add_argument("--json", action="store_true")
     iv.set_defaults(func=cmd_ivpsnr)
 
@@ -71,8 +74,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
         help="a rectified take and its disparity as MIV content: camera JSON, YUV 4:2:0 10-bit colour, 16-bit depth",
     )
-    ex.add_argument("take", type=Path, help="a rectified take (or an ideal=true simulated take)")
-    ex.add_argument("disparity", type=Path, help="disparity folder: <frame>/<camera>.pfm (a depth output, truth)")
+    ex.add_argument("take", type=args.InputPath("take"), help="a rectified take (or an ideal=true simulated take)")
+    ex.add_argument(
+        "disparity",
+        type=args.InputPath("disparity"),
+        help="disparity folder: <frame>/<camera>.pfm (a depth output, truth)",
+    )
     ex.add_argument("--out", type=Path, required=True, help="new folder for the content")
     ex.add_argument("--frames", metavar="A-B", help="frame sets A-B (default: every one with a disparity)")
     ex.set_defaults(func=cmd_export)
@@ -86,7 +93,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
         help="MIV content (camera JSON + YUV) as grid folders for rigctl depth and render, one per frame",
     )
-    im.add_argument("cameras", type=Path, help="the content's camera JSON")
+    im.add_argument("cameras", type=args.InputPath("cameras"), help="the content's camera JSON")
     im.add_argument(
         "--out", type=Path, required=True, help="new folder: <frame>/grid.yaml, images, truth/ (the content's depth)"
     )

@@ -30,7 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
             "--near and --far, check every pair and name those over budget."
         ),
     )
-    p.add_argument("rig", nargs="?", help="rig file or shipped rig name (default: sim-3x3)")
+    p.add_argument(
+        "rig", nargs="?", type=args.InputPath("RIG", text=True), help="rig file or shipped rig name (default: sim-3x3)"
+    )
     p.add_argument("--subject-depth", type=args.depth, metavar="M", help="depth of the subject in metres")
     p.add_argument("--near", type=args.distance, metavar="M", help="nearest point of the subject, metres")
     p.add_argument("--far", type=args.far_distance, metavar="M", help="farthest point, metres ('inf' allowed)")

@@ -10,6 +10,7 @@ import struct
 import sys
 from pathlib import Path
 
+from rigctl.cli import args
 from rigctl.cli.args import add_pipeline_options, depth_options, distance, far_distance
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
@@ -100,9 +101,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "DIR/process.json saying which frames are done. Workers read the take from storage they share; run again "
         "to finish what a stopped run left (done frames are skipped unless --redo).",
     )
-    p.add_argument("take", type=Path, metavar="TAKE")
+    p.add_argument("take", type=args.InputPath("TAKE"), metavar="TAKE")
     p.add_argument("--out", type=Path, required=True, metavar="DIR")
-    p.add_argument("--calibration", type=Path, metavar="C", help="calibration.yaml for a take not yet rectified")
+    p.add_argument(
+        "--calibration",
+        type=args.InputPath("--calibration"),
+        metavar="C",
+        help="calibration.yaml for a take not yet rectified",
+    )
     where = p.add_mutually_exclusive_group()
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a running Dask scheduler")
     where.add_argument(

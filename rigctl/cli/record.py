@@ -10,6 +10,7 @@ from pathlib import Path
 
 from rigctl.capture.preflight import PreflightReport, rate_text
 from rigctl.capture.recording import record_take
+from rigctl.cli import args
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
 from rigctl.errors import ParameterError
@@ -40,7 +41,9 @@ def register(sub: argparse._SubParsersAction) -> None:
             + sim_settings_help(),
         ),
     )
-    p.add_argument("rig", nargs="?", help="rig file or shipped rig name (default: sim-3x3)")
+    p.add_argument(
+        "rig", nargs="?", type=args.InputPath("RIG", text=True), help="rig file or shipped rig name (default: sim-3x3)"
+    )
     p.add_argument("--take", required=True, metavar="NAME", help="take name (a folder name: letters, digits, . _ -)")
     length = p.add_mutually_exclusive_group()
     length.add_argument("--frames", type=int, metavar="N", help="frame sets to record")

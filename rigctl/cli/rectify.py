@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from rigctl.cli import args
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
 from rigctl.cli.take import damaged_exit
@@ -28,8 +29,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "column in vertical neighbours. The result is a take (8-bit BGR) with its rectification recorded. Remap "
         "tables are cached by a hash of the calibration ($XDG_CACHE_HOME/rigctl/remap).",
     )
-    p.add_argument("take", type=Path, metavar="TAKE")
-    p.add_argument("--calibration", type=Path, required=True, metavar="FILE", help="calibration.yaml")
+    p.add_argument("take", type=args.InputPath("TAKE"), metavar="TAKE")
+    p.add_argument(
+        "--calibration", type=args.InputPath("--calibration"), required=True, metavar="FILE", help="calibration.yaml"
+    )
     p.add_argument("--out", type=Path, required=True, metavar="RECTIFIED_TAKE", help="the new take's folder")
     p.add_argument(
         "--skip-damaged",

@@ -9,9 +9,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from rigctl.cli import args
 from rigctl.cli.args import distance
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
+from rigctl.diskspace import check_free_space
 from rigctl.errors import OutputError, ParameterError
 from rigctl.publish import check_creatable, kind, output_folder, utf8_path
 
@@ -58,8 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--path). --leave-one-out renders each camera from the others and scores it against its own image "
         "(PSNR, SSIM on the keyed subject).",
     )
-    p.add_argument("input", type=Path, metavar="INPUT", help="rectified take, ideal simulated take, or grid folder")
-    p.add_argument("--disparity", type=Path, required=True, metavar="DIR", help="depth output or truth/disparity")
+    args.add_views_input(p)
     p.add_argument("--at", type=position, action="append", metavar="COL,ROW", help="view position (grid units)")
     p.add_argument("--stereo", type=distance, metavar="IPD_M", help="an eye pair this far apart (metres)")
     p.add_argument("--path", type=position, nargs="+", metavar="COL,ROW", help="a sequence along these positions")
@@ -130,7 +131,7 @@ def _check_out(out: Path) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     from rigctl.render.inputs import RenderInput
-    from rigctl.render.views import eyes_for, format_table, leave_one_out, path_positions, render_views
+    from rigctl.render.views import eyes_for, format_table, leave_one_out, path_positions, render_views, views_bytes
     from rigctl.take.framesets import parse_frames
 
     modes = sum(bool(x) for x in (ns.at, ns.path, ns.leave_one_out))
@@ -170,13 +171,15 @@ def run(ns: argparse.Namespace) -> int:
         def eyes(frame: Any) -> list[Any]:
             return [e for c, r in ns.at for e in eyes_for(frame, c, r, ns.stereo)]
 
-    for eye in eyes(first):  # positions no camera sees are refused before the output folder is made
+    wanted = eyes(first)
+    for eye in wanted:  # positions no camera sees are refused before the output folder is made
         first.position(eye.col, eye.row)
-    with (
-        output_folder(ns.out, "render"),  # locked for this run; an interrupted run's leftovers removed
-        Progress(f"render {ns.input.name}", "views", ns.quiet) as bar,
-    ):
-        views = render_views(inp, numbers, eyes, ns.out, truth, box, bar.update)
+    count, (height, width) = len(wanted) * len(numbers), first.shape
+    with output_folder(ns.out, "render"):  # locked for this run; an interrupted run's leftovers removed
+        # the disk is not filled halfway through (refused, the folder made for it is removed again)
+        check_free_space(ns.out, views_bytes(count, width, height), f"{count} views of {width}x{height} (PNG + EXR)")
+        with Progress(f"render {ns.input.name}", "views", ns.quiet) as bar:
+            views = render_views(inp, numbers, eyes, ns.out, truth, box, bar.update)
     if ns.json:
         print(json.dumps({"views": views}))
         return 0

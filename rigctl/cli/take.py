@@ -8,6 +8,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from rigctl.cli import args
 from rigctl.cli.args import add_layout
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
@@ -28,13 +29,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     verbs = p.add_subparsers(dest="take_verb", metavar="info|check|export", required=True)
     as_json = ("the same as JSON", "rigctl take info rigctl-demo/takes/presenter --json")
     info = verbs.add_parser("info", help="frames, drops, complete frame sets, skew", epilog=examples(summary, as_json))
-    info.add_argument("take", type=Path)
+    info.add_argument("take", type=args.InputPath("TAKE"))
     info.add_argument("--json", action="store_true")
     info.set_defaults(func=run_info)
     quick = ("the manifest and indexes only", "rigctl take check rigctl-demo/takes/presenter --quick")
     what = "is everything the take claims readable? (exit 0 when it is)"
     check = verbs.add_parser("check", help=what, epilog=examples(whole, quick))
-    check.add_argument("take", type=Path)
+    check.add_argument("take", type=args.InputPath("TAKE"))
     check.add_argument("--quick", action="store_true", help="skip reading every frame's checksum")
     check.set_defaults(func=run_check)
     export = verbs.add_parser(
@@ -46,7 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
              "rigctl take export takes/T001 --out T001-exr --format exr --colour acescg --layout sequence"),
         ),
     )
-    export.add_argument("take", type=Path)
+    export.add_argument("take", type=args.InputPath("TAKE"))
     export.add_argument("--out", type=Path, required=True, metavar="DIR")
     export.add_argument("--frames", metavar="A-B", help="N or A-B, frame-set numbers from 0 (default: all)")
     export.add_argument("--format", default="png", choices=("png", "exr"))

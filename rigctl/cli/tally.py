@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from rigctl.cli import args
 from rigctl.cli.helptext import examples
 from rigctl.registry import open_tally
 from rigctl.rig import load_rig
@@ -20,7 +21,9 @@ def register(sub: argparse._SubParsersAction) -> None:
             ("every lamp off", "rigctl tally sim-3x3"),
         ),
     )
-    p.add_argument("rig", nargs="?", help="rig file or shipped rig name (default: sim-3x3)")
+    p.add_argument(
+        "rig", nargs="?", type=args.InputPath("RIG", text=True), help="rig file or shipped rig name (default: sim-3x3)"
+    )
     p.add_argument("--program", nargs="*", default=[], metavar="CAM", help="cameras on program (live)")
     p.add_argument("--preview", nargs="*", default=[], metavar="CAM", help="cameras on preview")
     p.set_defaults(func=run)

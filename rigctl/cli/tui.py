@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from rigctl.cli import args
 from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
 
@@ -22,7 +23,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="A terminal UI for the shoot. Cameras stream as soon as it opens; r records a take of every "
         "camera into OUT (named SCENE-SHOT-Tnn, numbered on), q quits (asking first while recording), ? lists keys.",
     )
-    p.add_argument("rig", nargs="?", help="rig file or shipped rig name (default: sim-3x3)")
+    p.add_argument(
+        "rig", nargs="?", type=args.InputPath("RIG", text=True), help="rig file or shipped rig name (default: sim-3x3)"
+    )
     p.add_argument("--out", type=Path, default=Path("takes"), metavar="DIR", help="where takes go (default: ./takes)")
     p.add_argument("--scene", default="S01", help="scene name (default S01)")
     p.add_argument("--shot", default="01", help="shot name (default 01)")

@@ -28,9 +28,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="One UsdGeom.Camera per array camera: focal length and apertures from the rig's lens and "
         "the calibration, clipping range from the plan, the transform; metres, Y up.",
     )
-    p.add_argument("source", type=Path, help="calibration.yaml, or a rectified take (its common camera)")
+    p.add_argument(
+        "source", type=args.InputPath("SOURCE"), help="calibration.yaml, or a rectified take (its common camera)"
+    )
     p.add_argument("--out", type=Path, required=True, help="new .usda (text), .usd or .usdc file")
-    p.add_argument("--rig", help="rig file or shipped rig for the lens and the plan (default: the calibration's)")
+    p.add_argument(
+        "--rig",
+        type=args.InputPath("--rig", text=True),
+        help="rig file or shipped rig for the lens and the plan (default: the calibration's)",
+    )
     p.add_argument("--near", type=args.distance, help="clipping near, metres (default: the plan's near)")
     p.add_argument("--far", type=args.far_distance, help="clipping far, metres (default: the plan's far)")
     p.add_argument("--window", action="store_true", help="add the light-field window (the cameras' plane) as a mesh")

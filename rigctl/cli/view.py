@@ -6,8 +6,8 @@ import argparse
 import ipaddress
 import logging
 import sys
-from pathlib import Path
 
+from rigctl.cli import args
 from rigctl.cli.helptext import examples
 from rigctl.errors import ParameterError
 
@@ -50,8 +50,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "method of rigctl render, moves the eye within the array's window, plays the take, and shows stereo "
         "and WebXR. Listens on 127.0.0.1 unless --bind names another address; Ctrl-C stops it.",
     )
-    p.add_argument("input", type=Path, metavar="INPUT", help="rectified take, ideal simulated take, or grid folder")
-    p.add_argument("--disparity", type=Path, required=True, metavar="DIR", help="depth output or truth/disparity")
+    args.add_views_input(p)
     p.add_argument(
         "--bind", type=address, default="127.0.0.1", metavar="ADDR",
         help="address to listen on (default 127.0.0.1: this machine only; 0.0.0.0: every network)",

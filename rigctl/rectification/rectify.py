@@ -198,7 +198,8 @@ def rectify_take(
 
     A damaged source frame stops it (naming file and byte; the CLI removes the partial new take), unless
     ``skip_damaged``: then the frame is left out and listed in the new take's ``damaged_skipped``."""
-    if (source / "truth").resolve() in out.resolve().parents:  # copied into the new take: into itself
+    truth, real_out = Path(os.path.realpath(source / "truth")), Path(os.path.realpath(out))  # no raise on a loop
+    if truth in real_out.parents:  # copied into the new take: into itself
         raise ParameterError(f"--out {out}: lies in the source take's truth/, which the new take copies")
     reader = TakeReader(source, skip_damaged=skip_damaged)
     if reader.manifest.rectification is not None:  # a second warp would only resample it: nothing to gain

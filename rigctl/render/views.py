@@ -136,6 +136,18 @@ def write_view(folder: Path, stem: str, rgba: F32, attrs: dict[str, object]) -> 
     )
 
 
+# what write_view writes a pixel at most: 8-bit RGBA PNG (4 bytes, deflate never much larger) and half-float RGBA
+# EXR (8 bytes, PIZ never much larger), with a margin for what compression adds; and a file's headers
+VIEW_BYTES_PER_PIXEL = 13
+VIEW_FILE_BYTES = 1 << 16
+
+
+def views_bytes(views: int, width: int, height: int) -> int:
+    """The most ``views`` views of ``width`` x ``height`` written by :func:`write_view` take on disk (PNG + EXR,
+    as if neither compressed anything: a render is refused up front rather than the disk filled halfway)."""
+    return views * (width * height * VIEW_BYTES_PER_PIXEL + 2 * VIEW_FILE_BYTES)
+
+
 def render_views(
     inp: RenderInput,
     numbers: list[int],

@@ -8,7 +8,6 @@ import collections
 import contextlib
 import logging
 import math
-import shutil
 import threading
 import time
 from dataclasses import dataclass, field
@@ -21,6 +20,7 @@ from rigctl.camera_control import check_settings
 from rigctl.capture.preflight import LOW_TIME_S, PreflightReport, WriteSpeed, measure_write
 from rigctl.capture.recorder import Recorder, TakePlan
 from rigctl.capture.recording import enforce, preflight_take
+from rigctl.diskspace import free_bytes
 from rigctl.errors import ParameterError, PreflightError, RigctlError
 from rigctl.interfaces import SettingResult, SettingState, TallyState
 from rigctl.planning.report import plan_rig
@@ -273,7 +273,7 @@ class Session:
             self._disk_t = now
             try:
                 self.out.mkdir(parents=True, exist_ok=True)
-                free = shutil.disk_usage(self.out).free
+                free = free_bytes(self.out)
                 fmt = self.recorder.format if self.recorder else None
                 bps = (fmt.bytes_per_frame * fmt.fps * len(self.names)) if fmt else 0
                 self._disk_cache = (free / 1e9, free / bps / 60 if bps else None)

@@ -15,11 +15,7 @@ from __future__ import annotations
 import json
 import logging
 import math
-import queue
 import struct
-import threading
-from collections import OrderedDict
-from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +24,7 @@ import numpy as np
 from rigctl.errors import ParameterError, TakeError
 from rigctl.render.inputs import RenderInput, _row_col
 from rigctl.render.kernels import NONE
+from rigctl.viewer.makeahead import MakeAhead
 
 log = logging.getLogger(__name__)
 
@@ -62,10 +59,6 @@ class Bundles:
     def __init__(self, source: Path, disparity: Path) -> None:
         self.input = RenderInput(source, disparity, refuse_unestimated=False)  # an empty frame is shown empty
         self.numbers = self.input.select(None)
-        self._lock = threading.Lock()
-        self._cache: OrderedDict[int, Future[bytes]] = OrderedDict()
-        self._jobs: queue.SimpleQueue[tuple[int, Future[bytes]]] = queue.SimpleQueue()
-        self._closed = threading.Event()
         first = self.input.frame(self.numbers[0])
         self.height, self.width = first.shape
         size = len(first.views) * self.height * self.width * 8  # RGBA8 and float32 disparity a camera
@@ -78,10 +71,7 @@ class Bundles:
                 f"{source}: {where} of the take's description is not a finite number (the grid's spacings or "
                 "the rectification's positions are out of range)"
             )
-        # a daemon: at exit (Ctrl-C) nothing waits for the bundle being made (a pool's thread is joined, and a
-        # second Ctrl-C during that join ended in a traceback)
-        self._thread = threading.Thread(target=self._work, name="rigctl-view-bundles", daemon=True)
-        self._thread.start()
+        self.made = MakeAhead(self._make, self.cache)
 
     def _describe(self, frame: Any) -> dict[str, Any]:
         views = frame.views
@@ -121,52 +111,13 @@ class Bundles:
         if number not in self.numbers:
             raise ParameterError(f"frame set {number} is not one of the take's with a disparity")
         at = self.numbers.index(number)
-        wanted = self._future(number)
-        ahead = self.ahead
-        for later in self.numbers[at + 1 : at + 1 + ahead] + self.numbers[: max(0, at + 1 + ahead - len(self.numbers))]:
-            self._future(later)
-        return wanted.result()
+        end = at + 1 + self.ahead
+        ahead = self.numbers[at + 1 : end] + self.numbers[: max(0, end - len(self.numbers))]
+        return self.made.get(number, ahead)
 
     def close(self, wait_s: float = CLOSE_WAIT_S) -> None:
-        """Drop the bundles queued ahead and end the thread that makes them, waiting up to ``wait_s`` for the one
-        it is making: a process that exits while that thread is inside OpenCV or OpenEXR is aborted by the C++
-        runtime ("terminate called without an active exception"). A second Ctrl-C does not cut the wait short
-        into a traceback."""
-        self._closed.set()
-        with self._lock:
-            for made in self._cache.values():
-                made.cancel()
-        self._jobs.put((-1, Future()))  # wakes the thread
-        if self._thread is threading.current_thread():
-            return
-        try:
-            self._thread.join(wait_s)
-        except KeyboardInterrupt:
-            self._thread.join(wait_s)
-
-    def _work(self) -> None:
-        while not self._closed.is_set():
-            number, made = self._jobs.get()
-            if self._closed.is_set() or not made.set_running_or_notify_cancel():
-                continue
-            try:
-                made.set_result(self._make(number))
-            except BaseException as exc:  # whoever waits for the bundle gets it (a pool's worker does the same)
-                made.set_exception(exc)
-
-    def _future(self, number: int) -> Future[bytes]:
-        with self._lock:
-            if number in self._cache:
-                self._cache.move_to_end(number)
-                return self._cache[number]
-            made: Future[bytes] = Future()
-            if self._closed.is_set():
-                made.cancel()  # never made: its waiter is not left waiting
-            self._jobs.put((number, made))
-            self._cache[number] = made
-            while len(self._cache) > self.cache:
-                self._cache.popitem(last=False)
-            return made
+        """Drop the bundles queued ahead and end the thread that makes them (:meth:`MakeAhead.close`)."""
+        self.made.close(wait_s)
 
     def _make(self, number: int) -> bytes:
         frame = self.input.frame(number)

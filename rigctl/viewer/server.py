@@ -28,7 +28,9 @@ log = logging.getLogger(__name__)
 
 TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8", ".css": "text/css",
          ".glsl": "text/plain; charset=utf-8", ".png": "image/png"}  # fmt: skip
-FRAME = re.compile(r"/api/frame/(\d{1,9})\.bin")
+# a frame set's one URL: its number as take.json lists it (no leading zero, ASCII digits only: int() would also
+# take "01", "١" or "１" for 1, and \d matches any script's digits)
+FRAME = re.compile(r"/api/frame/(0|[1-9][0-9]{0,8})\.bin")
 MAX_RESULT = 1 << 28  # a 4K RGBA read-back with room to spare
 IDLE_S = 30.0  # a client that sends or takes nothing this long (gone, or holding a connection) is dropped
 CHUNK = 1 << 16  # a body is written in these, each within IDLE_S: a slow but steady reader gets it whole

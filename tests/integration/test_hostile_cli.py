@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 from hostile_support import REPO, SIM_RIG, one_line, rig_with, write_yaml  # type: ignore[import-not-found]
-from tests_support import rigctl_exe  # type: ignore[import-not-found]
+from tests_support import make_non_device, rigctl_exe  # type: ignore[import-not-found]
 
 from rigctl.errors import EXIT_BAD_INPUT, EXIT_DEVICE, EXIT_USAGE
 
@@ -48,13 +48,7 @@ def test_tally_transport_failures_are_device_errors_naming_the_port(run_cli, tmp
 @pytest.mark.parametrize("kind", ["a folder", "a regular file", "a FIFO"])
 def test_a_tally_port_that_exists_but_is_no_device_says_what_it_is(run_cli, tmp_path: Path, kind: str) -> None:  # type: ignore[no-untyped-def]
     """It said 'no such serial port' for a folder, which exists."""
-    port = tmp_path / "port"
-    if kind == "a folder":
-        port.mkdir()
-    elif kind == "a FIFO":
-        os.mkfifo(port)
-    else:
-        port.write_text("")
+    port = make_non_device(tmp_path / "port", kind)
     rig = rig_with(tmp_path, tally={"protocol": "tsl-umd-3.1", "port": str(port)})
     one_line(run_cli("tally", str(rig), "--program", "r0c0"), EXIT_DEVICE, f"{port}: exists but is {kind}, not a")
 
@@ -467,3 +461,54 @@ def test_tally_service_never_dies_silently(tmp_path: Path) -> None:
     assert not svc.running and not svc.connected
     assert svc.last_error == svc.stopped_by == "tally service stopped: ValueError: a bug in an output driver"
     svc.set(TallyState(program=frozenset({"r0c0"})))  # setting state on a stopped service does not hang
+
+
+LONG_PATH = "a/" * 2500  # 5,000 characters: more than PATH_MAX (4,096)
+
+
+@pytest.mark.parametrize("problem", ["too long", "a loop"])
+@pytest.mark.parametrize(
+    ("argv", "what"),
+    [
+        (("depth", "{p}", "--out", "out"), "INPUT"),
+        (("take", "info", "{p}"), "TAKE"),
+        (("take", "export", "{p}", "--out", "out"), "TAKE"),
+        (("render", "{p}", "--disparity", ".", "--at", "0,0", "--out", "o.png"), "INPUT"),
+        (("render", ".", "--disparity", "{p}", "--path", "0,0", "1,0", "--out", "o.mp4"), "--disparity"),
+        (("rectify", "{p}", "--calibration", "c.yaml", "--out", "out"), "TAKE"),
+        (("rectify", ".", "--calibration", "{p}", "--out", "out"), "--calibration"),
+        (("plan", "{p}"), "RIG"),
+        (("view", "{p}", "--disparity", "."), "INPUT"),
+    ],
+)
+def test_an_input_path_the_system_cannot_look_up_is_the_inputs_fault(  # type: ignore[no-untyped-def]
+    run_cli, tmp_path: Path, argv: tuple[str, ...], what: str, problem: str
+) -> None:
+    """A 5,000-character input path (ENAMETOOLONG) or a loop of symbolic links (ELOOP) ended in 'cannot write'
+    with exit 4 (the output side's catch-all), or a RuntimeError traceback: it is the input's fault, exit 3, in
+    one line naming the argument, the path shortened, and refused before any output folder is made."""
+    if problem == "a loop":
+        (tmp_path / "loop").symlink_to("loop")
+        path, says = "loop/x", f"{what} loop/x: a loop of symbolic links"
+    else:
+        path, says = LONG_PATH, "(5,000 characters): the path is too long for the file system"
+    line = one_line(run_cli(*(a.replace("{p}", path) for a in argv)), EXIT_BAD_INPUT, f"error: {what} ", says)
+    assert len(line) < 200 and "cannot write" not in line
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("argv", [("board", "--out", LONG_PATH + "b"), ("depth", ".", "--out", LONG_PATH)])
+def test_an_output_path_too_long_still_cannot_be_written(run_cli, argv: tuple[str, ...]) -> None:  # type: ignore[no-untyped-def]
+    """The other side of the above: a too-long output path is the destination's problem (exit 4), said in one
+    line with the path shortened."""
+    line = one_line(run_cli(*argv), EXIT_DEVICE, "a/a/a/...", "characters): cannot write: File name too long")
+    assert len(line) < 200
+
+
+def test_an_output_path_in_a_loop_of_symbolic_links_cannot_be_written(run_cli, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """depth's and rectify's check of --out against the input ended in a RuntimeError traceback (Path.resolve on
+    a symlink loop): the destination's problem, exit 4, one line."""
+    (tmp_path / "loop").symlink_to("loop")
+    one_line(run_cli("depth", ".", "--out", "loop/x"), EXIT_DEVICE, "loop/x: ", "Too many levels of symbolic links")
+    res = run_cli("rectify", ".", "--calibration", "c.yaml", "--out", "loop/x")
+    assert res.returncode in (EXIT_BAD_INPUT, EXIT_DEVICE) and "Traceback" not in res.stderr, res.stderr

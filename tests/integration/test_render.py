@@ -388,3 +388,38 @@ def test_a_frame_with_no_estimate_in_any_disparity_is_refused_before_writing(tak
     one_line(res, str(only), "frame 0", "no camera but r1c1 has an estimate")
     res = run_rigctl("render", str(take), "--disparity", str(only), "--at", "1,1", "--out", str(out))
     assert res.returncode == 0, res.stderr  # r1c1's own estimate is a source of a view beside it
+
+
+def test_a_path_render_the_disk_cannot_hold_is_refused_before_writing(
+    take: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A review: render --path had no disk-space check, so a long path could fill the disk halfway through. The
+    estimate (frames x views x resolution x PNG + EXR, as if uncompressed) is held against the free space of
+    --out's file system up front; the free space is given here, not read from this disk."""
+    import rigctl.diskspace
+    from rigctl.cli.main import main
+    from rigctl.errors import EXIT_DEVICE
+    from rigctl.render.views import views_bytes
+
+    asked: list[Path] = []
+
+    def free(folder: Path) -> int:
+        asked.append(folder)
+        return given
+
+    monkeypatch.setattr(rigctl.diskspace, "free_bytes", free)
+    out = tmp_path / "new" / "path"
+    argv = ["render", str(take), "--disparity", str(take / "truth" / "disparity"), "--path", "0,1", "2,1", "--out",
+            str(out), "--quiet"]  # fmt: skip
+    given = 10 * 10**6
+    code = main([*argv, "--steps", "50"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == EXIT_DEVICE and len(err) == 1, err
+    assert f"--out {out}: about 0.34 GB needed for 50 views of 960x540 (PNG + EXR), 0.01 GB free" in err[0]
+    assert asked == [out] and not (tmp_path / "new").exists()  # refused before a view: the folder made is gone
+
+    given = views_bytes(3, 960, 540)  # just enough: it renders, and what it wrote fits the estimate
+    assert main([*argv, "--steps", "3"]) == 0, capsys.readouterr().err
+    written = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
+    assert sorted(p.name for p in (out / "000000").glob("*.exr")) == [f"path_000{i}.exr" for i in range(3)]
+    assert 0 < written <= given

@@ -15,6 +15,7 @@ from rigctl.drivers.embedded_tally_output import EmbeddedTallyOutput
 from rigctl.drivers.protocols import bmd_control, tsl50
 from rigctl.drivers.sdi_bridge import SdiBridge
 from rigctl.simulators.sdi_bridge import SimSdiBridge
+from tests_support import make_non_device  # type: ignore[import-not-found]
 
 from rigctl.errors import DeviceError
 from rigctl.interfaces import CaptureFormat, SettingState, TallyState
@@ -273,13 +274,7 @@ def test_devices_does_not_call_a_line_found_that_is_no_device(tmp_path: Path, ki
     rigctl tally then refuses; a device node (a pty, /dev/null) still is found."""
     import os
 
-    port = tmp_path / "port"
-    if kind == "a folder":
-        port.mkdir()
-    elif kind == "a FIFO":
-        os.mkfifo(port)
-    else:
-        port.write_text("")
+    port = make_non_device(tmp_path / "port", kind)
     master, slave = os.openpty()
     tty = os.ttyname(slave)
     try:

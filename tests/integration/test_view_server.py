@@ -109,6 +109,18 @@ def test_nothing_outside_the_page_and_the_take_is_served(served: Served, path: s
 
 
 @pytest.mark.parametrize(
+    "number",
+    ["01", "001", "00", "%2B1", "+1", "%201", "1%20", "1_0", "0_1", "%D9%A1", "%EF%BC%91", "%E0%A5%A7", "1.0", "0x1"],
+)
+def test_a_frame_set_is_served_under_its_canonical_number_only(served: Served, number: str) -> None:
+    """A hostile-user review: int() took "01", "١" (Arabic-Indic one) and "１" (full-width) as frame set 1, so
+    one frame set had many URLs; only the decimal number as take.json lists it is served, anything else 404."""
+    status, body = served.get(f"/api/frame/{number}.bin")
+    assert status == 404 and body[:4] != b"RGFS", (number, status)
+    assert served.get("/api/frame/0.bin")[0] == 200 and served.get("/api/frame/1.bin")[0] == 200
+
+
+@pytest.mark.parametrize(
     ("host", "status"),
     [("evil.example", 403), ("evil.example:80", 403), ("10.0.0.7", 403), ("localhost", 200),
      ("127.0.0.1:1", 200), ("[::1]:8080", 200), ("LOCALHOST", 200)],
@@ -354,8 +366,8 @@ def test_the_bundles_kept_fit_in_a_memory_budget(full: Path, monkeypatch: pytest
     try:
         assert bundles.get(0)[:4] == b"RGFS"
         time.sleep(3)  # what is made ahead is made
-        assert len(bundles._cache) <= 3
+        assert len(bundles.made.kept()) <= 3
         assert bundles.get(1)[:4] == b"RGFS" and bundles.get(3)[:4] == b"RGFS"
-        assert len(bundles._cache) <= 3
+        assert len(bundles.made.kept()) <= 3
     finally:
         bundles.close()
