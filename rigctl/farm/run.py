@@ -292,9 +292,11 @@ def dask_client(options: FarmOptions) -> Iterator[Any]:
     limit = options.memory_limit
     if limit == "auto":
         limit = default_memory_limit(options.take, len(options.depth.cameras or ()) or None)
+    from rigctl.allocator import dask_workers_allocate_as_depth
     from rigctl.farm.quiet import quiet_nannies
 
     with (
+        dask_workers_allocate_as_depth(),  # not Dask's MALLOC_TRIM_THRESHOLD_ (rigctl.allocator)
         quiet_nannies(),  # an interrupted run: Dask's shutdown notices kept off stderr (rigctl.farm.quiet)
         LocalCluster(
             n_workers=options.workers,
