@@ -308,9 +308,10 @@ class SimArray:
         self._gains, self._vignetting, self.rectified  # noqa: B018
         with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
             for name in self.names:  # the first time: rays while this thread builds the scene's textures
-                pool.submit(self.rays, name)
+                pool.submit(self.states.unless_stopped, self.rays, name)
             scene = self.scene(state)
-            return list(pool.map(lambda n: self._render_camera(scene, n, state), self.names))
+            render = self.states.unless_stopped  # once the array is closed, no camera not yet begun
+            return list(pool.map(lambda n: render(self._render_camera, scene, n, state), self.names))
 
     @cached_property
     def states(self) -> StateStore:

@@ -196,3 +196,33 @@ def test_a_camera_starts_at_once_and_its_first_frame_waits_for_the_first_state()
     body = np.frombuffer(frame.data, np.uint8)[size // 2 :]  # below the burnt-in ids
     assert np.all(body == 100)  # state 0, as the schedule says for the stream's first frames
     assert calls[0] == 0 and calls.count(0) == 1
+
+
+def test_a_closed_stores_queued_camera_work_is_dropped_not_done() -> None:
+    """A state's render queues every camera's work in a pool, and a process exiting waits for that queue:
+    after ``stop`` the work not begun is refused (nine 8K cameras rendered for minutes after ``record``'s
+    preflight refused)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from rigctl.simulators.states import RenderStopped
+
+    done: list[int] = []
+    begun, release = threading.Event(), threading.Event()
+
+    def camera(n: int) -> int:
+        begun.set()
+        release.wait(10)
+        done.append(n)
+        return n
+
+    store = StateStore(lambda state: [])
+    assert store.unless_stopped(lambda a, b: a + b, 2, 3) == 5
+    with ThreadPoolExecutor(1) as pool:
+        futures = [pool.submit(store.unless_stopped, camera, n) for n in range(5)]
+        assert begun.wait(10)
+        store.stop()  # camera 0 under way: it finishes; 1 to 4 are refused when their turn comes
+        release.set()
+    assert done == [0] and futures[0].result() == 0
+    for f in futures[1:]:
+        with pytest.raises(RenderStopped):
+            f.result()
