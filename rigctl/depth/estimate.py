@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from rigctl.depth.cost import F32, TRUNCATE
 from rigctl.depth.edge import DEPTH_COVERAGE, coverage, sensor_fixed
 from rigctl.depth.grid import Grid
-from rigctl.depth.packed import PackedField, PackedPlane
+from rigctl.depth.packed import BitPlane, FillPlane, PackedField, PackedPlane
 from rigctl.depth.pair_fusion import pairs_engine
 from rigctl.depth.presets import Preset
 from rigctl.depth.search import EstimateStats, SearchJob
@@ -31,14 +31,20 @@ DEFAULT_KEYER = Keyer()
 
 @dataclass
 class DepthResult:
-    disparity: F32  # +inf where there is no estimate (keyed background, outside every view)
-    confidence: F32  # 0..1
-    unreliable: NDArray[np.bool_]  # textureless or saturated: an estimate, not to be trusted
-    bound_hit: NDArray[np.bool_]  # the best match lay at the edge of the planned range
-    # the keyer's matte, held packed (``packed.py``: about 1 byte a pixel, not 4) until the write; each read
-    # makes the plane again (a descriptor, the field's storage: no default shared between results)
-    matte: PackedField = PackedField()  # noqa: RUF009
-    filled: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 0), bool))
+    # every plane held packed until the write (``packed.py``: most of a presenter's frame is the screen's one
+    # value): each read makes a new read-only plane, so change one by assigning it (descriptors, the fields'
+    # storage: no default shared between results). About 3 bytes a pixel with the screen two thirds of the
+    # frame, not 15
+    # +inf where there is no estimate (keyed background, outside every view)
+    disparity: PackedField[F32] = PackedField(FillPlane.filling(np.inf))  # noqa: RUF009
+    confidence: PackedField[F32] = PackedField(FillPlane.filling(0.0))  # noqa: RUF009  # 0..1
+    # textureless or saturated: an estimate, not to be trusted
+    unreliable: PackedField[NDArray[np.bool_]] = PackedField(BitPlane.of)  # noqa: RUF009
+    # the best match lay at the edge of the planned range
+    bound_hit: PackedField[NDArray[np.bool_]] = PackedField(BitPlane.of)  # noqa: RUF009
+    matte: PackedField[F32] = PackedField(PackedPlane.of)  # noqa: RUF009  # the keyer's
+    # no match found: filled from the background side (default: none)
+    filled: PackedField[NDArray[np.bool_]] = PackedField(BitPlane.of, empty=lambda: np.zeros((0, 0), bool))  # noqa: RUF009
     stats: EstimateStats = field(default_factory=lambda: EstimateStats())
     # the keyer whose matte of the camera's picture ``matte`` is (the export's soft key starts from it rather
     # than keying the picture again); None when the caller gave the matte or nothing was keyed
@@ -46,7 +52,8 @@ class DepthResult:
 
     def keyed_a_screen(self) -> bool:
         """Whether the matte is below 1 anywhere (a screen was keyed), without making the plane."""
-        return PackedField.held(self, "matte").any_below_one()
+        held = PackedField.held(self, "matte")
+        return held.any_below_one() if isinstance(held, PackedPlane) else bool((held.plane() < 1).any())
 
 
 def choose_views(grid: Grid, ref: str, mode: str) -> list[str]:
@@ -202,10 +209,11 @@ def _drop_sensor_fixed(
 
 def cross_check(a: DepthResult, b: DepthResult, rel: tuple[float, float], tol: float = 1.0) -> NDArray[np.bool_]:
     """Pixels of ``a`` whose disparity disagrees with ``b``'s at the same point (b at offset ``rel`` from a)."""
-    h, w = a.disparity.shape
+    da, db = a.disparity, b.disparity  # each read makes the plane (held packed)
+    h, w = da.shape
     gy, gx = np.mgrid[0:h, 0:w].astype(np.float32)
-    d = np.where(np.isfinite(a.disparity), a.disparity, 0).astype(np.float32)
+    d = np.where(np.isfinite(da), da, 0).astype(np.float32)
     mx, my = gx - d * np.float32(rel[0]), gy - d * np.float32(rel[1])
-    db = np.where(np.isfinite(b.disparity), b.disparity, -1e6).astype(np.float32)
+    db = np.where(np.isfinite(db), db, -1e6).astype(np.float32)
     seen = cv2.remap(db, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=-1e6)
-    return np.asarray(np.isfinite(a.disparity) & (seen > -1e5) & (np.abs(seen - a.disparity) > tol))
+    return np.asarray(np.isfinite(da) & (seen > -1e5) & (np.abs(seen - da) > tol))

@@ -190,9 +190,10 @@ def write_all(
 
 def depth_channels(grid: Grid, name: str, res: DepthResult) -> dict[str, F32]:
     """The EXR's channels but the picture: 1/Z, confidence and the disparity layers."""
-    z = grid.depth(res.disparity)
+    disparity = res.disparity  # each read makes the plane (held packed)
+    z = grid.depth(disparity)
     inv_z = np.where(np.isfinite(z) & (z > 0), 1.0 / z, 0.0).astype(np.float32)
-    return {"depth.Z": inv_z, "confidence.Y": res.confidence, **layers(res.disparity, steps(grid.offsets, name))}
+    return {"depth.Z": inv_z, "confidence.Y": res.confidence, **layers(disparity, steps(grid.offsets, name))}
 
 
 def write_depth_exr(

@@ -112,11 +112,13 @@ def order_all(grid: Grid, out: dict[str, DepthResult]) -> None:
     order = occlusion_order(grid, {cam: res.disparity for cam, res in out.items()})
     for cam, (flagged, value) in order.items():
         res = out[cam]
-        res.disparity = ordered(res.disparity, flagged, value)
-        gone = flagged & ~np.isfinite(res.disparity)
-        res.confidence[gone] = 0.0
-        res.unreliable[gone] = False
-        res.bound_hit[gone] = False
+        disparity = ordered(res.disparity, flagged, value)
+        res.disparity = disparity
+        gone = flagged & ~np.isfinite(disparity)
+        if gone.any():  # the planes are held packed: each one changed is made, changed and assigned back
+            res.confidence = np.where(gone, np.float32(0.0), res.confidence)
+            res.unreliable = res.unreliable & ~gone
+            res.bound_hit = res.bound_hit & ~gone
         res.stats["occlusion_order_pixels"] = int(flagged.sum())
         res.stats["occlusion_order_removed_pixels"] = int(gone.sum())
         res.stats["occlusion_order_s"] = (time.perf_counter() - t0) / len(out)
@@ -130,7 +132,8 @@ def cross_check_all(grid: Grid, out: dict[str, DepthResult]) -> None:
         others = [c for c in out if c != cam]
         nearest = min(others, key=lambda c: math.hypot(*_rel(grid, cam, c)))
         bad = cross_check(res, out[nearest], _rel(grid, cam, nearest)) & (res.matte > 0)
-        res.confidence[bad] = 0.0
+        if bad.any():
+            res.confidence = np.where(bad, np.float32(0.0), res.confidence)
         res.stats["cross_check_with"] = nearest
         res.stats["cross_check_failed_pixels"] = int(bad.sum())
         res.stats["cross_check_s"] = time.perf_counter() - t0

@@ -165,11 +165,12 @@ def bound_side_hits(results: dict[str, DepthResult], d_range: tuple[float, float
     mid = (d_range[0] + d_range[1]) / 2
     low = high = 0
     for res in results.values():
-        estimated = int(np.isfinite(res.disparity).sum())
+        disparity, bound_hit = res.disparity, res.bound_hit  # each read makes the plane (held packed)
+        estimated = int(np.isfinite(disparity).sum())
         need = max(HIT_MIN_PX, HIT_SHARE * estimated)
         with np.errstate(invalid="ignore"):
-            lo_n = int((res.bound_hit & (res.disparity < mid)).sum())
-            hi_n = int((res.bound_hit & (res.disparity >= mid)).sum())
+            lo_n = int((bound_hit & (disparity < mid)).sum())
+            hi_n = int((bound_hit & (disparity >= mid)).sum())
         low += lo_n if lo_n > need else 0
         high += hi_n if hi_n > need else 0
     return low, high
