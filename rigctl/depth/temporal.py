@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 from rigctl.depth.cost import SweepLevel
 from rigctl.depth.estimate import DepthResult
 from rigctl.depth.grid import Grid
+from rigctl.depth.packed import Packed, PackedField
 from rigctl.depth.temporal_change import (
     MAD_TO_SIGMA,
     FrameChange,
@@ -83,7 +84,7 @@ class Previous:
 
     shape: tuple[int, int]
     pictures: HalfPictures
-    disparity: dict[str, F32]
+    disparity: dict[str, Packed]  # as the results held it (``packed.py``), not a copy
     frames: dict[str, NDArray[np.uint8]] = field(default_factory=dict)  # per camera: frames in each pixel's mean
 
 
@@ -112,7 +113,7 @@ class Temporal:
             self._frames[ref] = np.isfinite(d_new).astype(COUNT)
             return result
         change = self._frame_change(prev.pictures, grid)
-        d_prev = prev.disparity[ref]
+        d_prev = prev.disparity[ref].plane()
         n_prev = prev.frames.get(ref)
         if n_prev is None:
             n_prev = np.isfinite(d_prev).astype(COUNT)
@@ -170,7 +171,7 @@ class Temporal:
         # the half-size pictures the change test made of this frame set (the first of a run: made now)
         made = self._change[1].pictures if self._change is not None and self._change[0] is grid else None
         pictures = (made if made is not None else HalfPictures.of(grid)).made()
-        disparity = {n: r.disparity for n, r in results.items()}
+        disparity = {n: PackedField.held(r, "disparity") for n, r in results.items()}
         self.previous = Previous(grid.shape, pictures, disparity, frames)
         self._frames = {}
         self._change = None

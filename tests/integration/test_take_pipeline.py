@@ -21,6 +21,7 @@ import rigctl.depth.take_range as take_range
 from rigctl.depth import measured_range as measured_module
 from rigctl.depth.grid import Grid
 from rigctl.depth.options import DepthOptions
+from rigctl.depth.packed import PackedField
 from rigctl.depth.pipeline import FrameDone, TakeProcessor, chunks
 from rigctl.depth.scenes import surfaces
 from rigctl.depth.take_range import RangeDecision
@@ -224,7 +225,8 @@ def test_a_frame_set_is_let_go_of_once_the_next_one_is_done_but_for_what_the_nex
         blended.append(done.results["r1c1"].stats.get("temporal_blended_share", 0.0))
         kept = processor.temporal.previous
         assert kept is not None and set(kept.disparity) == {"r1c1", "r1c2"}
-        assert all(kept.disparity[c] is done.results[c].disparity for c in kept.disparity)
+        # the results' packed planes themselves (``packed.py``), not a copy of each
+        assert all(kept.disparity[c] is PackedField.held(done.results[c], "disparity") for c in kept.disparity)
         assert kept.pictures.grid is None and set(kept.pictures.pictures) == set(done.grid.names)
         h, w = done.grid.shape
         assert all(p.shape == ((h + 1) // 2, (w + 1) // 2, 3) for p in kept.pictures.pictures.values())
