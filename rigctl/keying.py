@@ -129,11 +129,16 @@ class _LocalMean:
         """``values``: H x W x C+1, the last channel ones (:func:`_with_ones`, shared by every mean)."""
         self.shape = weight.shape
         self.sigmas = sigmas
-        # the weighted values and the weight side by side, built once for every sigma
-        self.weighted: F32 = np.empty(values.shape, np.float32)
-        np.multiply(values, weight[..., None], out=self.weighted)
+        self.values, self.weight = values, weight  # their product made where read: 133 MB a mean at 4K
         self.fields: dict[int, F32] = {}
         self.todo: dict[int, NDArray[np.bool_]] = {}  # a fine field's tiles not blurred yet
+
+    def weighted(self, box: tuple[int, int, int, int] | None = None) -> F32:
+        """The values times the weight over ``box`` (top, bottom, left, right; default the frame), bit for bit."""
+        top, bottom, left, right = box if box is not None else (0, self.shape[0], 0, self.shape[1])
+        out = np.empty((bottom - top, right - left, self.values.shape[2]), np.float32)
+        np.multiply(self.values[top:bottom, left:right], self.weight[top:bottom, left:right, None], out=out)
+        return out
 
     def made(self, k: int, idx: NDArray[np.intp]) -> _LocalMean:
         """This mean with its blur ``k`` made where ``idx`` will read it (to make it in a thread of the
@@ -154,7 +159,7 @@ class _LocalMean:
         if scale == 1:
             return self._fine(k, idx)
         if k not in self.fields:
-            small = cv2.resize(self.weighted, (max(1, w // scale), max(1, h // scale)), interpolation=cv2.INTER_AREA)
+            small = cv2.resize(self.weighted(), (max(1, w // scale), max(1, h // scale)), interpolation=cv2.INTER_AREA)
             self.fields[k] = np.asarray(cv2.GaussianBlur(small, (0, 0), sigma / scale), np.float32)
         return self.fields[k]
 
@@ -167,7 +172,7 @@ class _LocalMean:
         h, w = self.shape
         if k not in self.fields:
             # memory is committed only for the pages a run writes (np.empty maps the rest lazily)
-            self.fields[k] = np.empty(self.weighted.shape, np.float32)
+            self.fields[k] = np.empty(self.values.shape, np.float32)
             self.todo[k] = np.ones((-(-h // TILE), -(-w // TILE)), bool)
         field, todo = self.fields[k], self.todo[k]
         need = np.zeros_like(todo)
@@ -189,11 +194,11 @@ class _LocalMean:
                 blurred = (max(0, y0 - reach), min(h, y1 + reach), max(0, x0 - before), min(w, x1 + reach))
                 runs.append(((y0, y1, x0, x1), blurred))
         if 2 * sum((bottom - top) * (right - left) for _, (top, bottom, left, right) in runs) >= h * w:
-            field[...] = cv2.GaussianBlur(self.weighted, (0, 0), sigma)
+            field[...] = cv2.GaussianBlur(self.weighted(), (0, 0), sigma)
             todo[...] = False
             return field
         for (y0, y1, x0, x1), (top, bottom, left, right) in runs:
-            part = cv2.GaussianBlur(self.weighted[top:bottom, left:right], (0, 0), sigma)
+            part = cv2.GaussianBlur(self.weighted((top, bottom, left, right)), (0, 0), sigma)
             field[y0:y1, x0:x1] = part[y0 - top : y1 - top, x0 - left : x1 - left]
         todo &= ~need
         return field
@@ -219,7 +224,7 @@ class _LocalMean:
 
     def at(self, idx: NDArray[np.intp]) -> tuple[F32, F32]:
         """The means at the flat pixel indices ``idx`` (N x C), and where there was any weight (N, 0/1)."""
-        c = self.weighted.shape[2] - 1
+        c = self.values.shape[2] - 1
         out = np.zeros((len(idx), c), np.float32)
         done = np.zeros(len(idx), bool)
         for k in range(len(self.sigmas)):

@@ -63,7 +63,7 @@ def test_the_soft_keys_fine_blur_on_tiles_is_the_frames_bit_for_bit() -> None:
         weight = (rng.random((h, w)) > 0.4).astype(np.float32)
         for sigma in (3.0, 4.0):
             mean = _LocalMean(values, weight, (sigma, 4 * sigma))
-            whole = cv2.GaussianBlur(mean.weighted, (0, 0), sigma).reshape(-1, 4)
+            whole = cv2.GaussianBlur(mean.weighted(), (0, 0), sigma).reshape(-1, 4)
             corners = np.array([0, w - 1, (h - 1) * w, h * w - 1])
             edge_rows = np.concatenate([np.arange(w), (h - 1) * w + np.arange(w)])
             scattered = rng.choice(h * w, size=max(1, h * w // 400), replace=False)
@@ -84,3 +84,18 @@ def test_the_soft_keys_fine_blur_on_tiles_is_the_frames_bit_for_bit() -> None:
     finally:
         cv2.GaussianBlur = real
     assert calls == [(200, 301, 4)] and not part.todo[0].any()
+
+
+def test_a_local_mean_holds_no_frame_of_weighted_values() -> None:
+    """Issue 24, the write's peak: the weighted values (H x W x 4 float32, 133 MB at 4K) are made where a blur
+    reads them, not held by each mean; any box of them is the frame's product there, bit for bit."""
+    rng = np.random.default_rng(5)
+    values = rng.normal(0, 1, (120, 170, 4)).astype(np.float32)
+    weight = (rng.random((120, 170)) > 0.5).astype(np.float32)
+    mean = _LocalMean(values, weight, (3.0, 12.0))
+    mean.sample(0, np.array([5, 170 * 60 + 80]))  # a fine field's tiles made: its own field, not the product
+    held = [v for v in vars(mean).values() if isinstance(v, np.ndarray)]
+    assert all(v is values or v is weight for v in held)
+    whole = values * weight[..., None]
+    assert np.array_equal(mean.weighted(), whole)
+    assert np.array_equal(mean.weighted((7, 90, 33, 170)), whole[7:90, 33:170])
