@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -108,10 +109,17 @@ class PlanDefaults(_Section):
     budget_fraction: Annotated[float, Field(gt=0, le=1)] = 0.04
 
 
+# The highest display address each tally protocol can carry: TSL UMD 3.1 sends 0x80 + address in one byte
+# (0..126); TSL UMD 5.0 a 16-bit INDEX whose 0xFFFF means every display of the screen (broadcast), which one
+# camera's display must not take. ``bmd-embedded`` numbers cameras by ``camera_control.camera_ids``.
+TALLY_ADDRESS_MAX = {"tsl-umd-3.1": 126, "tsl-umd-5.0": 0xFFFE, "bmd-embedded": 126}
+TSL5_BROADCAST = 0xFFFF
+
+
 class Tally(_Section):
     protocol: Literal["tsl-umd-3.1", "tsl-umd-5.0", "bmd-embedded"]
     port: str = Field(min_length=1)
-    addresses: dict[str, Annotated[int, Field(ge=0, le=126)]] | None = None
+    addresses: dict[str, Annotated[int, Field(ge=0)]] | None = None  # upper bound by protocol: TALLY_ADDRESS_MAX
     pad_with_nul: bool = False
     usb: UsbIdentity | None = None  # the USB-serial adapter behind ``port``
 
@@ -353,3 +361,21 @@ def _check_whole_rig(model: RigModel, source: str, lines: dict[Any, int]) -> Non
                     (section, field_name, name),
                     f"{section}.{field_name} names {name}, which is not a camera of this rig",
                 )
+    if model.tally is not None:
+        _check_tally_addresses(model.tally, fail)
+
+
+def _check_tally_addresses(tally: Tally, fail: Callable[[tuple[Any, ...], str], None]) -> None:
+    """Each address within what ``tally.protocol`` can carry; TSL UMD 5.0's broadcast index is refused, since a
+    display message there would paint every display of the screen with one camera's label and lamps."""
+    top = TALLY_ADDRESS_MAX[tally.protocol]
+    for name, address in (tally.addresses or {}).items():
+        loc = ("tally", "addresses", name)
+        if tally.protocol == "tsl-umd-5.0" and address == TSL5_BROADCAST:
+            fail(
+                loc,
+                f"tally.addresses.{name} is {address}, TSL UMD 5.0's broadcast index (every display of the "
+                f"screen): give {name} its own display, 0..{top}",
+            )
+        if address > top:
+            fail(loc, f"tally.addresses.{name} must be 0..{top} for {tally.protocol}, got {address}")

@@ -37,7 +37,14 @@ class Tsl5Packet:
     version: int = 0
 
 
+BROADCAST = 0xFFFF  # SCREEN or INDEX: every screen, or every display of the screen
+
+
 def encode(packet: Tsl5Packet) -> bytes:
+    """The packet on the wire. Any 16-bit SCREEN and INDEX is encoded, broadcast included: which of them a
+    rig may use is the rig file's business (``rigctl.rig.TALLY_ADDRESS_MAX``)."""
+    if not 0 <= packet.screen <= 0xFFFF:
+        raise ProtocolError(f"TSL 5.0 screen must be 0..65535, got {packet.screen}")
     body = bytearray()
     for d in packet.displays:
         for name, v, top in (

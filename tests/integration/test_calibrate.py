@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
+from colmap_text import Pose, read_model  # type: ignore[import-not-found]
 from conftest import SHARED
 from tests_support import run_rigctl
 
@@ -63,6 +64,39 @@ def test_real_stereo_pairs_with_the_adaptive_window(tmp_path: Path) -> None:
     code, rep, err = calibrate(str(STEREO), "--chessboard", "9x6", "--out", str(tmp_path / "c.yaml"))
     assert code == 0, err
     assert rep["rejected_views"] == [] and rep["rms_px"] < 0.25
+
+
+def test_real_stereo_exports_read_back_as_the_calibration(tmp_path: Path) -> None:
+    """--colmap and --opencv hold what calibration.yaml of the same run holds, read back by COLMAP's documented
+    text format (tests/colmap_text.py) and by OpenCV's FileStorage: K and size, each camera's pose and centre,
+    the rig and frame composing to each pose, and a point on the same pixel (COLMAP's coordinates half a pixel
+    on from OpenCV's)."""
+    out = tmp_path / "c.yaml"
+    colmap, opencv = tmp_path / "colmap", tmp_path / "cv.yaml"
+    code, _, err = calibrate(
+        str(STEREO), "--chessboard", "9x6", "--out", str(out), "--colmap", str(colmap), "--opencv", str(opencv)
+    )
+    assert code == 0, err
+    cal = load_calibration(out)
+    model = read_model(colmap)
+    ((rig_id, rig_from_world, _),) = model.frames.values()
+    ref, sensors = model.rigs[rig_id]
+    fs = cv2.FileStorage(str(opencv), cv2.FILE_STORAGE_READ)
+    for name in cal.names:
+        c, image = cal[name], model.images[f"{name}.png"]
+        cam = model.cameras[image.camera_id]
+        assert (cam.model, (cam.width, cam.height)) == ("OPENCV", c.image_size)
+        assert cam.params == pytest.approx([*np.diag(c.K)[:2], *(c.K[:2, 2] + 0.5), *c.dist[:4]], rel=1e-15)
+        assert np.allclose(image.pose.R, c.R, atol=1e-12) and np.allclose(image.pose.centre, c.centre, atol=1e-12)
+        composed = (sensors[image.camera_id] or Pose(np.eye(3), np.zeros(3))) @ rig_from_world
+        assert np.allclose(composed.R, c.R, atol=1e-12) and np.allclose(composed.t, c.t, atol=1e-12)
+        X = c.centre + c.R.T @ np.array([1.3, -0.9, 20.0])  # 20 squares ahead, towards the picture's corner
+        assert np.allclose(cam.project(image.pose.R @ X + image.pose.t) - c.project(X[None])[0], 0.5, atol=1e-9)
+        for key, value in (("K", c.K), ("dist", c.dist[None]), ("R", c.R), ("t", c.t[:, None])):
+            assert np.array_equal(fs.getNode(f"{name}_{key}").mat(), value), (name, key)
+        assert fs.getNode(f"{name}_image_size").mat().ravel().tolist() == list(c.image_size)
+    fs.release()
+    assert model.images[f"{cal.reference}.png"].camera_id == ref
 
 
 def test_board_in_millimetres_gives_the_same_result(tmp_path: Path) -> None:

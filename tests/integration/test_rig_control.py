@@ -203,6 +203,76 @@ def test_tsl50_over_udp(tmp_path: Path, run_cli) -> None:  # type: ignore[no-unt
     assert by["r0c0"].right == tsl50.OFF and by["r0c0"].brightness == 3
 
 
+def udp_receiver() -> tuple[socket.socket, int]:
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    return rx, rx.getsockname()[1]
+
+
+def test_tsl50_indexes_past_126_go_out_byte_exact(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    """Display indexes TSL 3.1 cannot carry, on the wire as the spec lays them out: PBC, VER, FLAGS, SCREEN,
+    then per camera INDEX, CONTROL, LENGTH, TEXT, 16-bit fields low byte first."""
+    rx, port = udp_receiver()
+    rx.settimeout(10)
+    addresses = {"r0c0": 1000, "r1c1": 127, "r2c2": 65534}
+    rig = write_rig(
+        tmp_path, tally={"protocol": "tsl-umd-5.0", "port": f"udp://127.0.0.1:{port}", "addresses": addresses}
+    )
+    try:
+        res = run_cli("tally", str(rig), "--program", "r0c0", "--preview", "r2c2")
+        assert res.returncode == 0, res.stderr
+        data = rx.recv(2048)
+    finally:
+        rx.close()
+    # CONTROL: program lights right, text and left red (1 | 1 << 2 | 1 << 4) at brightness 3 (3 << 6) = 0xD5;
+    # preview green (2 | 2 << 2 | 2 << 4 | 3 << 6) = 0xEA; off, brightness 3 = 0xC0
+    off = "C0 00 04 00"
+    expected = (
+        "5E 00 00 00 00 00"  # PBC 94 = 4 header bytes + 9 displays of 10; VER 0, FLAGS 0, SCREEN 0
+        " E8 03 D5 00 04 00 72 30 63 30"  # r0c0 at 1000 (0x03E8), program
+        f" 02 00 {off} 72 30 63 31 03 00 {off} 72 30 63 32"  # r0c1, r0c2 at their defaults 2, 3
+        f" 04 00 {off} 72 31 63 30 7F 00 {off} 72 31 63 31 06 00 {off} 72 31 63 32"  # r1c1 at 127
+        f" 07 00 {off} 72 32 63 30 08 00 {off} 72 32 63 31"
+        " FE FF EA 00 04 00 72 32 63 32"  # r2c2 at 65534 (0xFFFE), preview
+    )
+    assert data.hex(" ").upper() == expected
+
+
+@pytest.mark.parametrize(
+    ("address", "message"),
+    [
+        (
+            65535,
+            "tally.addresses.r2c2 is 65535, TSL UMD 5.0's broadcast index (every display of the screen): "
+            "give r2c2 its own display, 0..65534",
+        ),
+        (65536, "tally.addresses.r2c2 must be 0..65534 for tsl-umd-5.0, got 65536"),
+    ],
+)
+def test_tsl50_broadcast_and_past_16_bits_are_refused_before_sending(  # type: ignore[no-untyped-def]
+    tmp_path: Path, run_cli, address: int, message: str
+) -> None:
+    """65535 is the spec's broadcast INDEX: a display message there would light every display of the screen
+    with one camera's label and lamps, so no camera may have it; 65536 does not fit the 16-bit field."""
+    rx, port = udp_receiver()
+    rx.settimeout(0.5)
+    rig = write_rig(
+        tmp_path, tally={"protocol": "tsl-umd-5.0", "port": f"udp://127.0.0.1:{port}", "addresses": {"r2c2": address}}
+    )
+    try:
+        res = run_cli("tally", str(rig), "--program", "r2c2")
+        with pytest.raises(TimeoutError):
+            rx.recv(2048)
+    finally:
+        rx.close()
+    assert res.returncode == 3
+    assert res.stderr.splitlines() == [f"rigctl tally: error: {rig}:{line_of(rig, f'r2c2: {address}')}: {message}"]
+
+
+def line_of(path: Path, text: str) -> int:
+    return next(i for i, ln in enumerate(path.read_text().splitlines(), 1) if ln.strip().startswith(text))
+
+
 def test_tsl50_bad_port_is_named(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
     rig = write_rig(tmp_path, tally={"protocol": "tsl-umd-5.0", "port": "/dev/ttyUSB0"})
     res = run_cli("tally", str(rig), "--program", "r0c1")

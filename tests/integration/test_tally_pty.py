@@ -68,6 +68,23 @@ def test_rigctl_tally_sends_one_frame_per_camera(tmp_path: Path, pty_line, run_c
     assert data[:2] == bytes([0x81, 0x31])
 
 
+def test_tsl31_addresses_end_at_126(tmp_path: Path, pty_line, run_cli) -> None:  # type: ignore[no-untyped-def]
+    """The header byte is 0x80 + address, so 126 (0xFE) is the last address; 127 would be 0xFF, and TSL 5.0's
+    wider display indexes do not apply to 3.1: refused in one line, before anything is on the line."""
+    master, port = pty_line
+    res = run_cli("tally", str(rig_with_tally(tmp_path, port, {"r0c0": 0, "r2c2": 126})), "--program", "r2c2")
+    assert res.returncode == 0, res.stderr
+    data = read_all(master, 9 * 18)
+    assert data[0::18] == bytes([0x80, 0x82, 0x83, 0x84, 0x85, 0x86, 0x87, 0x88, 0xFE])
+    assert data[-18:] == bytes([0xFE, 0x32]) + b"r2c2".ljust(16)  # program = tally 2, brightness 3
+    rig = rig_with_tally(tmp_path, port, {"r2c2": 127})
+    res = run_cli("tally", str(rig), "--program", "r2c2")
+    assert res.returncode == 3
+    assert res.stderr.strip().endswith("tally.addresses.r2c2 must be 0..126 for tsl-umd-3.1, got 127")
+    assert len(res.stderr.splitlines()) == 1
+    assert read_all(master, 1, timeout=0.3) == b""
+
+
 def test_thousand_state_changes_arrive_in_order(tmp_path: Path, pty_line) -> None:  # type: ignore[no-untyped-def]
     master, port = pty_line
     rig = load_rig(rig_with_tally(tmp_path, port))

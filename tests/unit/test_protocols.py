@@ -76,6 +76,40 @@ def test_tsl50_vector() -> None:
     assert tsl50.decode(data) == pkt
 
 
+# The spec's layout written out field by field, 16-bit fields little-endian: PBC (0x16 = 22 bytes after it),
+# VER 0, FLAGS 0 (ASCII), SCREEN 0; then per display INDEX, CONTROL (right tally bits 0-1, text tally 2-3,
+# left tally 4-5, brightness 6-7), LENGTH, TEXT.
+@pytest.mark.parametrize(
+    ("index", "wire"),
+    [
+        (1000, "16 00 00 00 00 00 E8 03 C1 00 04 00 43 41 4D 35 07 00 9E 00 02 00 42 32"),
+        (65534, "16 00 00 00 00 00 FE FF C1 00 04 00 43 41 4D 35 07 00 9E 00 02 00 42 32"),
+        (tsl50.BROADCAST, "16 00 00 00 00 00 FF FF C1 00 04 00 43 41 4D 35 07 00 9E 00 02 00 42 32"),
+    ],
+)
+def test_tsl50_high_indexes_byte_exact(index: int, wire: str) -> None:
+    """A display index past TSL 3.1's 126 goes out as its two bytes, low first; the second display's CONTROL
+    has a different value in every field: right green 2, text amber 3 << 2, left red 1 << 4, brightness
+    2 << 6 = 0x9E. The codec encodes broadcast too; the rig file keeps cameras off it."""
+    pkt = tsl50.Tsl5Packet(
+        0,
+        (
+            tsl50.Display(index, right=tsl50.RED, brightness=3, text="CAM5"),
+            tsl50.Display(7, right=tsl50.GREEN, text_tally=tsl50.AMBER, left=tsl50.RED, brightness=2, text="B2"),
+        ),
+    )
+    data = tsl50.encode(pkt)
+    assert data == hx(wire)
+    assert tsl50.decode(data) == pkt
+
+
+def test_tsl50_fields_past_16_bits_are_protocol_errors() -> None:
+    with pytest.raises(ProtocolError, match=r"display index must be 0\.\.65535, got 65536"):
+        tsl50.encode(tsl50.Tsl5Packet(0, (tsl50.Display(65536, text="X"),)))
+    with pytest.raises(ProtocolError, match=r"screen must be 0\.\.65535, got 65536"):
+        tsl50.encode(tsl50.Tsl5Packet(65536, ()))
+
+
 displays = st.builds(
     tsl50.Display,
     st.integers(0, 0xFFFF),

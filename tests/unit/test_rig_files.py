@@ -119,6 +119,44 @@ def test_optional_sections_validate_camera_names(tmp_path: Path) -> None:
     assert load_rig(write(tmp_path, ok)).model.tally is not None
 
 
+def tally_rig(tmp_path: Path, protocol: str, address: int) -> Path:
+    return write(
+        tmp_path, SIM + f"tally:\n  protocol: {protocol}\n  port: loop://\n  addresses:\n    r1c1: {address}\n"
+    )
+
+
+@pytest.mark.parametrize(
+    ("protocol", "address"),
+    [("tsl-umd-3.1", 0), ("tsl-umd-3.1", 126), ("tsl-umd-5.0", 127), ("tsl-umd-5.0", 1000), ("tsl-umd-5.0", 65534)],
+)
+def test_tally_addresses_up_to_what_the_protocol_carries_load(tmp_path: Path, protocol: str, address: int) -> None:
+    tally = load_rig(tally_rig(tmp_path, protocol, address)).model.tally
+    assert tally is not None and tally.addresses == {"r1c1": address}
+
+
+@pytest.mark.parametrize(
+    ("protocol", "address", "message"),
+    [
+        ("tsl-umd-3.1", 127, "tally.addresses.r1c1 must be 0..126 for tsl-umd-3.1, got 127"),
+        ("tsl-umd-3.1", 1000, "tally.addresses.r1c1 must be 0..126 for tsl-umd-3.1, got 1000"),
+        (
+            "tsl-umd-5.0",
+            65535,
+            "tally.addresses.r1c1 is 65535, TSL UMD 5.0's broadcast index (every display of "
+            "the screen): give r1c1 its own display, 0..65534",
+        ),
+        ("tsl-umd-5.0", 65536, "tally.addresses.r1c1 must be 0..65534 for tsl-umd-5.0, got 65536"),
+        ("tsl-umd-5.0", -1, "tally.addresses.r1c1 must be >= 0, got -1"),
+    ],
+)
+def test_tally_addresses_past_the_protocol_are_named(tmp_path: Path, protocol: str, address: int, message: str) -> None:
+    path = tally_rig(tmp_path, protocol, address)
+    line = path.read_text().splitlines().index(f"    r1c1: {address}") + 1
+    with pytest.raises(RigFileError) as err:
+        load_rig(path)
+    assert str(err.value) == f"{path}:{line}: {message}"
+
+
 @pytest.mark.parametrize("text", ["12e-2", "1.2e5", "-3E2", ".5e1", "1e+2", "7e0"])
 def test_the_spelling_the_yaml_hint_suggests_is_read_as_that_number(text: str) -> None:
     import re
