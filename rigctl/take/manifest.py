@@ -49,6 +49,7 @@ TAKE_SPEC = 1
 MANIFEST = "take.yaml"
 STATUSES = ("recording", "complete", "ended", "interrupted")
 VERDICTS = ("circled", "no-good")
+ROTATION_TOLERANCE = 1e-6  # rectification.R orthonormal, det +1, to this (float32 from other tools errs ~1e-7)
 Verdict = Literal["circled", "no-good"]
 
 
@@ -174,9 +175,11 @@ class Rectification(_Section):
 
     @field_validator("R", "K")
     @classmethod
-    def _matrix(cls, value: list[list[float]]) -> list[list[float]]:
+    def _matrix(cls, value: list[list[float]], info: ValidationInfo) -> list[list[float]]:
         if len(value) != 3 or any(len(row) != 3 or not all(math.isfinite(v) for v in row) for row in value):
             raise ValueError(f"expected 3x3 finite numbers, got {value!r:.60}")
+        if info.field_name == "R":
+            _rotation(value)
         return value
 
     @model_validator(mode="after")
@@ -195,6 +198,21 @@ class Rectification(_Section):
         if last != [0, 0, 1]:
             raise ValueError(f"camera matrix K must end in the row [0, 0, 1], got {last!r:.40}")
         return self
+
+
+def _rotation(R: list[list[float]]) -> None:
+    """``R`` is a rotation: orthonormal rows and determinant +1, to ``ROTATION_TOLERANCE`` (its entries are at
+    most 1, so absolute is relative): a scaled, sheared or mirrored R was taken, and depth and the USD cameras
+    built on it came out skewed, exit 0."""
+    gram = [[sum(a * b for a, b in zip(R[i], R[j], strict=True)) for j in range(3)] for i in range(3)]
+    off = max(abs(gram[i][j] - (i == j)) for i in range(3) for j in range(3))
+    (a, b, c), (d, e, f), (g, h, k) = R
+    det = a * (e * k - f * h) - b * (d * k - f * g) + c * (d * h - e * g)
+    if off > ROTATION_TOLERANCE or abs(det - 1) > ROTATION_TOLERANCE:
+        raise ValueError(
+            f"is not a rotation: R R^T differs from the identity by {off:.3g} and det(R) is {det:.6g} "
+            f"(a rotation: 0 and 1, to {ROTATION_TOLERANCE:g})"
+        )
 
 
 class DamagedFrame(_Section):

@@ -4,14 +4,17 @@ folder. Each is one line naming the file and the field, and a documented exit co
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import cv2
+import numpy as np
 import pytest
 import yaml
 from conftest import SHARED
 from hostile_support import SIM_RIG, one_line, write_yaml  # type: ignore[import-not-found]
-from reliab_support import rigctl  # type: ignore[import-not-found]
+from reliab_support import copy_take, edit_manifest, record_tiny, rigctl  # type: ignore[import-not-found]
 
 from rigctl.errors import EXIT_BAD_INPUT, EXIT_USAGE
 
@@ -54,3 +57,52 @@ def test_a_chessboard_file_with_corners_out_of_bounds_is_one_line(
 def test_a_chessboard_option_out_of_bounds_is_one_line(tmp_path: Path, pattern: str) -> None:
     res = rigctl("calibrate", str(STEREO), "--chessboard", pattern, "--out", str(tmp_path / "c.yaml"), timeout=300)
     one_line(res, EXIT_USAGE, f"--chessboard {pattern}: must be 3 to 100 inner corners a side")
+
+
+# ---- rectification.R: a rotation -----------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def ideal(module_tmp: Callable[[str], Path]) -> Path:
+    """An ideal tiny take: rectified as recorded, its manifest holding rectification.R."""
+    return record_tiny(module_tmp("claims-ideal"), "ideal", 1, "ideal=true", "motion=false")
+
+
+def _rotated(R: list[list[float]], M: list[list[float]]) -> list[list[float]]:
+    return (np.asarray(M) @ np.asarray(R)).tolist()  # type: ignore[no-any-return]
+
+
+NOT_ROTATIONS = {
+    "scaled": [[2, 0, 0], [0, 2, 0], [0, 0, 2]],
+    "mirrored": [[1, 0, 0], [0, 1, 0], [0, 0, -1]],
+    "sheared": [[1, 0.01, 0], [0, 1, 0], [0, 0, 1]],
+    "singular": [[1, 0, 0], [1, 0, 0], [0, 0, 1]],
+}
+
+
+@pytest.mark.parametrize("verb", ["info", "depth"])
+@pytest.mark.parametrize("how", NOT_ROTATIONS)
+def test_a_rectification_that_is_no_rotation_is_one_line(ideal: Path, tmp_path: Path, how: str, verb: str) -> None:
+    """rectification.R was checked to be 3x3 and finite only: scaled, mirrored or sheared, it was read, exit 0."""
+    take = copy_take(ideal, tmp_path / "t")
+    edit_manifest(
+        take, lambda m: m["rectification"].__setitem__("R", _rotated(m["rectification"]["R"], NOT_ROTATIONS[how]))
+    )
+    cmd = (
+        ["take", "info", str(take)]
+        if verb == "info"
+        else ["depth", str(take), "--out", str(tmp_path / "d"), "--preset", "fast"]
+    )
+    one_line(rigctl(*cmd), EXIT_BAD_INPUT, f"{take / 'take.yaml'}:", "rectification.R", "is not a rotation")
+    assert not (tmp_path / "d").exists() or not any((tmp_path / "d").rglob("*.pfm"))
+
+
+def test_a_rotation_written_in_float32_by_another_tool_is_read(ideal: Path, tmp_path: Path) -> None:
+    take = copy_take(ideal, tmp_path / "t")
+    tilt = cv2.Rodrigues(np.array([0.01, -0.02, 0.005]))[0]  # not the identity, so float32 rounding shows
+    edit_manifest(
+        take,
+        lambda m: m["rectification"].__setitem__(
+            "R", [[float(np.float32(v)) for v in row] for row in _rotated(m["rectification"]["R"], tilt.tolist())]
+        ),
+    )
+    res = rigctl("take", "info", str(take))
+    assert res.returncode == 0, res.stderr
