@@ -106,3 +106,86 @@ def test_a_rotation_written_in_float32_by_another_tool_is_read(ideal: Path, tmp_
     )
     res = rigctl("take", "info", str(take))
     assert res.returncode == 0, res.stderr
+
+
+# ---- grid folders: one connected grid ------------------------------------------------------------------------------
+def grid_folder(folder: Path, cameras: list[tuple[int, int]]) -> Path:
+    """A grid folder of 64x48 pictures at ``cameras`` (row, col), spacing 1, focal 100 px."""
+    folder.mkdir()
+    rng = np.random.default_rng(1)
+    picture = rng.integers(0, 255, (48, 64, 3), dtype=np.uint8)
+    for row, col in cameras:
+        cv2.imwrite(str(folder / f"r{row}c{col}.png"), np.roll(picture, -3 * col, axis=1))
+    (folder / "grid.yaml").write_text("spacing_x: 1\nspacing_y: 1\nfocal_px: 100\n")
+    return folder
+
+
+def test_two_grids_far_apart_in_one_folder_are_refused_naming_both(tmp_path: Path) -> None:
+    """r0c0..r2c2 and r100c100..r102c102 in one folder: each camera shares views with its own 3x3, so no camera
+    was alone, and the two grids were estimated as one (one range, one report), exit 0."""
+    near = [(r, c) for r in range(3) for c in range(3)]
+    grid = grid_folder(tmp_path / "g", [*near, *((r + 100, c + 100) for r, c in near)])
+    res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=120)
+    one_line(
+        res, EXIT_BAD_INPUT, f"{grid}: the pictures form 2 grids that share no view",
+        "r0c0..r2c2 (9 cameras)", "r100c100..r102c102 (9 cameras)",
+    )  # fmt: skip
+    assert not (tmp_path / "d").exists() or not any((tmp_path / "d").rglob("*.pfm"))
+
+
+def test_a_chain_of_cameras_that_share_views_pairwise_is_one_grid(tmp_path: Path) -> None:
+    """r0c0 and r0c120 share no view (120 spacings on 64 px pictures), but each shares one with the camera
+    40 columns beside it: one grid, read."""
+    grid = grid_folder(tmp_path / "g", [(0, 0), (0, 40), (0, 80), (0, 120)])
+    res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert len(list((tmp_path / "d").glob("*.pfm"))) == 4
+
+
+def _groups_by_pairs(cams: list[tuple[int, int]], size: tuple[int, int], ratio: float) -> int:
+    """How many groups the cameras form, every pair compared (the definition; quadratic)."""
+    group = list(range(len(cams)))
+
+    def find(k: int) -> int:
+        while group[k] != k:
+            k = group[k]
+        return k
+
+    w, h = size
+    for a, (ra, ca) in enumerate(cams):
+        for b, (rb, cb) in enumerate(cams[:a]):
+            if abs(ca - cb) / w < 1 and abs(ra - rb) * ratio / h < 1:
+                group[find(a)] = find(b)
+    return len({find(k) for k in range(len(cams))})
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_grid_groups_match_every_pair_compared(seed: int) -> None:
+    """The cell-by-cell grouping (linear in the cameras) agrees with comparing every pair."""
+    from rigctl.depth.grid_folder import _refuse_apart
+    from rigctl.errors import RigFileError
+
+    rng = np.random.default_rng(seed)
+    size = (int(rng.integers(8, 40)), int(rng.integers(8, 40)))
+    ratio = float(rng.choice([0.5, 1.0, 1.7]))
+    spots = {(int(r), int(c)) for r, c in rng.integers(0, 120, (int(rng.integers(2, 30)), 2))}
+    cams = sorted(spots)
+    files = [Path(f"/g/r{r}c{c}.png") for r, c in cams]
+    groups = _groups_by_pairs(cams, size, ratio)
+    if groups == 1:
+        _refuse_apart(files, size, ratio, None)
+    else:
+        with pytest.raises(RigFileError, match=r"shares no view|grids that share no view"):
+            _refuse_apart(files, size, ratio, None)
+
+
+def test_grid_grouping_is_linear_in_the_cameras() -> None:
+    """40,000 cameras (200x200 positions, each picture 8x8: every camera in a cell of its own) in about a second."""
+    import time
+
+    from rigctl.depth.grid_folder import _refuse_apart
+
+    files = [Path(f"/g/r{r}c{c}.png") for r in range(200) for c in range(200)]
+    start = time.perf_counter()
+    _refuse_apart(files, (8, 8), 1.0, None)
+    assert time.perf_counter() - start < 10
