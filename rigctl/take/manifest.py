@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 from pathlib import Path
 from typing import Annotated, Literal, cast
 
@@ -49,6 +50,8 @@ TAKE_SPEC = 1
 MANIFEST = "take.yaml"
 STATUSES = ("recording", "complete", "ended", "interrupted")
 VERDICTS = ("circled", "no-good")
+SequenceNumber = Annotated[StrictInt, Field(ge=0, lt=1 << 64)]  # a frame's, as its index record holds it
+SIDECAR_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,99}")  # no path: a file beside take.yaml
 ROTATION_TOLERANCE = 1e-6  # rectification.R orthonormal, det +1, to this (float32 from other tools errs ~1e-7)
 Verdict = Literal["circled", "no-good"]
 
@@ -63,14 +66,32 @@ class CameraEntry(_Section):
     essence: str
     index: str
     frames: int = 0
-    first_sequence: int | None = None
-    last_sequence: int | None = None
+    first_sequence: SequenceNumber | None = None
+    last_sequence: SequenceNumber | None = None
     source_drops: list[int] = []
     error_frames: list[int] = []
     writer_drops: list[int] = []
     not_written: list[int] = []
     ended_early: str | None = None  # why the camera's stream ended before the take did
     format_changed_at: list[int] | None = None  # sequences flagged as a format change
+
+    @model_validator(mode="after")
+    def _sequence_span(self) -> CameraEntry:
+        """The first and last frame's sequence numbers: both or neither, in order, with a number for every frame
+        between them (a reader holds them to the index too: ``rigctl.take.proof.sequence_problems``)."""
+        first, last = self.first_sequence, self.last_sequence
+        if first is None or last is None:
+            if first is not None or last is not None:
+                raise ValueError("first_sequence and last_sequence go together: give both or neither")
+            return self
+        if first > last:
+            raise ValueError(f"first_sequence {first} is after last_sequence {last}")
+        if last - first + 1 < self.frames:
+            raise ValueError(
+                f"first_sequence {first} to last_sequence {last} number {last - first + 1} frames, fewer than the "
+                f"{self.frames} of frames"
+            )
+        return self
 
 
 class FormatEntry(_Section):
@@ -111,11 +132,32 @@ class IncompleteSet(_Section):
 
 
 class FrameSetSummary(_Section):
-    count: int
-    complete: int
+    """The frame sets the recorder assembled; ``file`` (``sets.csv`` beside the manifest) has a row for each
+    (``take check`` holds it to this: ``rigctl.take.check.sets_problem``)."""
+
+    count: Annotated[StrictInt, Field(ge=0)]
+    complete: Annotated[StrictInt, Field(ge=0)]
     incomplete: list[IncompleteSet] = []
     skew: Skew = Skew()
     file: str = "sets.csv"
+
+    @field_validator("file")
+    @classmethod
+    def _beside_the_manifest(cls, value: str) -> str:
+        if not SIDECAR_NAME.fullmatch(value):
+            raise ValueError(f"{value!r:.60} is not a file name beside take.yaml (letters, digits, '.', '_', '-')")
+        return value
+
+    @model_validator(mode="after")
+    def _counts(self) -> FrameSetSummary:
+        numbers = [s.number for s in self.incomplete]
+        if self.complete + len(numbers) != self.count:
+            raise ValueError(
+                f"count {self.count} is not complete {self.complete} plus the {len(numbers)} incomplete sets listed"
+            )
+        if len(set(numbers)) != len(numbers) or not all(0 <= n < self.count for n in numbers):
+            raise ValueError(f"incomplete: set numbers must be distinct, 0 to count - 1 ({self.count - 1})")
+        return self
 
 
 class End(_Section):

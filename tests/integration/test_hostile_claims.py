@@ -4,6 +4,7 @@ folder. Each is one line naming the file and the field, and a documented exit co
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -189,3 +190,127 @@ def test_grid_grouping_is_linear_in_the_cameras() -> None:
     start = time.perf_counter()
     _refuse_apart(files, (8, 8), 1.0, None)
     assert time.perf_counter() - start < 10
+
+
+# ---- a take's sequence numbers and sets.csv ---------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def dropping(module_tmp: Callable[[str], Path]) -> Path:
+    """A tiny take in which r1c1 drops two frames: sets.csv has incomplete rows and blank cells."""
+    return record_tiny(module_tmp("claims-drops"), "t", 6, "motion=false", "drops.r1c1=[5,7]")
+
+
+def _camera(name: str, **values: object) -> Callable[[dict[str, Any]], None]:
+    return lambda m: m["cameras"][name].update(values)
+
+
+@pytest.mark.parametrize(
+    ("edit", "said"),
+    [
+        (_camera("r0c0", first_sequence="4"), "cameras.r0c0.first_sequence"),
+        (_camera("r0c0", first_sequence=4.0), "cameras.r0c0.first_sequence"),
+        (_camera("r0c0", first_sequence=-1), "cameras.r0c0.first_sequence"),
+        (_camera("r0c0", first_sequence=1 << 64), "cameras.r0c0.first_sequence"),
+        (_camera("r0c0", first_sequence=9, last_sequence=4), "first_sequence 9 is after last_sequence 4"),
+        (_camera("r0c0", first_sequence=None), "give both or neither"),
+        (_camera("r0c0", first_sequence=4, last_sequence=6), "fewer than the 6 of frames"),
+        # within the rules alone, but not the index's: its records run from 4 to 9
+        (_camera("r0c0", first_sequence=0, last_sequence=100), "disagree with r0c0.index"),
+        (_camera("r0c0", first_sequence=5, last_sequence=10), "disagree with r0c0.index"),
+        (lambda m: m["frame_sets"].update(count=7), "count 7 is not complete 4 plus the 2 incomplete"),
+        (lambda m: m["frame_sets"].update(count="6"), "frame_sets.count"),
+        (lambda m: m["frame_sets"]["incomplete"][1].update(number=1), "set numbers must be distinct"),
+        (lambda m: m["frame_sets"].update(file="../../../etc/passwd"), "is not a file name beside take.yaml"),
+    ],
+    ids=lambda v: v if isinstance(v, str) else "",
+)
+@pytest.mark.parametrize("verb", ["info", "export"])
+def test_sequence_numbers_and_frame_set_counts_that_cannot_be_are_one_line(
+    dropping: Path, tmp_path: Path, edit: Callable[[dict[str, Any]], None], said: str, verb: str
+) -> None:
+    """first_sequence and last_sequence were taken as any number (or text), each alone, in any order, whatever the
+    index held; frame_sets' counts and file as written. Every reader refuses them, naming the field."""
+    take = copy_take(dropping, tmp_path / "t")
+    edit_manifest(take, edit)
+    extra = ["--out", str(tmp_path / "out")] if verb == "export" else []
+    one_line(rigctl("take", verb, str(take), *extra), EXIT_BAD_INPUT, f"{take / 'take.yaml'}:", said)
+    res = rigctl("take", "check", str(take))
+    assert res.returncode == 1 and said in res.stderr and "Traceback" not in res.stderr, res.stderr
+
+
+def _rows(take: Path, edit: Callable[[list[list[str]]], None]) -> None:
+    path = take / "sets.csv"
+    rows = [line.split(",") for line in path.read_text().splitlines()]
+    edit(rows)
+    path.write_text("".join(",".join(r) + "\n" for r in rows))
+
+
+def _cell(row: int, column: int, value: str) -> Callable[[list[list[str]]], None]:
+    return lambda rows: rows[row].__setitem__(column, value)
+
+
+def _unlisted(rows: list[list[str]]) -> None:
+    """Set 0 without r0c0's frame, marked incomplete: an incomplete set take.yaml does not list."""
+    rows[1][3], rows[1][5] = "0", ""
+
+
+SETS_EDITS = {
+    "a row twice": (lambda rows: rows.insert(2, rows[1]), "line 3: set '0' is not 1"),
+    "a row left out": (lambda rows: rows.pop(), "5 frame sets, take.yaml frame_sets.count claims 6"),
+    "a set numbered 1.0": (_cell(2, 0, "1.0"), "line 3: set '1.0' is not 1"),
+    "a sequence of no frame": (_cell(1, 5, "99"), "line 2: r0c0 '99' is not a sequence number of r0c0.index"),
+    "a sequence in text": (_cell(1, 5, "four"), "line 2: r0c0 'four' is not a sequence number"),
+    "a frame in two sets": (_cell(2, 5, "4"), "line 3: r0c0 4: sequence 4 after 4"),
+    "complete that is not": (_cell(2, 3, "1"), "line 3: complete '1', but 1 camera(s) have no frame"),
+    "an incomplete set not listed": (_unlisted, "line 2: cameras missing ['r0c0'], take.yaml frame_sets.incomplete"),
+    "a camera left blank": (_cell(1, 9, ""), "line 2: complete '1', but 1 camera(s)"),
+    "cameras swapped in the header": (_cell(0, 5, "r0c1"), "line 1: header"),
+    "a row cut short": (lambda rows: rows[1].pop(), "line 2: 13 fields, the header has 14"),
+    "a timecode that is none": (_cell(1, 1, "25:99:00:00"), "line 2: timecode '25:99:00:00'"),
+    "a time that is none": (_cell(1, 2, "1e9"), "line 2: time_ns '1e9' is not a whole number"),
+    "a spread of NaN": (_cell(1, 4, "nan"), "line 2: spread_us 'nan'"),
+    "an unclosed quote": (_cell(1, 4, '"1'), "line"),
+}
+
+
+@pytest.mark.parametrize("how", SETS_EDITS)
+def test_take_check_holds_sets_csv_to_the_take(dropping: Path, tmp_path: Path, how: str) -> None:
+    """sets.csv (frame sets as editorial reads them) was never read back: rows twice or missing, sequence numbers
+    of no frame, a frame in two sets, complete flags that lie; take check said ok, exit 0. Readers assemble frame
+    sets from the indexes and do not read it, so take info still reads the take."""
+    take = copy_take(dropping, tmp_path / "t")
+    edit, said = SETS_EDITS[how]
+    _rows(take, edit)
+    res = rigctl("take", "check", str(take))
+    assert res.returncode == 1 and "Traceback" not in res.stderr, res.stderr
+    errors = [ln for ln in res.stderr.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1 and f"{take / 'sets.csv'}:" in errors[0] and said in errors[0], res.stderr
+    assert rigctl("take", "info", str(take)).returncode == 0
+
+
+@pytest.mark.parametrize("kind", ["a FIFO", "a device", "too large"])
+def test_a_sets_csv_that_is_no_file_or_too_large_is_one_problem_without_waiting(
+    dropping: Path, tmp_path: Path, kind: str
+) -> None:
+    take = copy_take(dropping, tmp_path / "t")
+    sets = take / "sets.csv"
+    sets.unlink()
+    if kind == "a FIFO":
+        os.mkfifo(sets)
+    elif kind == "a device":
+        sets.symlink_to("/dev/zero")
+    else:
+        sets.write_text("x" * 10_000_000)
+    res = rigctl("take", "check", str(take), timeout=60)
+    assert res.returncode == 1 and "Traceback" not in res.stderr, res.stderr
+    assert f"error: {sets}: frame-set file" in res.stderr, res.stderr
+
+
+def test_takes_as_recorded_and_rectified_pass_take_check(dropping: Path, tmp_path: Path) -> None:
+    """The recorder's own sets.csv and sequence numbers hold; a rectified take (no sets.csv) too."""
+    res = rigctl("take", "check", str(dropping))
+    assert res.returncode == 0, res.stderr
+    truth = dropping / "truth" / "calibration.yaml"
+    res = rigctl("rectify", str(dropping), "--calibration", str(truth), "--out", str(tmp_path / "r"))
+    assert res.returncode == 0, res.stderr
+    res = rigctl("take", "check", str(tmp_path / "r"))
+    assert res.returncode == 0, res.stderr
