@@ -329,6 +329,9 @@ def _check_whole_rig(model: RigModel, source: str, lines: dict[Any, int]) -> Non
         m = CAMERA_NAME.match(cam.name)
         assert m is not None  # checked by the field validator
         row, col = int(m.group(1)), int(m.group(2))
+        if cam.name != f"r{row}c{col}":  # r01c0 beside r1c0 was two cameras at one place, as in a grid folder
+            how = "a leading zero" if cam.name.isascii() else "digits other than 0-9"
+            fail(("cameras", i, "name"), f"cameras[{i}].name {cam.name} is written with {how}: name it r{row}c{col}")
         if row >= g.rows or col >= g.columns:
             fail(("cameras", i, "name"), f"cameras[{i}].name {cam.name} lies outside the {g.rows}x{g.columns} grid")
         if cam.name in seen:

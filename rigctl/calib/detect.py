@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.board import BoardSpec
-from rigctl.calib import CHESSBOARD_SQUARE
+from rigctl.calib import CHESSBOARD_CORNERS, CHESSBOARD_SQUARE
 from rigctl.calib.inputs import CalibrationViews
 from rigctl.errors import CalibrationError, ParameterError
 from rigctl.yamlfile import load_yaml
@@ -60,6 +60,13 @@ def load_target(path: Path) -> Target:
     with ``columns``, ``rows`` (inner corners) and ``square``."""
     data = load_yaml(path)
     if isinstance(data, dict) and data.get("type") == "chessboard":
+        fewest, most = CHESSBOARD_CORNERS
+        for key in ("columns", "rows"):
+            v = data.get(key)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, int) or not fewest <= v <= most):
+                raise CalibrationError(
+                    f"{path}: {key}: must be a whole number of inner corners {fewest} to {most}, got {v!r:.60}"
+                )
         try:
             board = Chessboard(int(data["columns"]), int(data["rows"]), float(data.get("square", 1.0)))
         except (KeyError, TypeError, ValueError, OverflowError):

@@ -9,7 +9,7 @@ import stat
 import sys
 from pathlib import Path
 
-from rigctl.calib import CHESSBOARD_SQUARE
+from rigctl.calib import CHESSBOARD_CORNERS, CHESSBOARD_SQUARE
 from rigctl.cli import args
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
@@ -84,8 +84,13 @@ def run(ns: argparse.Namespace) -> int:
             cols, rows = (int(v) for v in ns.chessboard.lower().split("x"))
         except ValueError:
             raise ParameterError(f"--chessboard {ns.chessboard!r}: expected inner corners such as 9x6") from None
-        if cols < 3 or rows < 3 or ns.subpix_window < 0:
-            raise ParameterError("--chessboard needs at least 3x3 inner corners, --subpix-window >= 0")
+        if not all(CHESSBOARD_CORNERS[0] <= v <= CHESSBOARD_CORNERS[1] for v in (cols, rows)):
+            raise ParameterError(
+                f"--chessboard {ns.chessboard}: must be {CHESSBOARD_CORNERS[0]} to {CHESSBOARD_CORNERS[1]} inner "
+                "corners a side (such as 9x6)"
+            )
+        if ns.subpix_window < 0:
+            raise ParameterError(f"--subpix-window {ns.subpix_window}: must be >= 0 (0: auto)")
         lo, hi = CHESSBOARD_SQUARE
         if not lo <= ns.square <= hi:  # NaN fails too
             raise ParameterError(

@@ -79,7 +79,7 @@ def load_grid_folder(folder: Path) -> Grid:
     if spec.get("spacing_y") == 0 and len(rows) > 1:
         raise RigFileError(f"{path}: spacing_y: 0 puts the {len(rows)} rows of cameras at one place")
     ratio = float(spec.get("spacing_y") or spec["spacing_x"]) / float(spec["spacing_x"])
-    _refuse_isolated(files, sizes[files[0]], ratio, rng)
+    _refuse_apart(files, sizes[files[0]], ratio, rng)
     images = {p.stem: read_png(p) for p in files}
     first = next(iter(images))
     for n, img in images.items():
@@ -124,37 +124,73 @@ def _grid_files(folder: Path) -> list[Path]:
     return files
 
 
-def _refuse_isolated(files: list[Path], size: tuple[int, int], ratio: float, rng: tuple[float, float] | None) -> None:
-    """Refuse a camera that shares no view with any other: between cameras (dx, dy) horizontal spacings apart
-    a point of disparity d moves (d dx, d dy) px, so past ``w / |dx|`` (or ``h / |dy|``) it lies outside the
-    other's picture. A camera for which that happens at 1 px (or at the planned range's largest disparity,
-    when smaller) for every other camera was matched against nothing its depth could come from: a misnamed
-    ``r9999c9999.png`` beside a 3x3 set was left out of every other camera's views and estimated alone from
-    disparities under 0.01 px, exit 0. ``ratio`` is spacing_y / spacing_x."""
+def _refuse_apart(files: list[Path], size: tuple[int, int], ratio: float, rng: tuple[float, float] | None) -> None:
+    """Refuse cameras that do not form one grid: between cameras (dx, dy) horizontal spacings apart a point of
+    disparity d moves (d dx, d dy) px, so past ``w / |dx|`` (or ``h / |dy|``) it lies outside the other's picture.
+    Two cameras share a view when that does not happen at 1 px (or at the planned range's largest disparity,
+    when smaller), and every camera must reach every other through cameras that share views. A camera alone
+    was matched against nothing its depth could come from (a misnamed ``r9999c9999.png`` beside a 3x3 set was
+    estimated from disparities under 0.01 px, exit 0): it is named with its nearest camera. Two grids far apart
+    in one folder (r0c0..r2c2 and r100c100..r102c102) were each estimated as if the other were not there, with
+    one range and one report, exit 0: the groups are named. ``ratio`` is spacing_y / spacing_x."""
     if len(files) < 2:
         return
     w, h = size
     probe = min(1.0, max(abs(rng[0]), abs(rng[1]))) if rng else 1.0
-    # positions scaled so that two cameras share a view when both coordinates differ by under 1: a camera alone in
-    # its unit cell is checked against the 8 cells around it only (linear in the cameras, not quadratic)
-    pos = {}
-    for p in files:
-        m = SAFE_CAMERA.fullmatch(p.stem)
-        assert m is not None
-        pos[p] = (int(m[2]) * probe / w, int(m[1]) * ratio * probe / h)
+    # positions scaled so that two cameras share a view when both coordinates differ by under 1: the cameras of
+    # one unit cell all share views, and cells are joined through the 8 around them (linear in the cameras)
+    pos = {p: (col * probe / w, row * ratio * probe / h) for p in files for row, col in [_position(p)]}
     cells: dict[tuple[int, int], list[Path]] = {}
     for p, (x, y) in pos.items():
         cells.setdefault((math.floor(x), math.floor(y)), []).append(p)
-    for (cx, cy), here in cells.items():
-        if len(here) > 1:
-            continue
-        p = here[0]
-        x, y = pos[p]
-        around = [
-            q for i in (-1, 0, 1) for j in (-1, 0, 1) if (i, j) != (0, 0) for q in cells.get((cx + i, cy + j), ())
-        ]
-        if not any(abs(pos[q][0] - x) < 1 and abs(pos[q][1] - y) < 1 for q in around):
-            raise _isolated(p, pos, (w / probe, h / probe), probe, size)
+    at = {c: np.array([pos[p] for p in here]) for c, here in cells.items()}
+    root = {c: c for c in cells}
+
+    def find(c: tuple[int, int]) -> tuple[int, int]:
+        while root[c] != c:
+            root[c] = root[root[c]]
+            c = root[c]
+        return c
+
+    for (cx, cy), a in at.items():
+        for i, j in ((1, -1), (1, 0), (1, 1), (0, 1)):
+            b = at.get((cx + i, cy + j))
+            if b is not None and _share_a_view(a, b, i, j):
+                root[find((cx + i, cy + j))] = find((cx, cy))
+    groups: dict[tuple[int, int], list[Path]] = {}
+    for c, here in cells.items():
+        groups.setdefault(find(c), []).extend(here)
+    if len(groups) == 1:
+        return
+    alone = [g[0] for g in groups.values() if len(g) == 1]
+    if alone:
+        raise _isolated(min(alone), pos, (w / probe, h / probe), probe, size)
+    named = sorted((sorted(g, key=_position) for g in groups.values()), key=lambda g: _position(g[0]))
+    said = " and ".join(f"{g[0].stem}..{g[-1].stem} ({len(g)} cameras)" for g in named[:2])
+    more = f" (and {len(named) - 2} more)" if len(named) > 2 else ""
+    raise RigFileError(
+        f"{files[0].parent}: the pictures form {len(named)} grids that share no view: {said}{more}: a point of "
+        f"{probe:g} px disparity moves out of the {w}x{h} picture between them (two grids in one folder?)"
+    )
+
+
+def _share_a_view(a: NDArray[np.float64], b: NDArray[np.float64], i: int, j: int) -> bool:
+    """Whether a camera of cell ``a`` and one of cell ``b`` (``i``, ``j`` cells from it) differ by under 1 in both
+    coordinates: along an axis where the cells differ by ``s`` = +-1, s a > s b - 1; along one where they do not,
+    always. A dominance query, in n log n: some point of ``a`` above some point of ``b`` in both."""
+    au, bu = (i * a[:, 0], i * b[:, 0] - 1) if i else (np.ones(len(a)), np.zeros(len(b)))
+    av, bv = (j * a[:, 1], j * b[:, 1] - 1) if j else (np.ones(len(a)), np.zeros(len(b)))
+    order = np.argsort(au)
+    u, top = au[order], np.maximum.accumulate(av[order][::-1])[::-1]  # the largest v among a's from there on
+    k = np.searchsorted(u, bu, side="right")  # the first a with u above b's
+    inside = k < len(u)
+    return bool(np.any(top[k[inside]] > bv[inside]))
+
+
+def _position(p: Path) -> tuple[int, int]:
+    m = SAFE_CAMERA.fullmatch(p.stem)
+    assert m is not None
+    return int(m[1]), int(m[2])
 
 
 def _isolated(

@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 from pathlib import Path
 from typing import Annotated, Literal, cast
 
@@ -49,6 +50,9 @@ TAKE_SPEC = 1
 MANIFEST = "take.yaml"
 STATUSES = ("recording", "complete", "ended", "interrupted")
 VERDICTS = ("circled", "no-good")
+SequenceNumber = Annotated[StrictInt, Field(ge=0, lt=1 << 64)]  # a frame's, as its index record holds it
+SIDECAR_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,99}")  # no path: a file beside take.yaml
+ROTATION_TOLERANCE = 1e-6  # rectification.R orthonormal, det +1, to this (float32 from other tools errs ~1e-7)
 Verdict = Literal["circled", "no-good"]
 
 
@@ -62,14 +66,32 @@ class CameraEntry(_Section):
     essence: str
     index: str
     frames: int = 0
-    first_sequence: int | None = None
-    last_sequence: int | None = None
+    first_sequence: SequenceNumber | None = None
+    last_sequence: SequenceNumber | None = None
     source_drops: list[int] = []
     error_frames: list[int] = []
     writer_drops: list[int] = []
     not_written: list[int] = []
     ended_early: str | None = None  # why the camera's stream ended before the take did
     format_changed_at: list[int] | None = None  # sequences flagged as a format change
+
+    @model_validator(mode="after")
+    def _sequence_span(self) -> CameraEntry:
+        """The first and last frame's sequence numbers: both or neither, in order, with a number for every frame
+        between them (a reader holds them to the index too: ``rigctl.take.proof.sequence_problems``)."""
+        first, last = self.first_sequence, self.last_sequence
+        if first is None or last is None:
+            if first is not None or last is not None:
+                raise ValueError("first_sequence and last_sequence go together: give both or neither")
+            return self
+        if first > last:
+            raise ValueError(f"first_sequence {first} is after last_sequence {last}")
+        if last - first + 1 < self.frames:
+            raise ValueError(
+                f"first_sequence {first} to last_sequence {last} number {last - first + 1} frames, fewer than the "
+                f"{self.frames} of frames"
+            )
+        return self
 
 
 class FormatEntry(_Section):
@@ -110,11 +132,32 @@ class IncompleteSet(_Section):
 
 
 class FrameSetSummary(_Section):
-    count: int
-    complete: int
+    """The frame sets the recorder assembled; ``file`` (``sets.csv`` beside the manifest) has a row for each
+    (``take check`` holds it to this: ``rigctl.take.check.sets_problem``)."""
+
+    count: Annotated[StrictInt, Field(ge=0)]
+    complete: Annotated[StrictInt, Field(ge=0)]
     incomplete: list[IncompleteSet] = []
     skew: Skew = Skew()
     file: str = "sets.csv"
+
+    @field_validator("file")
+    @classmethod
+    def _beside_the_manifest(cls, value: str) -> str:
+        if not SIDECAR_NAME.fullmatch(value):
+            raise ValueError(f"{value!r:.60} is not a file name beside take.yaml (letters, digits, '.', '_', '-')")
+        return value
+
+    @model_validator(mode="after")
+    def _counts(self) -> FrameSetSummary:
+        numbers = [s.number for s in self.incomplete]
+        if self.complete + len(numbers) != self.count:
+            raise ValueError(
+                f"count {self.count} is not complete {self.complete} plus the {len(numbers)} incomplete sets listed"
+            )
+        if len(set(numbers)) != len(numbers) or not all(0 <= n < self.count for n in numbers):
+            raise ValueError(f"incomplete: set numbers must be distinct, 0 to count - 1 ({self.count - 1})")
+        return self
 
 
 class End(_Section):
@@ -174,9 +217,11 @@ class Rectification(_Section):
 
     @field_validator("R", "K")
     @classmethod
-    def _matrix(cls, value: list[list[float]]) -> list[list[float]]:
+    def _matrix(cls, value: list[list[float]], info: ValidationInfo) -> list[list[float]]:
         if len(value) != 3 or any(len(row) != 3 or not all(math.isfinite(v) for v in row) for row in value):
             raise ValueError(f"expected 3x3 finite numbers, got {value!r:.60}")
+        if info.field_name == "R":
+            _rotation(value)
         return value
 
     @model_validator(mode="after")
@@ -195,6 +240,21 @@ class Rectification(_Section):
         if last != [0, 0, 1]:
             raise ValueError(f"camera matrix K must end in the row [0, 0, 1], got {last!r:.40}")
         return self
+
+
+def _rotation(R: list[list[float]]) -> None:
+    """``R`` is a rotation: orthonormal rows and determinant +1, to ``ROTATION_TOLERANCE`` (its entries are at
+    most 1, so absolute is relative): a scaled, sheared or mirrored R was taken, and depth and the USD cameras
+    built on it came out skewed, exit 0."""
+    gram = [[sum(a * b for a, b in zip(R[i], R[j], strict=True)) for j in range(3)] for i in range(3)]
+    off = max(abs(gram[i][j] - (i == j)) for i in range(3) for j in range(3))
+    (a, b, c), (d, e, f), (g, h, k) = R
+    det = a * (e * k - f * h) - b * (d * k - f * g) + c * (d * h - e * g)
+    if off > ROTATION_TOLERANCE or abs(det - 1) > ROTATION_TOLERANCE:
+        raise ValueError(
+            f"is not a rotation: R R^T differs from the identity by {off:.3g} and det(R) is {det:.6g} "
+            f"(a rotation: 0 and 1, to {ROTATION_TOLERANCE:g})"
+        )
 
 
 class DamagedFrame(_Section):

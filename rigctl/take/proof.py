@@ -6,6 +6,8 @@ every problem; :class:`~rigctl.take.reader.TakeReader` refuses on the first):
 - the frame period agrees with the rate;
 - each camera's records lie in its own essence file, in the order they were written, none overlapping
   another, each of the format's size;
+- each camera's records lie between the manifest's first and last sequence numbers for it (are its first and
+  last, in a finished take whose frames are all there);
 - each camera's records name that camera (index version 2): two cameras' files swapped or renamed are caught
   though every checksum holds;
 - each camera's capture times increase, never three frames within one frame period (one late timestamp
@@ -26,7 +28,7 @@ from numpy.typing import NDArray
 
 from rigctl.rig import MAX_FRAME_PIXELS
 from rigctl.take.index import RECORD_SIZE, camera_tag
-from rigctl.take.manifest import Manifest
+from rigctl.take.manifest import CameraEntry, Manifest
 
 MAX_PIXELS = MAX_FRAME_PIXELS  # 134 million pixels a frame (16384 x 8192): beyond it a manifest is lying
 SPAN_SLACK_FRAMES = 1000
@@ -101,6 +103,24 @@ def record_problems(ipath: Path, idx: NDArray[np.void], bytes_per_frame: int, pe
             f"before, faster than the rate allows ({period_ns} ns a frame)"
         )
     return out
+
+
+def sequence_problems(
+    mpath: Path, name: str, entry: CameraEntry, ipath: Path, idx: NDArray[np.void], ends: bool
+) -> list[str]:
+    """The manifest's ``first_sequence`` and ``last_sequence`` of camera ``name`` against its index: every record
+    between them, and (``ends``: a finished take whose index and frames are whole) the first and last records
+    theirs. A take made with ``--skip-damaged`` may lack its source's first or last frame: only ``between``."""
+    first, last = entry.first_sequence, entry.last_sequence
+    if first is None or last is None or not len(idx):
+        return []
+    lo, hi = int(idx["sequence"][0]), int(idx["sequence"][-1])  # increasing: record_problems
+    if first <= lo and hi <= last and (not ends or (lo, hi) == (first, last)):
+        return []
+    return [
+        f"{mpath}: cameras.{name}.first_sequence {first} and last_sequence {last} disagree with {ipath.name}, "
+        f"whose records run from sequence {lo} to {hi}"
+    ]
 
 
 def span_problem(folder: Path, index: Mapping[str, NDArray[np.void]], period_ns: int) -> str | None:

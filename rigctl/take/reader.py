@@ -97,6 +97,10 @@ class TakeReader:
             self._check_claims(name, essence, size)
             self.proof += proof.record_problems(self.index_path(name), idx, self.bytes_per_frame, self.period_ns)
             self.proof += proof.identity_problems(self.index_path(name), idx, name, self.names)
+            if self.status != "recording":  # a crashed take's manifest is the one written at its start
+                whole = not self.problems[name] and not self.manifest.damaged_skipped
+                entry, ipath = self.manifest.cameras[name], self.index_path(name)
+                self.proof += proof.sequence_problems(mpath, name, entry, ipath, idx, whole)
             self._prove(prove)
         span = proof.span_problem(self.folder, self.index, self.period_ns)
         self.proof += [span] if span else []

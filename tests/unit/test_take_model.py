@@ -81,6 +81,8 @@ def write_take(folder: Path, pixel_format: str = "UYVY", timecodes: bool = True)
         writer.write(Frame("r0c0", 5 + i, t, t + 7, FrameFlags(0), memoryview(data.reshape(-1).data), tc), i)
     writer.close()
     data = dict(OLD)
+    # the frames above are sequences 5 to 7: the manifest says so (a reader holds it to the index)
+    data["cameras"] = {"r0c0": {**OLD["cameras"]["r0c0"], "first_sequence": 5, "last_sequence": 7}}
     per_pixel = {"UYVY": 2, "BGR3": 3}[pixel_format]
     data["format"] = {**OLD["format"], "pixel_format": pixel_format, "bytes_per_frame": W * H * per_pixel}
     write_manifest(folder, Manifest.model_validate(data))
