@@ -208,6 +208,35 @@ def test_the_sensor_tests_only_where_the_views_may_agree_unshifted_match_the_who
     assert np.array_equal(fixed[True], fixed[False])
 
 
+
+@pytest.mark.parametrize("rows", [1, 2, 7])
+def test_the_sensor_tests_in_bands_of_rows_are_the_whole_boxs(monkeypatch: pytest.MonkeyPatch, rows: int) -> None:
+    """Issue 24, the depth's peak: the sparse test samples the views in bands of rows (each with the row either
+    side its 3x3 windows read), not the whole box at once. Bands of 1, 2 and 7 rows (band edges everywhere,
+    the box's own edges among them) give the one-band values bit for bit."""
+    from rigctl.depth import edge
+
+    images = plane_with_overlay(10.0)
+    g = grid_from_arrays(images, 1000.0, 0.12, 0.12 * 0.65)
+    rng = np.random.default_rng(11)
+    d = np.full(g.shape, 10.0, np.float32) + rng.normal(0, 0.4, g.shape).astype(np.float32)
+    d[40:60, 50:90] = np.inf
+    views = [n for n in g.names if n != "r1c1"]
+    h, w = g.shape
+    box = (3, h - 2, 1, w)  # the box's edges are not the frame's
+    y0, y1, x0, x1 = box
+    dz = np.where(np.isfinite(d), d, 0.0).astype(np.float32)[y0:y1, x0:x1]
+    ref_y = np.asarray(g.images["r1c1"] @ edge.LUMA, np.float32)[y0:y1, x0:x1]
+    have = np.isfinite(d)[y0:y1, x0:x1]
+    monkeypatch.setattr(edge, "FIXED_BAND_ROWS", h)
+    whole = edge._tests_where_unshifted_may_agree(g, "r1c1", views, dz, have, box, ref_y)
+    monkeypatch.setattr(edge, "FIXED_BAND_ROWS", rows)
+    banded = edge._tests_where_unshifted_may_agree(g, "r1c1", views, dz, have, box, ref_y)
+    assert (whole[1] > 0).mean() > 0.05  # tested somewhere: the comparison means something
+    for a, b in zip(whole, banded, strict=True):
+        assert np.array_equal(a.view(np.uint32), b.view(np.uint32))
+
+
 def _order_reference(grid, disparities):  # type: ignore[no-untyped-def]
     """The occlusion order as first written (issue 24 moved it to the box of each camera's estimates): every
     other view sampled over the whole frame, its non-finite values as -inf before sampling."""
