@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rigctl.diskspace import check_free_space
 from rigctl.errors import ParameterError, TakeError
 from rigctl.exr import picture, picture_attributes, to_colour, write_exr
 from rigctl.keying import Keyer
@@ -73,6 +74,9 @@ def export_take(
     members = [(n, c) for n in chosen for c in reader.names if c in sets[n].members]
     planned = {relative(out, output_path(out, layout, n, c, ext)) for n, c in members}
     previous = previous_files(out)
+    w, h = reader.width, reader.height
+    need = len(members) * (w * h * BYTES_PER_PIXEL[fmt] + FILE_BYTES)
+    check_free_space(out, need, f"{len(members)} pictures of {w}x{h} ({fmt.upper()})")
     head = {"take": str(reader.folder), "format": fmt, "layout": layout}
     publish_json(out / RECORD, {**head, "complete": False, "files": sorted(previous | planned)})
     remove_ours(out, previous - planned)  # the previous export's files this run does not write
@@ -114,6 +118,11 @@ def export_take(
     publish_json(out / RECORD, record)
     return result
 
+
+# what a picture takes a pixel at most, as if nothing compressed (with a margin): 8-bit BGR PNG, float32 RGBA
+# EXR; and a file's headers (the record beside them within it)
+BYTES_PER_PIXEL = {"png": 4, "exr": 17}
+FILE_BYTES = 1 << 16
 
 RECORD = "export.json"
 RECORD_LIMIT = 64 << 20  # 64 MB: a million files' names
