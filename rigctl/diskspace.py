@@ -22,6 +22,9 @@ def free_bytes(folder: Path) -> int:
 
 
 def gb(n: float) -> str:
+    """``n`` bytes for a message: in MB below 10 MB (a small take's outputs, a nearly full disk), else in GB."""
+    if n < 1e7:
+        return f"{n / 1e6:.2f} MB"
     return f"{n / 1e9:.2f} GB" if n < 1e11 else f"{n / 1e9:,.0f} GB"
 
 

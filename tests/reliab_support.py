@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shlex
 import shutil
 import struct
@@ -15,6 +16,9 @@ import yaml
 from hostile_support import SIM_RIG, write_yaml  # type: ignore[import-not-found]
 from tests_support import rigctl_exe  # type: ignore[import-not-found]
 
+from rigctl.exr import read_exr
+from rigctl.pfm import read_pfm
+from rigctl.publish import TEMP_SUFFIX
 from rigctl.take.index import RECORD, RECORD_SIZE
 
 CAMS = [f"r{r}c{c}" for r in range(3) for c in range(3)]
@@ -104,3 +108,25 @@ def in_mount(
         capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL,
     )  # fmt: skip
     return None if res.returncode == 99 else res
+
+
+def published(out: Path) -> dict[str, bytes]:
+    """Every file under ``out`` by its relative name, each proven whole by reading it as its format."""
+    files = {}
+    for p in sorted(out.rglob("*")):
+        if not p.is_file() or p.name.endswith(TEMP_SUFFIX):
+            continue
+        data = p.read_bytes()
+        if p.suffix == ".png":
+            import cv2
+            import numpy as np
+
+            assert cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED) is not None, p
+        elif p.suffix == ".exr":
+            read_exr(p)
+        elif p.suffix == ".pfm":
+            read_pfm(p)
+        elif p.suffix == ".json":
+            json.loads(data)
+        files[str(p.relative_to(out))] = data
+    return files

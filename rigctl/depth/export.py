@@ -36,6 +36,18 @@ from rigctl.timecode import Timecode
 F32 = NDArray[np.float32]
 FORMATS = ("exr", "pfm", "png")
 PARTIAL_PREFIX = ".partial-"
+# what one camera's outputs take a pixel at most, as if nothing compressed (with a margin for what compression
+# adds): the EXR's half-float RGBA (8 bytes) and float32 depth.Z, confidence and six disparity layers (32); the
+# PFM's float32 disparity; the preview's 8-bit RGB (PNG); and each file's headers
+OUTPUT_BYTES_PER_PIXEL = {"exr": 44, "pfm": 4, "png": 4}
+OUTPUT_FILE_BYTES = 1 << 16
+
+
+def outputs_bytes(pictures: int, width: int, height: int, formats: tuple[str, ...] = FORMATS) -> int:
+    """The most ``pictures`` cameras' outputs of ``width`` x ``height`` in ``formats`` take on disk: a run is
+    refused up front rather than the disk filled halfway (report.json's 1 MB beside them)."""
+    per = sum(width * height * OUTPUT_BYTES_PER_PIXEL[f] + OUTPUT_FILE_BYTES for f in formats)
+    return pictures * per + (1 << 20)
 
 
 def frame_name(number: int) -> str:

@@ -124,3 +124,15 @@ def open_source(path: Path, calibration: Path | None = None, skip_damaged: bool 
     if (path / "grid.yaml").exists():
         return GridFolder(path)
     raise ParameterError(f"{path}: not a take (take.yaml) or a grid folder (grid.yaml)")
+
+
+def frame_size(source: FrameSource) -> tuple[int, int]:
+    """Width and height of ``source``'s pictures, as depth writes them: from a take's manifest or a grid held in
+    memory, else from its first frame set."""
+    if isinstance(source, TakeGrid):
+        return source.reader.width, source.reader.height
+    if isinstance(source, RectifyingGrid):
+        return source.rect.grid.image_size
+    grid = source.grid0 if isinstance(source, OneGrid) else source.grid(source.frame_numbers()[0])
+    h, w = grid.shape
+    return w, h

@@ -19,9 +19,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.calibration_model import ArrayCalibration, load_calibration
+from rigctl.diskspace import check_free_space
 from rigctl.errors import CalibrationError, ParameterError
 from rigctl.publish import publishing_folder
 from rigctl.rectification.geometry import RectifiedGrid, calibration_hash, common_plane, rectification_record
+from rigctl.take.index import RECORD_SIZE
 from rigctl.take.manifest import TAKE_SPEC, DamagedFrame, Rectification, write_manifest
 from rigctl.take.reader import TakeReader
 from rigctl.take.writer import TakeWriter
@@ -210,8 +212,34 @@ def rectify_take(
     t_tables = time.perf_counter()
     rect = rectifier_for_take(reader, calibration)
     t_tables = time.perf_counter() - t_tables
+    w, h = rect.grid.image_size
+    frames = sum(len(reader.index[n]) for n in reader.names)
+    need = rectified_bytes(frames, w, h, len(reader.names)) + tree_bytes(source / "truth")
+    check_free_space(out, need, f"{frames} rectified frames of {w}x{h} (8-bit BGR) and the truth")
     with publishing_folder(out, "rectify", "already exists; takes are never overwritten") as folder:
         return _rectify_into(folder, out, source, calibration, reader, rect, t_tables, progress)
+
+
+# a camera's files besides its frames and index records (the manifest, sidecars) at most
+CAMERA_FILE_BYTES = 1 << 20
+
+
+def rectified_bytes(frames: int, width: int, height: int, cameras: int) -> int:
+    """What a rectified take of ``frames`` frames of ``width`` x ``height`` takes on disk at most: each frame as
+    8-bit BGR and its index record, and each camera's other files (the truth is counted apart)."""
+    return frames * (width * height * 3 + RECORD_SIZE) + cameras * CAMERA_FILE_BYTES
+
+
+def tree_bytes(folder: Path) -> int:
+    """The bytes of the files under ``folder`` (0 when there is none): what copying it writes."""
+    total = 0
+    for root, _dirs, names in os.walk(folder):
+        for name in names:
+            try:
+                total += os.stat(os.path.join(root, name)).st_size
+            except OSError:
+                continue  # a dangling link: the copy says so in its own line
+    return total
 
 
 def _rectify_into(

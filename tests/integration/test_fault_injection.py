@@ -6,17 +6,14 @@ publish it (``replace``), bytes going into a rectified take's essence (``write``
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from reliab_support import make_tiny, rigctl  # type: ignore[import-not-found]
+from reliab_support import make_tiny, published, rigctl  # type: ignore[import-not-found]
 
-from rigctl.exr import read_exr
-from rigctl.pfm import read_pfm
 from rigctl.publish import PARTIAL_SUFFIX, TEMP_SUFFIX
 from rigctl.take.check import check_take
 
@@ -50,28 +47,6 @@ def command(verb: str, paths: dict[str, Path], out: Path) -> list[str]:
     if verb == "depth":
         return ["depth", str(paths["rect"]), "--out", str(out), "--preset", "fast"]
     return ["render", str(paths["rect"]), "--disparity", str(paths["disp"]), "--at", "1,1", "--out", str(out)]
-
-
-def published(out: Path) -> dict[str, bytes]:
-    """Every file under ``out`` by its relative name, each proven whole by reading it as its format."""
-    files = {}
-    for p in sorted(out.rglob("*")):
-        if not p.is_file() or p.name.endswith(TEMP_SUFFIX):
-            continue
-        data = p.read_bytes()
-        if p.suffix == ".png":
-            import cv2
-            import numpy as np
-
-            assert cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED) is not None, p
-        elif p.suffix == ".exr":
-            read_exr(p)
-        elif p.suffix == ".pfm":
-            read_pfm(p)
-        elif p.suffix == ".json":
-            json.loads(data)
-        files[str(p.relative_to(out))] = data
-    return files
 
 
 def comparable(files: dict[str, bytes]) -> dict[str, bytes]:

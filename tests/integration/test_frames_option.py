@@ -61,7 +61,7 @@ def test_a_malformed_frames_is_the_same_line_for_every_verb(
 def test_frames_within_the_take_still_work(ideal: Path, tmp_path: Path) -> None:
     res = run_rigctl(*argv("take export", ideal, tmp_path / "e", "1-2"))
     assert res.returncode == 0, res.stderr
-    assert sorted(p.name for p in (tmp_path / "e").iterdir()) == ["000001", "000002"]
+    assert sorted(p.name for p in (tmp_path / "e").iterdir()) == ["000001", "000002", "export.json"]
 
 
 @pytest.fixture(scope="module")

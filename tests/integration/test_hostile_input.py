@@ -191,7 +191,10 @@ def test_a_failed_export_leaves_no_half_written_frame_set(run_cli, tiny: Path, t
     out = tmp_path / "x"
     res = run_cli("take", "export", str(take), "--out", str(out), "--layout", layout)
     one_line(res, EXIT_DAMAGED, f"{ess}: byte {frame}: frame", "fails its checksum")
-    files = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+    record = json.loads((out / "export.json").read_text())  # the record: what the stopped run may have written
+    planned = "000001/r0c0.png" if layout == "frames" else "r0c0/r0c0.000001.png"
+    assert not record["complete"] and planned in record["files"]
+    files = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and p.name != "export.json")
     cams = [f"r{r}c{c}" for r in range(3) for c in range(3)]
     if layout == "frames":
         assert files == [f"000000/{c}.png" for c in cams]

@@ -175,7 +175,7 @@ def test_exr_export_is_scene_linear_premultiplied_with_attributes(tmp_path: Path
     assert res.returncode == 0, res.stderr
     # one folder per camera, one numbered file per frame set: what NUKE reads as r0c0.######.exr
     assert sorted(p.name for p in (out / "r0c0").iterdir()) == [f"r0c0.{k:06d}.exr" for k in range(4)]
-    assert sorted(p.name for p in out.iterdir()) == ["r0c0", "r0c1"]
+    assert sorted(p.name for p in out.iterdir()) == ["export.json", "r0c0", "r0c1"]  # and the export's record
     for k, tc in enumerate(tcs):
         path = out / "r0c1" / f"r0c1.{k:06d}.exr"
         channels, _ = read_exr(path)
