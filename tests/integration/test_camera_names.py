@@ -1,0 +1,114 @@
+"""A camera's name is its grid position ``r{row}c{col}``, written one way (ASCII digits, no leading zeros) in every
+file rigctl reads: a take's manifest, a calibration, a grid folder. A name written another way (``r01c0``,
+``r٢c1``) is refused in one line naming the file, its line, the field and the name to use, exit 3."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+from hostile_support import one_line  # type: ignore[import-not-found]
+from reliab_support import copy_take, edit_manifest, record_tiny, rewrite_records, rigctl  # type: ignore[import-not-found]
+
+from rigctl.errors import EXIT_BAD_INPUT, EXIT_CHECK_FAILED
+from rigctl.take.index import camera_tag
+
+MISSPELT = [("r01c0", "r1c0"), ("r1c00", "r1c0"), ("r٢c1", "r2c1")]
+IDS = ["leading zero in the row", "leading zero in the column", "arabic-indic digit"]
+
+
+@pytest.fixture(scope="module")
+def ideal(module_tmp: Callable[[str], Path]) -> Path:
+    """An ideal tiny take: rectified as recorded (depth reads it), its manifest holding rectification.positions_m."""
+    return record_tiny(module_tmp("names-ideal"), "ideal", 2, "ideal=true", "motion=false")
+
+
+def key_line(path: Path, *loc: str | int) -> int:
+    """The line (from 1) of the key or item at ``loc`` in the YAML file ``path``."""
+    node: Any = yaml.compose(path.read_text(encoding="utf-8"))
+    line = 1
+    for key in loc:
+        if isinstance(key, int):
+            node = node.value[key]
+            line = node.start_mark.line + 1
+            continue
+        for k, v in node.value:
+            if k.value == key:
+                line, node = k.start_mark.line + 1, v
+                break
+        else:
+            raise KeyError(key)
+    return line
+
+
+def _renamed(d: dict[str, Any], old: str, new: str) -> dict[str, Any]:
+    return {(new if k == old else k): v for k, v in d.items()}  # in order: sets.csv's header follows it
+
+
+def rename_camera(take: Path, old: str, new: str, where: str) -> None:
+    """Name camera ``old`` ``new`` in the take: in ``cameras`` (with its files, its index records' camera tag and
+    sets.csv's header: a take another tool wrote that way, whole), in ``rectification.positions_m`` or in the
+    manifest's rig snapshot."""
+    if where == "cameras":
+        for kind in ("essence", "index"):
+            (take / "cameras" / f"{old}.{kind}").rename(take / "cameras" / f"{new}.{kind}")
+        rewrite_records(take / "cameras" / f"{new}.index", lambda _i, f: f.update(res=camera_tag(new)))
+        sets = take / "sets.csv"
+        header, rest = sets.read_text(encoding="utf-8").split("\n", 1)
+        sets.write_text(",".join(new if c == old else c for c in header.split(",")) + "\n" + rest, encoding="utf-8")
+
+    def edit(m: dict[str, Any]) -> None:
+        if where == "cameras":
+            m["cameras"] = _renamed(m["cameras"], old, new)
+            m["cameras"][new].update(essence=f"cameras/{new}.essence", index=f"cameras/{new}.index")
+        elif where == "positions_m":
+            m["rectification"]["positions_m"] = _renamed(m["rectification"]["positions_m"], old, new)
+        else:
+            next(c for c in m["rig"]["cameras"] if c["name"] == old)["name"] = new
+
+    edit_manifest(take, edit)
+
+
+def _loc(take: Path, name: str, where: str) -> tuple[str | int, ...]:
+    if where == "cameras":
+        return ("cameras", name)
+    if where == "positions_m":
+        return ("rectification", "positions_m", name)
+    rig = yaml.safe_load((take / "take.yaml").read_text(encoding="utf-8"))["rig"]
+    return ("rig", "cameras", next(i for i, c in enumerate(rig["cameras"]) if c["name"] == name), "name")
+
+
+# ---- take manifests ------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("verb", ["info", "check", "export", "depth"])
+@pytest.mark.parametrize("where", ["cameras", "positions_m", "rig"])
+@pytest.mark.parametrize(("name", "right"), MISSPELT, ids=IDS)
+def test_a_take_camera_written_with_a_leading_zero_is_refused_naming_the_right_name(
+    ideal: Path, tmp_path: Path, name: str, right: str, where: str, verb: str
+) -> None:
+    """take.yaml took r01c0 (and r٢c1) wherever it names a camera, where a rig file and a grid folder refused it:
+    a take written that way by another tool, whole (files, index, sets.csv), was read, exported and estimated
+    as a camera r01c0, exit 0. Every reader refuses it now on its line, naming the name to use."""
+    take = copy_take(ideal, tmp_path / "t")
+    rename_camera(take, right, name, where)
+    manifest = take / "take.yaml"
+    at = f"{manifest}:{key_line(manifest, *_loc(take, name, where))}:"
+    said = f"camera name {name} is written with"
+    if verb == "check":
+        res = rigctl("take", "check", str(take))
+        assert res.returncode == EXIT_CHECK_FAILED and "Traceback" not in res.stderr, res.stderr
+        assert at in res.stderr and said in res.stderr and f"name it {right}" in res.stderr, res.stderr
+        return
+    out = tmp_path / "out"
+    cmd = ["take", verb, str(take)] if verb != "depth" else ["depth", str(take), "--preset", "fast"]
+    cmd += ["--out", str(out)] if verb != "info" else []
+    one_line(rigctl(*cmd), EXIT_BAD_INPUT, at, said, f"name it {right}")
+    assert not out.exists() or not any(p.is_file() for p in out.rglob("*"))
+
+
+def test_a_take_named_as_recorded_is_read(ideal: Path) -> None:
+    """The recorder's own names pass."""
+    res = rigctl("take", "check", str(ideal))
+    assert res.returncode == 0, res.stderr
