@@ -112,3 +112,35 @@ def test_a_take_named_as_recorded_is_read(ideal: Path) -> None:
     """The recorder's own names pass."""
     res = rigctl("take", "check", str(ideal))
     assert res.returncode == 0, res.stderr
+
+
+# ---- calibration files ---------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def real(module_tmp: Callable[[str], Path]) -> Path:
+    """A tiny take that needs rectifying, with its true calibration in truth/calibration.yaml."""
+    return record_tiny(module_tmp("names-real"), "real", 1, "motion=false")
+
+
+def misnamed_calibration(real: Path, tmp_path: Path, old: str, new: str) -> Path:
+    """The take's true calibration with camera ``old`` named ``new`` (order kept)."""
+    cal: dict[str, Any] = yaml.safe_load((real / "truth" / "calibration.yaml").read_text(encoding="utf-8"))
+    cal["cameras"] = _renamed(cal["cameras"], old, new)
+    path = tmp_path / "calibration.yaml"
+    path.write_text(yaml.safe_dump(cal, sort_keys=False, allow_unicode=True), encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("verb", ["rectify", "usd"])
+@pytest.mark.parametrize(("name", "right"), MISSPELT, ids=IDS)
+def test_a_calibration_camera_written_another_way_is_refused_naming_the_right_name(
+    real: Path, tmp_path: Path, name: str, right: str, verb: str
+) -> None:
+    """CAMERA_NAME matched Python's \\d, so a calibration took r٢c1 as the camera at row 2, column 1, and r01c0
+    as a camera of its own beside r1c0; both are refused on their line now, naming the name to use."""
+    cal = misnamed_calibration(real, tmp_path, right, name)
+    out = tmp_path / ("r" if verb == "rectify" else "stage.usda")
+    cmd = ["rectify", str(real), "--calibration", str(cal)] if verb == "rectify" else ["usd", str(cal)]
+    res = rigctl(*cmd, "--out", str(out))
+    one_line(res, EXIT_BAD_INPUT, f"{cal}:{key_line(cal, 'cameras', name)}: cameras:", f"camera name {name} is written")
+    assert f"name it {right}" in res.stderr
+    assert not out.exists() or not any(p.is_file() for p in out.rglob("*"))
