@@ -13,7 +13,7 @@ import yaml
 from hostile_support import one_line  # type: ignore[import-not-found]
 from reliab_support import copy_take, edit_manifest, record_tiny, rewrite_records, rigctl  # type: ignore[import-not-found]
 
-from rigctl.errors import EXIT_BAD_INPUT, EXIT_CHECK_FAILED
+from rigctl.errors import EXIT_BAD_INPUT, EXIT_CHECK_FAILED, EXIT_USAGE
 from rigctl.take.index import camera_tag
 
 MISSPELT = [("r01c0", "r1c0"), ("r1c00", "r1c0"), ("r٢c1", "r2c1")]
@@ -144,3 +144,79 @@ def test_a_calibration_camera_written_another_way_is_refused_naming_the_right_na
     one_line(res, EXIT_BAD_INPUT, f"{cal}:{key_line(cal, 'cameras', name)}: cameras:", f"camera name {name} is written")
     assert f"name it {right}" in res.stderr
     assert not out.exists() or not any(p.is_file() for p in out.rglob("*"))
+
+
+# ---- the command line --------------------------------------------------------------------------------------------
+NOT_NAMES = ["../r1c1", "r1c1/../r1c0", "/tmp/r1c1", "r1c1\n", "r1c1 ", ""]
+
+
+def _command(verb: str, ideal: Path, out: Path, option: list[str]) -> list[str]:
+    if verb == "depth":
+        return ["depth", str(ideal), "--out", str(out), "--preset", "fast", *option]
+    if verb == "process":
+        return ["process", str(ideal), "--out", str(out), "--workers", "1", *option]
+    if verb == "render":
+        disparity = str(ideal / "truth" / "disparity")
+        return ["render", str(ideal), "--disparity", disparity, "--leave-one-out", "--json", *option]
+    if verb == "bench":
+        return ["bench", "depth", "--size", "64x48", *option]
+    if verb == "tally":
+        return ["tally", "sim-3x3", *option]
+    return ["control", "sim-3x3", "--gain", "2", *option]
+
+
+VERBS = ["depth", "process", "render", "bench", "control", "tally"]
+OPTION = {"control": "--camera", "tally": "--program"}
+
+
+@pytest.mark.parametrize("verb", VERBS)
+@pytest.mark.parametrize(("name", "right"), MISSPELT, ids=IDS)
+def test_a_camera_option_written_another_way_names_the_right_name(
+    ideal: Path, tmp_path: Path, verb: str, name: str, right: str
+) -> None:
+    """--cameras r01c0 was looked up among the take's cameras and not found ('no camera r01c0 in the grid'),
+    as if the camera were not there: the option is held to the name's one spelling, naming r1c0."""
+    option = [OPTION.get(verb, "--cameras"), name]
+    res = rigctl(*_command(verb, ideal, tmp_path / "out", option))
+    one_line(res, EXIT_USAGE, f"argument {option[0]}: {name} is written with", f"name it {right}")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("verb", VERBS)
+@pytest.mark.parametrize("name", NOT_NAMES)
+def test_a_camera_option_that_is_a_path_is_refused_before_anything_is_read(
+    ideal: Path, tmp_path: Path, verb: str, name: str
+) -> None:
+    """A path given as a camera is refused as no camera name while the command line is read (a newline in it
+    split the error over two lines)."""
+    option = [OPTION.get(verb, "--cameras"), name]
+    res = rigctl(*_command(verb, ideal, tmp_path / "out", option))
+    one_line(res, EXIT_USAGE, f"argument {option[0]}: {name!r} is not a camera name r{{row}}c{{col}}")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(("name", "right"), MISSPELT, ids=IDS)
+def test_a_sim_setting_naming_a_camera_another_way_names_the_right_name(tmp_path: Path, name: str, right: str) -> None:
+    """--sim drops.r01c0=[1] passed the name check and was then 'no camera r01c0' of the rig."""
+    sim = f"drops.{name}=[1]"
+    res = rigctl("record", "sim-3x3", "--take", "t", "--frames", "1", "--out", str(tmp_path), "--sim", sim)
+    one_line(res, EXIT_USAGE, f"--sim drops: {name} is written with", f"name it {right}")
+    assert not (tmp_path / "t").exists()
+
+
+# ---- images to calibrate from --------------------------------------------------------------------------------------
+@pytest.mark.parametrize(("name", "right"), [("r0c01", "r0c1"), ("r٠c1", "r0c1")])
+def test_calibration_images_of_a_camera_written_another_way_are_refused(
+    real: Path, tmp_path: Path, name: str, right: str
+) -> None:
+    """A folder of frame sets <frame>/<camera>.png took r0c01.png as a camera r0c01 and went on to calibrate it
+    (toward a calibration naming a camera as no grid folder, rig or take does); refused before any image is read."""
+    folder = tmp_path / "views"
+    (folder / "000000").mkdir(parents=True)
+    export = rigctl("take", "export", str(real), "--out", str(tmp_path / "export"))
+    assert export.returncode == 0, export.stderr
+    for png in (tmp_path / "export" / "000000").glob("*.png"):
+        png.rename(folder / "000000" / f"{name if png.stem == right else png.stem}.png")
+    res = rigctl("calibrate", str(folder), "--out", str(tmp_path / "c.yaml"), timeout=300)
+    one_line(res, EXIT_BAD_INPUT, f"{folder}: camera {name}", f"name it {right}")
+    assert not (tmp_path / "c.yaml").exists()
