@@ -220,3 +220,16 @@ def test_calibration_images_of_a_camera_written_another_way_are_refused(
     res = rigctl("calibrate", str(folder), "--out", str(tmp_path / "c.yaml"), timeout=300)
     one_line(res, EXIT_BAD_INPUT, f"{folder}: camera {name}", f"name it {right}")
     assert not (tmp_path / "c.yaml").exists()
+
+
+@pytest.mark.parametrize("name", ["../../r1c0", "r1c0/..", "/tmp/r1c0", "r1c0\n", "r1c0\0"])
+@pytest.mark.parametrize("verb", ["rectify", "usd"])
+def test_a_calibration_camera_named_as_a_path_is_refused(real: Path, tmp_path: Path, name: str, verb: str) -> None:
+    """A calibration's camera names become USD prim names and are matched to a take's file names: no path, no
+    NUL, and no trailing newline (CAMERA_NAME's '$' matched before one, so 'r1c0\\n' was read as a camera)."""
+    cal = misnamed_calibration(real, tmp_path, "r1c0", name)
+    out = tmp_path / ("r" if verb == "rectify" else "stage.usda")
+    cmd = ["rectify", str(real), "--calibration", str(cal)] if verb == "rectify" else ["usd", str(cal)]
+    res = rigctl(*cmd, "--out", str(out))
+    one_line(res, EXIT_BAD_INPUT, f"{cal}:", f"camera name {name!r} is not r{{row}}c{{col}}")
+    assert not out.exists() or not any(p.is_file() for p in out.rglob("*"))
