@@ -19,6 +19,7 @@ import yaml
 from numpy.typing import NDArray
 
 from rigctl.errors import CalibrationError, RigFileError
+from rigctl.layout import misspelt
 from rigctl.publish import publish_text
 from rigctl.rig import CAMERA_NAME, FOCAL_RANGE_WIDTHS
 from rigctl.yamlfile import check_spec, line_of, load_yaml_with_lines
@@ -143,6 +144,8 @@ def load_calibration(path: Path) -> ArrayCalibration:
         raise RigFileError(f"{path}:{line_of(lines, ('cameras',))}: cameras must map camera names to models")
     models: dict[str, CameraModel] = {}
     for name, c in cams.items():
+        if wrong := misspelt(name):  # r01c0, r٢c1: named as no grid folder, rig file or take names it
+            raise RigFileError(f"{path}:{line_of(lines, ('cameras', name))}: cameras: camera name {name} {wrong}")
         if not isinstance(name, str) or not CAMERA_NAME.match(name):
             raise RigFileError(
                 f"{path}:{line_of(lines, ('cameras', name))}: camera name {name!r} is not r{{row}}c{{col}}"
@@ -171,8 +174,6 @@ def load_calibration(path: Path) -> ArrayCalibration:
             t=_matrix(path, lines, (*loc, "t"), c["t"], (3,)),
             image_size=(size[0], size[1]),
         )
-        if not CAMERA_NAME.match(name):
-            raise RigFileError(f"{path}:{line_of(lines, loc)}: camera name {name!r} is not r{{row}}c{{col}}")
         problem = camera_problem(models[name])
         if problem:
             field_name, text = problem

@@ -22,7 +22,11 @@ from rigctl.errors import OutputError, ParameterError, TakeError
 log = logging.getLogger(__name__)
 
 LAYOUTS = ("frames", "sequence")
-SAFE_CAMERA = re.compile(r"r([0-9]{1,4})c([0-9]{1,4})")  # fullmatch: no trailing newline, no other digits
+# A camera's name is its grid position written one way everywhere (rig files, takes, calibrations, grid folders,
+# the command line): ASCII digits without leading zeros. Anchored, so ``match`` and ``fullmatch`` agree (no
+# trailing newline, no other digits: ``re``'s ``\d`` would take r٢c1).
+SAFE_CAMERA = re.compile(r"\Ar(0|[1-9][0-9]{0,3})c(0|[1-9][0-9]{0,3})\Z")
+_OTHER_SPELLING = re.compile(r"\Ar(\d{1,8})c(\d{1,8})\Z")  # a grid position in any digits, leading zeros too
 SAFE_EXT = re.compile(r"\.[a-z]{2,4}")
 MAX_FRAME = 999_999_999
 
@@ -31,6 +35,33 @@ def check_layout(layout: str) -> None:
     """Refuse an unknown ``--layout`` before any work."""
     if layout not in LAYOUTS:
         raise ParameterError(f"--layout {layout!r}: choose {' or '.join(LAYOUTS)}")
+
+
+def grid_name(name: object) -> str | None:
+    """The camera name of the grid position ``name`` is written as, however it is written (``r01c0``, ``r٢c1``
+    and ``r1c0`` are all ``r1c0``); None when ``name`` is no grid position."""
+    if not isinstance(name, str) or not (m := _OTHER_SPELLING.fullmatch(name)):
+        return None
+    right = f"r{int(m[1])}c{int(m[2])}"
+    return right if SAFE_CAMERA.fullmatch(right) else None  # beyond 4 digits a side: no position rigctl names
+
+
+def misspelt(name: object) -> str | None:
+    """For a grid position written another way (``r01c0``, ``r٢c1``): what is wrong and the name to use
+    (``is written with a leading zero: name it r1c0``); None for a camera name and for anything that is no
+    grid position at all. One camera named two ways was two cameras at one place (``r01c0`` beside ``r1c0``)."""
+    right = grid_name(name)
+    if right is None or right == name:
+        return None
+    how = "a leading zero" if str(name).isascii() else "digits other than 0-9"
+    return f"is written with {how}: name it {right}"
+
+
+def camera_name_problem(name: object) -> str | None:
+    """Why ``name`` is no camera name (a phrase following the name), or None when it is one."""
+    if isinstance(name, str) and SAFE_CAMERA.fullmatch(name):
+        return None
+    return misspelt(name) or "is not a camera name r{row}c{col}"
 
 
 def safe_camera(name: object, where: str = "camera name") -> str:

@@ -8,7 +8,6 @@ plan defaults) are ``None`` when a rig does not have them, and nothing that need
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import resources
@@ -18,10 +17,11 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from rigctl.errors import RigFileError
+from rigctl.layout import SAFE_CAMERA, misspelt
 from rigctl.yamlfile import check_spec, describe_validation_error, line_of, load_yaml_with_lines
 
 RIG_SPEC = 1
-CAMERA_NAME = re.compile(r"^r(\d+)c(\d+)$")
+CAMERA_NAME = SAFE_CAMERA  # r{row}c{col}: ASCII digits, no leading zeros (rigctl.layout)
 PIXEL_FORMATS = ("UYVY", "YUYV", "BGR3", "GREY", "Y210", "v210")  # Y210, v210: 10-bit 4:2:2 (rigctl.yuv10)
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -95,7 +95,7 @@ class CameraAssignment(_Section):
     @field_validator("name")
     @classmethod
     def _grid_name(cls, value: str) -> str:
-        if not CAMERA_NAME.match(value):
+        if not CAMERA_NAME.match(value) and misspelt(value) is None:  # r01c0: refused naming r1c0 below
             raise ValueError("must be a grid position r{row}c{col}, e.g. r1c1")
         return value
 
@@ -326,12 +326,11 @@ def _check_whole_rig(model: RigModel, source: str, lines: dict[Any, int]) -> Non
     devices: dict[str, int] = {}
     rows, cols = set(), set()
     for i, cam in enumerate(model.cameras):
+        if wrong := misspelt(cam.name):  # r01c0 beside r1c0 was two cameras at one place, as in a grid folder
+            fail(("cameras", i, "name"), f"cameras[{i}].name {cam.name} {wrong}")
         m = CAMERA_NAME.match(cam.name)
         assert m is not None  # checked by the field validator
         row, col = int(m.group(1)), int(m.group(2))
-        if cam.name != f"r{row}c{col}":  # r01c0 beside r1c0 was two cameras at one place, as in a grid folder
-            how = "a leading zero" if cam.name.isascii() else "digits other than 0-9"
-            fail(("cameras", i, "name"), f"cameras[{i}].name {cam.name} is written with {how}: name it r{row}c{col}")
         if row >= g.rows or col >= g.columns:
             fail(("cameras", i, "name"), f"cameras[{i}].name {cam.name} lies outside the {g.rows}x{g.columns} grid")
         if cam.name in seen:

@@ -13,7 +13,8 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from rigctl.errors import ParameterError
-from rigctl.rig import CAMERA_NAME, Rig
+from rigctl.layout import camera_name_problem, misspelt
+from rigctl.rig import Rig
 
 NonNeg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 
@@ -105,8 +106,8 @@ class SimSettings(BaseModel):
     @classmethod
     def _camera_keys(cls, value: dict[str, Any] | list[str]) -> dict[str, Any] | list[str]:
         for key in value:
-            if not CAMERA_NAME.match(key):
-                raise ValueError(f"{key!r} is not a camera name r{{row}}c{{col}}")
+            if wrong := camera_name_problem(key):  # r01c0: 'name it r1c0', as the rig file says
+                raise ValueError(f"{key if misspelt(key) else repr(key)} {wrong}")
         return value
 
     def effective(self) -> SimSettings:

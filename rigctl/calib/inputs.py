@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from rigctl.errors import CalibrationError
 from rigctl.imagefile import png_chunks, png_size
+from rigctl.layout import misspelt
 from rigctl.regular import read_regular
 from rigctl.rig import CAMERA_NAME
 from rigctl.take.reader import TakeReader
@@ -52,7 +53,11 @@ class CalibrationViews:
 
 
 def _grid_names(names: list[str], where: Path) -> dict[str, str]:
-    """Input camera names -> grid names: kept when already r{row}c{col}; ``left``/``right`` -> a 1x2 grid."""
+    """Input camera names -> grid names: kept when already r{row}c{col}; ``left``/``right`` -> a 1x2 grid. A grid
+    position written another way (``r01c0``) is refused naming the name to use, as in a grid folder."""
+    for n in names:
+        if wrong := misspelt(n):
+            raise CalibrationError(f"{where}: camera {n} (its images' name) {wrong}")
     if all(CAMERA_NAME.match(n) for n in names):
         return {n: n for n in names}
     lower = {n.lower(): n for n in names}

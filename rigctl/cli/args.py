@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, NoReturn
 from rigctl.cli.helptext import HelpFormatter
 from rigctl.errors import InputPathError, short_path
 from rigctl.exr import COLOURS
-from rigctl.layout import LAYOUTS
+from rigctl.layout import LAYOUTS, camera_name_problem, misspelt
 
 if TYPE_CHECKING:
     from rigctl.depth.options import DepthOptions
@@ -145,6 +145,14 @@ def non_negative_int(text: str) -> int:
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be at least 0, got {text!r}")
     return value
+
+
+def camera(text: str) -> str:
+    """A camera named on the command line (``--cameras``, ``--camera``): a grid position ``r{row}c{col}`` as every
+    file writes it; ``r01c0`` is refused naming ``r1c0``, and no name holds a path (``/``, ``..``, NUL)."""
+    if wrong := camera_name_problem(text):
+        raise argparse.ArgumentTypeError(f"{text if misspelt(text) else repr(text)[:60]} {wrong}")
+    return text
 
 
 def add_layout(p: argparse.ArgumentParser) -> None:

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from rigctl.cli import bench_record, render
+from rigctl.cli import args, bench_record, render
 from rigctl.cli.helptext import examples
 from rigctl.cli.progress import Progress, add_quiet
 from rigctl.errors import ParameterError
@@ -54,7 +54,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     d.add_argument("--frames", type=int, metavar="N", help="with --video: frame sets per take (default 10)")
     d.add_argument("--preset", help="with --size or --video: the depth preset (default best)")
-    d.add_argument("--cameras", nargs="+", metavar="CAM", help="with --size: cameras to compute (default: all)")
+    d.add_argument(
+        "--cameras", nargs="+", type=args.camera, metavar="CAM", help="with --size: cameras to compute (default: all)"
+    )
     d.add_argument(
         "--workers",
         type=int,

@@ -38,7 +38,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--focus", type=float, metavar="X", help="focus, 0 (near end) .. 1 (far end)")
     p.add_argument("--aperture-f", type=float, metavar="F", help="aperture as an f-number, e.g. 2.8")
     p.add_argument("--reference", choices=REFERENCE_SOURCES, help="reference (genlock) source")
-    p.add_argument("--camera", action="append", metavar="CAM", help="only this camera (repeatable; default: all)")
+    p.add_argument(
+        "--camera", action="append", type=args.camera, metavar="CAM", help="only this camera (repeatable; default: all)"
+    )
     p.add_argument("--sim", action="append", default=[], metavar="KEY=VALUE", help="simulator setting (repeatable)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run)

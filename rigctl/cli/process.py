@@ -122,7 +122,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="local workers' memory limit, e.g. 6GiB (default: the bound measured for the take's frame size)",
     )
     p.add_argument("--frames", metavar="A-B", help="frame sets (default: all complete ones)")
-    p.add_argument("--cameras", nargs="+", metavar="CAM", help="cameras to compute (default: all)")
+    p.add_argument("--cameras", nargs="+", type=args.camera, metavar="CAM", help="cameras to compute (default: all)")
     p.add_argument("--preset", choices=list(PRESETS), default="best")
     p.add_argument("--near", type=distance, metavar="M", help="nearest subject distance (planner range)")
     p.add_argument("--far", type=far_distance, metavar="M", help="farthest subject distance (inf allowed)")

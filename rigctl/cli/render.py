@@ -67,7 +67,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--steps", type=int, help="views along --path (default 9, at most 10000)")
     p.add_argument("--leave-one-out", action="store_true", help="score each camera rendered from the others")
     p.add_argument(
-        "--cameras", nargs="+", action="extend", metavar="CAM", help="cameras for --leave-one-out (default: all)"
+        "--cameras",
+        nargs="+",
+        action="extend",
+        type=args.camera,
+        metavar="CAM",
+        help="cameras for --leave-one-out (default: all)",
     )
     p.add_argument("--frames", metavar="A-B", help="frame sets (default: every complete one with a disparity)")
     p.add_argument("--out", type=Path, metavar="OUT")

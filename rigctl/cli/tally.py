@@ -24,8 +24,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "rig", nargs="?", type=args.InputPath("RIG", text=True), help="rig file or shipped rig name (default: sim-3x3)"
     )
-    p.add_argument("--program", nargs="*", default=[], metavar="CAM", help="cameras on program (live)")
-    p.add_argument("--preview", nargs="*", default=[], metavar="CAM", help="cameras on preview")
+    p.add_argument(
+        "--program", nargs="*", default=[], type=args.camera, metavar="CAM", help="cameras on program (live)"
+    )
+    p.add_argument("--preview", nargs="*", default=[], type=args.camera, metavar="CAM", help="cameras on preview")
     p.set_defaults(func=run)
 
 

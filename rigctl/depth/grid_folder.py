@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from rigctl.depth.grid import F32, Grid, grid_from_arrays, read_truths
 from rigctl.errors import RigFileError
 from rigctl.imagefile import MAX_SIDE, png_size, read_png
-from rigctl.layout import SAFE_CAMERA
+from rigctl.layout import SAFE_CAMERA, grid_name, misspelt
 from rigctl.rig import FOCAL_RANGE_WIDTHS
 from rigctl.yamlfile import load_yaml_with_lines, refuse_unknown_keys
 
@@ -103,24 +103,22 @@ def _grid_files(folder: Path) -> list[Path]:
     """The folder's pictures ``r{row}c{col}.png``, one per grid position and named as the position is written
     (no leading zeros: ``r01c0.png`` beside ``r1c0.png`` read as two cameras at one place). A name that is no
     grid position is left out with a warning."""
-    files = sorted(p for p in folder.glob("r*c*.png") if SAFE_CAMERA.fullmatch(p.stem))
+    files = sorted(p for p in folder.glob("r*c*.png") if grid_name(p.stem))
     for p in sorted(set(folder.glob("r*c*.png")) - set(files))[:8]:
         log.warning("%s: not named r{row}c{col}.png: left out of the grid", p)
     if not files:
         raise RigFileError(f"{folder}: no r{{row}}c{{col}}.png images")
     by_position: dict[str, list[Path]] = {}
     for p in files:
-        m = SAFE_CAMERA.fullmatch(p.stem)
-        assert m is not None
-        by_position.setdefault(f"r{int(m[1])}c{int(m[2])}", []).append(p)
+        by_position.setdefault(str(grid_name(p.stem)), []).append(p)
     for camera, named in by_position.items():
         if len(named) > 1:
             raise RigFileError(
                 f"{' and '.join(str(p) for p in named)}: {len(named)} pictures of camera {camera} (a grid position "
                 f"is written without leading zeros: keep {camera}.png alone)"
             )
-        if named[0].stem != camera:
-            raise RigFileError(f"{named[0]}: grid position written with a leading zero: name it {camera}.png")
+        if wrong := misspelt(named[0].stem):  # r01c0.png, r٢c1.png
+            raise RigFileError(f"{named[0]}: grid position {wrong}.png")
     return files
 
 

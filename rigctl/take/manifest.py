@@ -38,11 +38,11 @@ from pydantic import (
 from pydantic.main import IncEx
 
 from rigctl.errors import TakeError
-from rigctl.layout import SAFE_CAMERA
+from rigctl.layout import SAFE_CAMERA, misspelt
 from rigctl.publish import kind
 from rigctl.rig import FOCAL_RANGE_WIDTHS
 from rigctl.timecode import Timecode, TimecodeError, rate_of
-from rigctl.yamlfile import check_spec, describe_validation_error, load_yaml_with_lines
+from rigctl.yamlfile import Loc, check_spec, describe_validation_error, line_of, load_yaml_with_lines
 
 log = logging.getLogger(__name__)
 
@@ -380,7 +380,28 @@ def read_manifest(folder: Path) -> Manifest:
         raise TakeError(f"{path}: missing: {folder} is not a take (no manifest)")
     data, lines = load_yaml_with_lines(path)
     check_spec(path, data, lines, TAKE_SPEC, "take manifest")
+    _refuse_misspelt_cameras(path, data, lines)
     try:
         return Manifest.model_validate(data)
     except ValidationError as exc:
         raise TakeError(describe_validation_error(path, exc, lines)) from None
+
+
+def _refuse_misspelt_cameras(path: Path, data: dict[str, object], lines: dict[Loc, int]) -> None:
+    """A camera named as its grid position is not written (``r01c0``, ``r٢c1``) is refused on its line, naming
+    the name to use, as in a rig file and a grid folder: one camera named two ways was two cameras at one place.
+    (A name that is no grid position at all is refused by the model's validators.)"""
+    for loc in (("cameras",), ("rectification", "positions_m")):
+        section: object = data
+        for key in loc:
+            section = section.get(key) if isinstance(section, dict) else None
+        for name in section if isinstance(section, dict) else ():
+            if wrong := misspelt(name):
+                field = ".".join(loc)
+                raise TakeError(f"{path}:{line_of(lines, (*loc, name))}: {field}: camera name {name} {wrong}")
+    rig = data.get("rig")
+    cams = rig.get("cameras") if isinstance(rig, dict) else None
+    for i, cam in enumerate(cams if isinstance(cams, list) else ()):
+        if isinstance(cam, dict) and (wrong := misspelt(cam.get("name"))):
+            where = line_of(lines, ("rig", "cameras", i, "name"))
+            raise TakeError(f"{path}:{where}: rig.cameras[{i}].name: camera name {cam['name']} {wrong}")

@@ -547,6 +547,20 @@ def test_a_grid_position_with_a_leading_zero_is_refused_naming_the_files(
     assert not (tmp_path / "d").exists() or nothing_in(tmp_path / "d")
 
 
+@pytest.mark.parametrize(("name", "right"), [("r0c١", "r0c1"), ("r0c１", "r0c1"), ("r0c001", "r0c1")])
+def test_a_grid_position_in_other_digits_is_refused_naming_the_name_to_use(
+    tmp_path: Path, name: str, right: str
+) -> None:
+    """r0c١.png (an Arabic-Indic one) was no grid position to the grid folder's [0-9]: it was left out with a
+    warning and the grid read without it (here r0c0 alone: 'no depth could be estimated'), where a rig file and
+    a calibration took the same name as camera r0c1."""
+    grid = grid_folder(tmp_path / "g")
+    (grid / "r0c1.png").rename(grid / f"{name}.png")
+    res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=60)
+    one_line(res, EXIT_BAD_INPUT, f"{grid / name}.png: grid position is written with", f"name it {right}.png")
+    assert nothing_in(tmp_path / "d")
+
+
 def test_a_camera_that_shares_no_view_with_the_grid_is_refused_a_gap_is_not(tmp_path: Path) -> None:
     """r9999c9999.png beside the grid was left out of every other camera's views and estimated alone from
     disparities under 0.01 px, exit 0. A camera a few steps off (a gap in the grid) still shares a view."""

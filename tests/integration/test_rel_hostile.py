@@ -78,10 +78,13 @@ def _set(i: int, key: str, value: object) -> Callable[[list[dict[str, Any]]], No
         # two cameras named alike read one camera's files: a grid position showed another camera's view, exit 0
         (lambda cams: cams[1].__setitem__("Name", cams[0]["Name"]), "is used twice"),
         (_set(0, "Name", "r0c0\0"), "no usable Name"),  # a NUL byte: ValueError traceback from open()
+        # a Name is part of the file names read beside cameras.json: never a path out of the content's folder
+        (_set(0, "Name", "../../r0c0"), "no usable Name"),
+        (_set(0, "Name", "/tmp/r0c0"), "no usable Name"),
         (_set(0, "Depth_range", [1e-300, 3.0]), "Depth_range"),  # disparity overflowed to inf, exit 0
         (_set(0, "Position", [1e308, 0.0, 0.0]), "Position"),  # 'inf mm' off the plane, and a RuntimeWarning
     ],
-    ids=["duplicate-name", "nul-name", "near-1e-300", "position-1e308"],
+    ids=["duplicate-name", "nul-name", "parent-name", "absolute-name", "near-1e-300", "position-1e308"],
 )
 def test_hostile_camera_json_is_one_line(
     content: Path, tmp_path: Path, edit: Callable[[list[dict[str, Any]]], None], fragment: str
