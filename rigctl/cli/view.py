@@ -5,7 +5,10 @@ from __future__ import annotations
 import argparse
 import ipaddress
 import logging
+import os
+import signal
 import sys
+import threading
 
 from rigctl.cli import args
 from rigctl.cli.helptext import examples
@@ -78,7 +81,16 @@ def run(ns: argparse.Namespace) -> int:
     try:
         server.serve_forever(poll_interval=0.2)
     except KeyboardInterrupt:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C while stopping stops nothing twice
+        server.server_close()
         sys.stderr.write("rigctl view: stopped\n")
+        if any(t.daemon and t.is_alive() for t in threading.enumerate()):
+            # a frame set still being made ahead is in numba's or OpenCV's threads: the interpreter's exit
+            # beside them can abort in C++ ("terminate called without an active exception", exit -6). The
+            # viewer writes nothing, so nothing is lost by leaving at once
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(0)
     finally:
         server.server_close()
     return 0
