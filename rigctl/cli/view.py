@@ -82,7 +82,7 @@ def run(ns: argparse.Namespace) -> int:
         server.serve_forever(poll_interval=0.2)
     except KeyboardInterrupt:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C while stopping stops nothing twice
-        server.server_close()
+        server.server_close()  # (again in finally: closing twice is harmless)
         sys.stderr.write("rigctl view: stopped\n")
         if any(t.daemon and t.is_alive() for t in threading.enumerate()):
             # a frame set still being made ahead is in numba's or OpenCV's threads: the interpreter's exit

@@ -132,14 +132,14 @@ class PackedField(Generic[A]):
         self.empty = empty
 
     def __set_name__(self, owner: type, name: str) -> None:
-        self.slot = f"_{name}_packed"
+        self.name, self.slot = name, f"_{name}_packed"
 
     def __get__(self, obj: object | None, owner: type | None = None) -> A:
         if obj is None:
             if self.empty is None:
                 raise AttributeError("no default")  # how a dataclass learns a descriptor field has none
             return None  # type: ignore[return-value]  # the default, as the dataclass sees it
-        out = self.held(obj, self.slot[1 : -len("_packed")]).plane()
+        out = self.held(obj, self.name).plane()
         out.flags.writeable = False
         return out  # type: ignore[return-value]
 
