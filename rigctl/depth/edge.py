@@ -243,7 +243,8 @@ def occlusion_order(grid: Grid, disparities: dict[str, F32]) -> dict[str, tuple[
     """Per camera: the pixels that most other views see farther, and what to put there (the median of what
     they see, +inf where that is the screen), in :func:`ordered`'s form. Decided from every camera's
     disparity as given (none sees another's corrections). Only the box of the camera's estimates is tested
-    (nothing outside it can be flagged), each other view sampled where the box's points fall in it."""
+    (nothing outside it can be flagged), each other view sampled where the box's points fall in it, in bands
+    of ORDER_BAND_ROWS rows (each pixel's test is its own: the same values as the box at once)."""
     screen = {b: _screen_far(d) for b, d in disparities.items()}
     out: dict[str, tuple[NDArray[np.bool_], F32]] = {}
     for a, d in disparities.items():
@@ -251,36 +252,60 @@ def occlusion_order(grid: Grid, disparities: dict[str, F32]) -> dict[str, tuple[
         out[a] = (flagged, np.zeros(0, np.float32))
         have_all = np.isfinite(d)
         box = subject_box(have_all, 0)
-        ox, oy = grid.offsets[a]
-        others = [b for b in disparities if b != a and grid.offsets[b] != (ox, oy)]
+        others = [b for b in disparities if b != a and grid.offsets[b] != grid.offsets[a]]
         if len(others) < 2 or box is None:
             continue
         y0, y1, x0, x1 = box
-        have, dz = have_all[y0:y1, x0:x1], d[y0:y1, x0:x1]
-        gy, gx = np.mgrid[y0:y1, x0:x1].astype(np.float32)
-        dz = np.where(have, dz, 0.0).astype(np.float32)
-        stack = np.empty((len(others), y1 - y0, x1 - x0), np.float32)
-        for i, b in enumerate(others):
-            rx, ry = grid.offsets[b][0] - ox, grid.offsets[b][1] - oy
-            mx, my = gx - dz * np.float32(rx), gy - dz * np.float32(ry)
-            # NaN: outside b's frame
-            cv2.remap(
-                screen[b], mx, my, cv2.INTER_NEAREST, dst=stack[i], borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan
-            )
-        np.copyto(stack, np.float32(-np.inf), where=np.isinf(stack))  # a view's screen: far
-        in_frame = ~np.isnan(stack)
-        farther = in_frame & (stack < dz - ORDER_TOL)
-        n_in, n_far = in_frame.sum(axis=0), farther.sum(axis=0)
-        flagged[y0:y1, x0:x1] = have & (n_in >= 2) & (2 * n_far > n_in)
-        inside = flagged[y0:y1, x0:x1]
-        if not inside.any():
-            continue
-        seen_far = np.where(farther[:, inside] & np.isfinite(stack[:, inside]), stack[:, inside], np.nan)
-        some = np.isfinite(seen_far).any(axis=0)
-        value = np.full(seen_far.shape[1], np.inf, np.float32)
-        value[some] = np.nanmedian(seen_far[:, some], axis=0)
-        out[a] = (flagged, value)
+        values = [
+            _order_band(grid, a, others, screen, d, have_all, (r0, min(y1, r0 + ORDER_BAND_ROWS), x0, x1), flagged)
+            for r0 in range(y0, y1, ORDER_BAND_ROWS)
+        ]
+        if flagged.any():
+            out[a] = (flagged, np.concatenate(values).astype(np.float32))
     return out
+
+
+ORDER_BAND_ROWS = 128  # rows of the box tested at once (issue 24: the views' samples of a 4K box were 0.3 GiB)
+
+
+def _order_band(
+    grid: Grid,
+    a: str,
+    others: list[str],
+    screen: dict[str, F32],
+    d: F32,
+    have_all: NDArray[np.bool_],
+    band: tuple[int, int, int, int],
+    flagged: NDArray[np.bool_],
+) -> F32:
+    """:func:`occlusion_order` on the rows ``band`` of camera ``a``: sets ``flagged`` there and returns the
+    values of its flagged pixels, in row order."""
+    y0, y1, x0, x1 = band
+    ox, oy = grid.offsets[a]
+    have, dz = have_all[y0:y1, x0:x1], d[y0:y1, x0:x1]
+    gy, gx = np.mgrid[y0:y1, x0:x1].astype(np.float32)
+    dz = np.where(have, dz, 0.0).astype(np.float32)
+    stack = np.empty((len(others), y1 - y0, x1 - x0), np.float32)
+    for i, b in enumerate(others):
+        rx, ry = grid.offsets[b][0] - ox, grid.offsets[b][1] - oy
+        mx, my = gx - dz * np.float32(rx), gy - dz * np.float32(ry)
+        # NaN: outside b's frame
+        cv2.remap(
+            screen[b], mx, my, cv2.INTER_NEAREST, dst=stack[i], borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan
+        )
+    np.copyto(stack, np.float32(-np.inf), where=np.isinf(stack))  # a view's screen: far
+    in_frame = ~np.isnan(stack)
+    farther = in_frame & (stack < dz - ORDER_TOL)
+    n_in, n_far = in_frame.sum(axis=0), farther.sum(axis=0)
+    inside = have & (n_in >= 2) & (2 * n_far > n_in)
+    flagged[y0:y1, x0:x1] = inside
+    if not inside.any():
+        return np.zeros(0, np.float32)
+    seen_far = np.where(farther[:, inside] & np.isfinite(stack[:, inside]), stack[:, inside], np.nan)
+    some = np.isfinite(seen_far).any(axis=0)
+    value = np.full(seen_far.shape[1], np.inf, np.float32)
+    value[some] = np.nanmedian(seen_far[:, some], axis=0)
+    return value
 
 
 def _screen_far(d: F32) -> F32:

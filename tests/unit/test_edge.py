@@ -274,13 +274,19 @@ def _order_reference(grid, disparities):  # type: ignore[no-untyped-def]
     return out
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_the_occlusion_order_in_the_box_of_the_estimates_is_the_whole_frames(seed: int) -> None:
-    """Issue 24: testing only the box of a camera's estimates changes nothing. Against the whole-frame
-    reference, bit for bit: subjects touching the frame's edges (views sample outside the frame), a camera
-    with no estimate, one with a single pixel, NaN where an estimate should be +inf (taken as the screen, as
-    the reference does), and the ``ORDER_TOL`` boundary hit exactly."""
+@pytest.mark.parametrize(("seed", "rows"), [(0, 128), (1, 128), (2, 128), (0, 1), (1, 7), (2, 13)])
+def test_the_occlusion_order_in_the_box_of_the_estimates_is_the_whole_frames(
+    monkeypatch: pytest.MonkeyPatch, seed: int, rows: int
+) -> None:
+    """Issue 24: testing only the box of a camera's estimates, in bands of ``rows`` rows, changes nothing.
+    Against the whole-frame reference, bit for bit: subjects touching the frame's edges (views sample outside
+    the frame), a camera with no estimate, one with a single pixel, NaN where an estimate should be +inf
+    (taken as the screen, as the reference does), the ``ORDER_TOL`` boundary hit exactly, and bands of 1, 7
+    and 13 rows (flagged pixels in many bands, their values in the same order)."""
+    from rigctl.depth import edge
     from rigctl.depth.edge import occlusion_order, ordered
+
+    monkeypatch.setattr(edge, "ORDER_BAND_ROWS", rows)
 
     names = [f"r{r}c{c}" for r in range(3) for c in range(3)]
     grid = grid_from_arrays({n: np.zeros((60, 90, 3), np.float32) for n in names}, 1000.0, 0.12, 0.078)
@@ -299,6 +305,8 @@ def test_the_occlusion_order_in_the_box_of_the_estimates_is_the_whole_frames(see
     disparities["r0c1"] = disparities["r0c1"].astype(np.float64)  # another type: sampled as float32, as before
     got, want = occlusion_order(grid, disparities), _order_reference(grid, disparities)
     assert sum(int(want[n][1].sum()) for n in names) > 50  # the scene does flag pixels
+    if rows < 60:  # flagged pixels in several bands of a camera
+        assert sum(len(np.unique(np.nonzero(want[n][1])[0] // rows)) > 1 for n in names) >= 3
     for n in names:
         assert np.array_equal(got[n][0], want[n][1])
         assert np.array_equal(ordered(disparities[n], *got[n]), want[n][0], equal_nan=True)
