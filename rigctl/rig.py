@@ -363,8 +363,28 @@ def _check_whole_rig(model: RigModel, source: str, lines: dict[Any, int]) -> Non
                     (section, field_name, name),
                     f"{section}.{field_name} names {name}, which is not a camera of this rig",
                 )
+        _check_one_each(section, field_name, names, seen, fail)
     if model.tally is not None:
         _check_tally_addresses(model.tally, fail)
+
+
+def _check_one_each(
+    section: str, field_name: str, given: dict[str, int], order: dict[str, int], fail: Callable[..., None]
+) -> None:
+    """No two cameras with one number, given or by default (1..N in the rig file's order, as ``rigctl.tally``
+    and ``rigctl.camera_control`` number them): one display lit for two cameras, or one camera sent another's
+    settings. Named at the given entry of the two."""
+    first: dict[int, str] = {}
+    for name, i in order.items():
+        number = given.get(name, i + 1)
+        other = first.setdefault(number, name)
+        if other != name:
+            blamed, beside = (name, other) if name in given else (other, name)
+            default = "" if beside in given else " by default (1..N in the order of the cameras)"
+            fail(
+                (section, field_name, blamed),
+                f"{section}.{field_name}.{blamed} is {number}, as is {beside}'s{default}: each camera needs its own",
+            )
 
 
 def _check_tally_addresses(tally: Tally, fail: Callable[[tuple[Any, ...], str], None]) -> None:

@@ -157,6 +157,33 @@ def test_tally_addresses_past_the_protocol_are_named(tmp_path: Path, protocol: s
     assert str(err.value) == f"{path}:{line}: {message}"
 
 
+@pytest.mark.parametrize(
+    ("section", "field"), [("tally:\n  protocol: tsl-umd-5.0\n  port: loop://", "addresses"),
+                           ("camera_control:\n  bridge: loop://", "camera_ids")]
+)  # fmt: skip
+def test_two_cameras_on_one_tally_address_or_camera_id_are_refused(tmp_path: Path, section: str, field: str) -> None:
+    """A display lit for two cameras (the one not on air looks live), or one camera sent the other's
+    settings: the second camera with the number is named, at its line."""
+    path = write(tmp_path, SIM + f"{section}\n  {field}:\n    r0c0: 17\n    r1c1: 18\n    r2c2: 17\n")
+    line = path.read_text().splitlines().index("    r2c2: 17") + 1
+    with pytest.raises(RigFileError) as err:
+        load_rig(path)
+    head = section.split(":")[0]
+    assert str(err.value) == f"{path}:{line}: {head}.{field}.r2c2 is 17, as is r0c0's: each camera needs its own"
+    fine = write(tmp_path, SIM + f"{section}\n  {field}:\n    r0c0: 17\n    r1c1: 18\n    r2c2: 19\n")
+    assert load_rig(fine).model is not None
+    # the cameras not given one are numbered 1..N in the file's order: the first camera is 1
+    first = load_rig(fine).camera_names[0]
+    clash = write(tmp_path, SIM + f"{section}\n  {field}:\n    r2c2: 1\n")
+    line = clash.read_text().splitlines().index("    r2c2: 1") + 1
+    with pytest.raises(RigFileError) as err:
+        load_rig(clash)
+    assert str(err.value) == (
+        f"{clash}:{line}: {head}.{field}.r2c2 is 1, as is {first}'s by default (1..N in the order of the cameras): "
+        "each camera needs its own"
+    )
+
+
 @pytest.mark.parametrize("text", ["12e-2", "1.2e5", "-3E2", ".5e1", "1e+2", "7e0"])
 def test_the_spelling_the_yaml_hint_suggests_is_read_as_that_number(text: str) -> None:
     import re
