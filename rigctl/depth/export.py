@@ -23,6 +23,7 @@ from pydantic import BaseModel, ConfigDict
 
 from rigctl.depth.estimate import DepthResult
 from rigctl.depth.grid import Grid
+from rigctl.diskspace import check_free_space
 from rigctl.disparity_layers import header as disparity_header
 from rigctl.disparity_layers import layers, steps
 from rigctl.exr import FAST_LOSSLESS, picture, picture_attributes, write_exr
@@ -48,6 +49,14 @@ def outputs_bytes(pictures: int, width: int, height: int, formats: tuple[str, ..
     refused up front rather than the disk filled halfway (report.json's 1 MB beside them)."""
     per = sum(width * height * OUTPUT_BYTES_PER_PIXEL[f] + OUTPUT_FILE_BYTES for f in formats)
     return pictures * per + (1 << 20)
+
+
+def check_room(out: Path, sets: int, cameras: int, size: tuple[int, int], formats: tuple[str, ...] = FORMATS) -> None:
+    """Refuse (exit 4, one line) an --out whose file system cannot take ``cameras`` cameras' outputs in ``sets``
+    frame sets of ``size`` (``rigctl.diskspace``): before the first of the work, not with the disk full halfway."""
+    w, h = size
+    what = f"{cameras} cameras' depth in {sets} frame sets at {w}x{h} ({' + '.join(map(str.upper, formats))})"
+    check_free_space(out, outputs_bytes(sets * cameras, w, h, formats), what)
 
 
 def frame_name(number: int) -> str:

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from rigctl.depth.estimate import DepthResult
-from rigctl.depth.export import Exporter, Target, colour_preview, outputs_bytes, write_outputs
+from rigctl.depth.export import Exporter, Target, check_room, colour_preview, write_outputs
 from rigctl.depth.grid import Grid, TakeGrid
 from rigctl.depth.options import DEFAULT_CHUNK, DepthOptions
 from rigctl.depth.pipeline import ChunkEnd, FrameDone, TakeProcessor, chunks, settle
@@ -21,7 +21,6 @@ from rigctl.depth.report import TakeReport
 from rigctl.depth.sources import FrameSource, OneGrid, frame_size, open_source
 from rigctl.depth.take_range import SearchState, unplanned_range
 from rigctl.depth.video_metrics import VideoMetrics
-from rigctl.diskspace import check_free_space
 from rigctl.errors import ParameterError
 from rigctl.exr import to_colour
 from rigctl.layout import check_layout
@@ -97,10 +96,7 @@ def run_depth(
     src = open_source(source, skip_damaged=skip_damaged)
     numbers = select_frames(src, frames)
     cams = [c for c in (opt.cameras or src.names) if c in src.names]  # another name is refused just below
-    w, h = frame_size(src)
-    count = len(numbers) * len(cams)
-    what = f"{len(cams)} cameras' depth in {len(numbers)} frame sets at {w}x{h} ({' + '.join(map(str.upper, formats))})"
-    check_free_space(out, outputs_bytes(count, w, h, formats), what)  # before the range, the first of the work
+    check_room(out, len(numbers), len(cams), frame_size(src), formats)  # before the range, the first of the work
     # a grid folder is one picture: the frames layout keeps its outputs in DIR itself, as before
     exporter = Exporter(out, layout, colour, formats, flat=src.flat and layout == "frames")
     processor = TakeProcessor(src, opt, exporter=exporter)

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel, ConfigDict
 
-from rigctl.depth.export import FORMATS, PARTIAL_PREFIX, Exporter, frame_name
+from rigctl.depth.export import FORMATS, PARTIAL_PREFIX, Exporter, check_room, frame_name
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.pipeline import ChunkEnd, chunks, settle
 from rigctl.depth.take_range import RangeDecision, SearchRounds, SearchState, hull
@@ -196,12 +196,12 @@ def frames_to_do(options: FarmOptions) -> Work:
     ledger.data.chunk, ledger.data.warmup = options.depth.chunk, options.depth.warmup
     depth_dir = options.out / "depth"
     names = list(cams or reader.names)
-    whole = {
-        n
-        for n in numbers
-        if ledger.whole(frame_name(n), depth_dir / frame_name(n))
-        and all((depth_dir / frame_name(n) / f"{c}.{ext}").exists() for c in names for ext in FORMATS)
-    }
+    files = [f"{c}.{ext}" for c in names for ext in FORMATS]
+    whole = {n for n in numbers if ledger.whole(frame_name(n), depth_dir / frame_name(n))
+             and all((depth_dir / frame_name(n) / f).exists() for f in files)}  # fmt: skip
+    sets = sum(len(c) for c in chunks(numbers, options.depth.chunk) if options.redo or not whole.issuperset(c))
+    if sets:  # a chunk is written whole
+        check_room(options.out, sets, len(names), (reader.width, reader.height))
     return Work(chunks(numbers, options.depth.chunk), whole, ledger, options.redo)
 
 
@@ -227,8 +227,7 @@ class ProcessSummary(BaseModel):
     seconds: float
     compute_seconds: float  # from the first task submitted to the last result (no cluster start)
     frames_per_second: float  # frame sets computed (each once) a second of compute
-    # the repeat passes: frame-set computations beyond each one's first, and runs of a chunk beyond its first,
-    # when a chunk widened the take's range and every chunk was run again from it
+    # the repeat passes (a chunk widened the take's range, every chunk ran again): computations beyond the first
     recomputed: int = 0
     chunks_recomputed: int = 0
 
