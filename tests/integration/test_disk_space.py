@@ -1,6 +1,6 @@
-"""``take export``, ``depth``, ``process`` and ``rectify`` had no up-front disk-space check: a run on a file system too small
-for it wrote until the disk was full, part of the way through. Each now holds an estimate of what it will write
-(every picture as if uncompressed) against the free space of --out's file system before it writes anything, and
+"""``take export``, ``depth``, ``process`` and ``rectify`` had no up-front disk-space check: a run on a file system
+too small for it wrote until the disk was full, part of the way through. Each now holds an estimate of what it will
+write (every picture as if uncompressed) against the free space of --out's file system before it writes anything, and
 refuses in one line with exit 4 (the destination cannot take it), as ``render`` does. The free space is given
 here (rigctl.diskspace.free_bytes replaced), never read from this machine's disk."""
 
@@ -75,38 +75,25 @@ def test_an_export_the_disk_cannot_hold_is_refused_before_writing(
     refused_then_run(argv, out, need, f"18 pictures of {w}x{h} ({fmt.upper()})", given, asked, capsys)
 
 
-def test_a_depth_run_the_disk_cannot_hold_is_refused_before_writing(
-    tiny: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
+@pytest.mark.parametrize("verb", [["depth"], ["process", "--workers", "1"]])
+def test_a_depth_or_process_run_the_disk_cannot_hold_is_refused_before_writing(
+    tiny: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+    verb: list[str],
+) -> None:  # fmt: skip
+    """``process`` as ``depth``: what its chunks will write, checked on the client before any worker starts."""
     rect = tiny[1]
     asked, given = free_space(monkeypatch)
     reader = TakeReader(rect)
     w, h = reader.width, reader.height
     out = tmp_path / "new" / "d"
     need = outputs_bytes(4, w, h)  # frame sets 0 and 1 of two cameras, EXR + PFM + PNG
-    argv = ["depth", str(rect), "--out", str(out), "--frames", "0-1", "--cameras", "r1c1", "r1c2", "--preset",
-            "fast", "--quiet"]  # fmt: skip
+    argv = [verb[0], str(rect), "--out", str(out), "--frames", "0-1", "--cameras", "r1c1", "r1c2", "--preset",
+            "fast", *verb[1:], "--quiet"]  # fmt: skip
     what = f"2 cameras' depth in 2 frame sets at {w}x{h} (EXR + PFM + PNG)"
     refused_then_run(argv, out, need, what, given, asked, capsys)
-
-
-def test_a_process_run_the_disk_cannot_hold_is_refused_before_a_cluster_starts(
-    tiny: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """The farm's run as ``depth``'s: what its chunks will write, checked on the client before any worker."""
-    rect = tiny[1]
-    asked, given = free_space(monkeypatch)
-    reader = TakeReader(rect)
-    w, h = reader.width, reader.height
-    out = tmp_path / "new" / "p"
-    need = outputs_bytes(4, w, h)  # frame sets 0 and 1 of two cameras, EXR + PFM + PNG
-    argv = ["process", str(rect), "--out", str(out), "--frames", "0-1", "--cameras", "r1c1", "r1c2", "--preset",
-            "fast", "--workers", "1", "--quiet"]  # fmt: skip
-    what = f"2 cameras' depth in 2 frame sets at {w}x{h} (EXR + PFM + PNG)"
-    refused_then_run(argv, out, need, what, given, asked, capsys)
-    # a second run finds every frame set whole: nothing to write, nothing to find room for
-    given[0] = 0
-    assert main(argv) == 0, capsys.readouterr().err
+    if verb[0] == "process":  # a second run finds every frame set whole: nothing to write, nothing to find room for
+        given[0] = 0
+        assert main(argv) == 0, capsys.readouterr().err
 
 
 def test_a_rectify_the_disk_cannot_hold_is_refused_before_writing(
