@@ -35,6 +35,7 @@ from rigctl.publish import move_into, publish_png
 from rigctl.timecode import Timecode
 
 F32 = NDArray[np.float32]
+F16 = NDArray[np.float16]
 FORMATS = ("exr", "pfm", "png")
 PARTIAL_PREFIX = ".partial-"
 # what one camera's outputs take a pixel at most, as if nothing compressed (with a margin for what compression
@@ -205,7 +206,10 @@ def write_all(
             key = pending.result() if pending is not None else None
             pending = start(i + 1)
             if "exr" in formats:
-                write_depth_exr(target, name, grid, res, key, depth_channels(grid, name, res))
+                pic = exr_picture(grid, name, res, key, target.colour)
+                key = None  # the key's planes go before the depth layers are made and the file encoded
+                write_depth_exr(target, name, grid, pic, depth_channels(grid, name, res))
+                del pic
             del key
 
 
@@ -217,14 +221,19 @@ def depth_channels(grid: Grid, name: str, res: DepthResult) -> dict[str, F32]:
     return {"depth.Z": inv_z, "confidence.Y": res.confidence, **layers(disparity, steps(grid.offsets, name))}
 
 
-def write_depth_exr(
-    target: Target, name: str, grid: Grid, res: DepthResult, key: SoftKey | None, depth: dict[str, F32]
-) -> None:
-    """The camera's EXR: the picture (scene-linear, A the subject's coverage from the soft ``key`` and RGB its
-    unmixed colour premultiplied by it, as NUKE and Unreal read it; unkeyed, no screen or --no-key, opaque)
-    and the ``depth`` channels, with the take's time and the rectified camera."""
+def exr_picture(grid: Grid, name: str, res: DepthResult, key: SoftKey | None, colour: str) -> dict[str, F16]:
+    """The EXR's picture: scene-linear, A the subject's coverage from the soft ``key`` and RGB its unmixed colour
+    premultiplied by it, as NUKE and Unreal read it (unkeyed, no screen or --no-key: opaque). In the half
+    floats it is written in, made so at once: the float32 planes are let go of before the file is encoded
+    (issue 24: the write's peak, beside the next camera's key; numpy's rounding, as the write's own)."""
     rgb, alpha = (key.foreground, key.alpha) if key is not None else (grid.images[name], res.matte)
-    channels: dict[str, F32] = {**picture(rgb, alpha, target.colour), **depth}
+    return {k: v.astype(np.float16) for k, v in picture(rgb, alpha, colour).items()}
+
+
+def write_depth_exr(target: Target, name: str, grid: Grid, pic: dict[str, F16], depth: dict[str, F32]) -> None:
+    """The camera's EXR: the picture (:func:`exr_picture`) and the ``depth`` channels, with the take's time
+    and the rectified camera."""
+    channels: dict[str, NDArray[np.floating]] = {**pic, **depth}
     st = steps(grid.offsets, name)
     ox, oy = grid.offsets[name]
     h, w = grid.shape

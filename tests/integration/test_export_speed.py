@@ -190,7 +190,8 @@ def test_the_threaded_write_writes_what_one_thread_writes(
         try:
             one = Target(tmp_path / "one", "frames", 0, 25.0)
             key = export.soft_key(grid.images[cam], results[cam])
-            export.write_depth_exr(one, cam, grid, results[cam], key, export.depth_channels(grid, cam, results[cam]))
+            pic = export.exr_picture(grid, cam, results[cam], key, one.colour)
+            export.write_depth_exr(one, cam, grid, pic, export.depth_channels(grid, cam, results[cam]))
         finally:
             OpenEXR.set_global_thread_count(pool)
         assert threaded.path(cam, ".exr").read_bytes() == one.path(cam, ".exr").read_bytes()
