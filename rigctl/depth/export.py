@@ -26,7 +26,7 @@ from rigctl.depth.grid import Grid
 from rigctl.diskspace import check_free_space
 from rigctl.disparity_layers import header as disparity_header
 from rigctl.disparity_layers import layers, steps
-from rigctl.exr import FAST_LOSSLESS, picture, picture_attributes, write_exr
+from rigctl.exr import FAST_LOSSLESS, half_picture, picture_attributes, write_exr
 from rigctl.exrcam import camera_attributes
 from rigctl.keying import Keyer, SoftKey
 from rigctl.layout import inside, output_path
@@ -227,7 +227,7 @@ def exr_picture(grid: Grid, name: str, res: DepthResult, key: SoftKey | None, co
     floats it is written in, made so at once: the float32 planes are let go of before the file is encoded
     (issue 24: the write's peak, beside the next camera's key; numpy's rounding, as the write's own)."""
     rgb, alpha = (key.foreground, key.alpha) if key is not None else (grid.images[name], res.matte)
-    return {k: v.astype(np.float16) for k, v in picture(rgb, alpha, colour).items()}
+    return half_picture(rgb, alpha, colour)
 
 
 def write_depth_exr(target: Target, name: str, grid: Grid, pic: dict[str, F16], depth: dict[str, F32]) -> None:

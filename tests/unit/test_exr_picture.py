@@ -61,3 +61,26 @@ def test_what_the_compiled_pass_does_not_take_goes_the_numpy_way() -> None:
     assert np.array_equal(picture(rgb, None)["A"], np.ones(matte.shape, np.float32))
     empty = np.zeros((0, 0, 3), np.float32)
     assert picture(empty, np.zeros((0, 0), np.float32))["RGB"].shape == (0, 0, 3)
+
+
+@pytest.mark.parametrize("rows", [1, 7, 64, 1000])
+@pytest.mark.parametrize("colour", ["rec709", "acescg"])
+def test_the_half_picture_in_bands_is_the_whole_picture_in_half_floats(
+    monkeypatch: pytest.MonkeyPatch, rows: int, colour: str
+) -> None:
+    """Issue 24: the EXR's picture made band by band straight into half floats gives the bits of the whole
+    picture rounded to half floats (what the write did before), with and without a matte, NaN included."""
+    from rigctl import exr
+    from rigctl.exr import half_picture
+
+    monkeypatch.setattr(exr, "HALF_BAND_ROWS", rows)
+    rgb, matte = _pictures()
+    rgb[5, 5, 0], matte[6, 6] = np.nan, np.nan
+    for m in (matte, None):
+        got, want = half_picture(rgb, m, colour), picture(rgb, m, colour)
+        assert set(got) == set(want) == {"RGB", "A"}
+        for k in want:
+            assert got[k].dtype == np.float16 and got[k].shape == want[k].shape
+            assert np.array_equal(got[k].view(np.uint16), want[k].astype(np.float16).view(np.uint16))
+    empty = half_picture(np.zeros((0, 4, 3), np.float32), np.zeros((0, 4), np.float32), colour)
+    assert empty["RGB"].shape == (0, 4, 3) and empty["A"].shape == (0, 4)
