@@ -113,6 +113,7 @@ def estimate(
         matte = keyer.matte(grid.images[ref]) if keyer is not None else np.ones((h, w), np.float32)
     # depth where the subject covers at least half the pixel (``edge.py``): not on the screen beside it
     fg = coverage(grid.images[ref], matte) >= DEPTH_COVERAGE
+    grid.frames.forget_last()  # the search reads the greys; the picture is made again if asked
     key = PackedPlane.of(matte)  # what the result holds (``packed.py``); the plane is not needed again here
     del matte
     stats["key_s"] = time.perf_counter() - t0

@@ -236,6 +236,23 @@ def test_what_the_grid_made_from_its_pictures_is_let_go_of_and_made_again_alike(
     assert own.bgr8("r0c0") is given and own.made_bytes() == 0  # a picture given as 8 bits is kept
 
 
+def test_a_grey_keeps_no_float_picture_and_the_last_picture_can_be_let_go_of() -> None:
+    """Issue 24: the greys the search reads are kept, the float pictures made for them are not, and the last
+    float picture asked for is let go of before the search (``forget_last``); each made again alike."""
+    rgb = np.random.default_rng(4).random((H, W, 3), dtype=np.float32)
+    images = FrameImages({n: (rgb * 255).astype(np.uint8) for n in ("r0c0", "r0c1")})
+    last = images["r0c0"]
+    picture = last.copy()
+    grey = images.grey("r0c1").copy()
+    assert images.made_bytes() == picture.nbytes + grey.nbytes
+    assert images["r0c0"] is last  # still the last picture: r0c1's, made for its grey, was not kept
+    assert images.grey("r0c0").nbytes == grey.nbytes  # from the last picture, which stays
+    assert images.made_bytes() == picture.nbytes + 2 * grey.nbytes
+    images.forget_last()
+    assert images.made_bytes() == 2 * grey.nbytes
+    assert np.array_equal(images["r0c0"], picture) and np.array_equal(images.grey("r0c1"), grey)
+
+
 def test_a_frame_pool_is_bounded_by_count_and_memory() -> None:
     """``--buffers 999999999`` was an ENOMEM traceback from the pool's mmap; now one line before allocating."""
     assert check_buffers(2, 1 << 20, 9, memory=64 << 30) == 2
