@@ -15,6 +15,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from rigctl.local_mean import LocalMean, with_ones
+
 F32 = NDArray[np.float32]
 
 
@@ -103,6 +105,8 @@ SURE = 0.02  # alpha within this of 0 or 1 is 0 or 1 (sensor noise on the screen
 MIN_LUMA_LEVER = 0.02  # below this luma between a pair and the screen, both pixels of the pair share alpha
 SPECK = 0.8  # a green excess below this share of the screen's may be a speck of the subject (10x its noise)
 SMALL_ALPHA = 0.1  # below this the unmixed colour leans on the nearby subject's (dividing by alpha is noise)
+BAND_PX = 16  # at 1920 px wide: how far past the subject (the hard key's, and partial cover) the key looks
+STEP_PX = 2  # and past its faintest cover (a speck of screen noise is not followed further than this)
 
 
 @dataclass(frozen=True)
@@ -110,158 +114,6 @@ class SoftKey:
     alpha: F32  # H x W, the share of each pixel the subject covers
     foreground: F32  # H x W x 3, the subject's own colour (unmixed from the screen, spill suppressed)
     solved: int = 0  # how many pixels the key was solved on (the edge band); the rest are 0 or 1
-
-
-TILE = 32  # px: the fine blurs are made on the tiles of the frame the key reads (the edge band's)
-BAND_PX = 16  # at 1920 px wide: how far past the subject (the hard key's, and partial cover) the key looks
-STEP_PX = 2  # and past its faintest cover (a speck of screen noise is not followed further than this)
-
-
-class _LocalMean:
-    """Normalised convolution: the weighted local mean of ``values`` (H x W x C) at the first of ``sigmas``
-    that has weight nearby, else the next. A blur is made only when some pixel asked for needs it: a fine one
-    on the :data:`TILE` x :data:`TILE` tiles the pixels asked for lie in (the edge band is a few % of a frame),
-    each run of tiles blurred with the blur's reach around it, which gives OpenCV's values over the frame there
-    bit for bit; the wide ones at a coarser scale, read at the pixels asked for (:meth:`at`) as OpenCV's
-    bilinear enlargement would give them, without enlarging the frame."""
-
-    def __init__(self, values: F32, weight: F32, sigmas: tuple[float, ...]) -> None:
-        """``values``: H x W x C+1, the last channel ones (:func:`_with_ones`, shared by every mean)."""
-        self.shape = weight.shape
-        self.sigmas = sigmas
-        self.values, self.weight = values, weight  # their product made where read: 133 MB a mean at 4K
-        self.fields: dict[int, F32] = {}
-        self.todo: dict[int, NDArray[np.bool_]] = {}  # a fine field's tiles not blurred yet
-
-    def weighted(self, box: tuple[int, int, int, int] | None = None) -> F32:
-        """The values times the weight over ``box`` (top, bottom, left, right; default the frame), bit for bit."""
-        top, bottom, left, right = box if box is not None else (0, self.shape[0], 0, self.shape[1])
-        out = np.empty((bottom - top, right - left, self.values.shape[2]), np.float32)
-        np.multiply(self.values[top:bottom, left:right], self.weight[top:bottom, left:right, None], out=out)
-        return out
-
-    def made(self, k: int, idx: NDArray[np.intp]) -> _LocalMean:
-        """This mean with its blur ``k`` made where ``idx`` will read it (to make it in a thread of the
-        caller's choosing)."""
-        self.field(k, idx)
-        return self
-
-    def scale(self, k: int) -> int:
-        """1 / the scale blur ``k`` is made at: a wide blur at a coarser scale, the same field in a fraction of
-        the time."""
-        return max(1, int(self.sigmas[k] // 4))
-
-    def field(self, k: int, idx: NDArray[np.intp]) -> F32:
-        """The blurred weighted values at ``sigmas[k]``, right at least at the flat pixel indices ``idx``:
-        over the frame, or at 1 / scale of it."""
-        sigma, (h, w) = self.sigmas[k], self.shape
-        scale = self.scale(k)
-        if scale == 1:
-            return self._fine(k, idx)
-        if k not in self.fields:
-            small = cv2.resize(self.weighted(), (max(1, w // scale), max(1, h // scale)), interpolation=cv2.INTER_AREA)
-            self.fields[k] = np.asarray(cv2.GaussianBlur(small, (0, 0), sigma / scale), np.float32)
-        return self.fields[k]
-
-    def _fine(self, k: int, idx: NDArray[np.intp]) -> F32:
-        """Field ``k`` at full resolution, blurred on the tiles ``idx`` lies in that were not blurred before:
-        each run of them along a row of tiles with the Gaussian's reach around it (OpenCV's kernel for float:
-        8 sigma + 1 taps, rounded), so every value in the run is the frame's blur bit for bit (the frame's own
-        edges are the run's). Over the frame at once when the runs and their margins would blur half as many
-        pixels as the frame has or more (scattered tiles: specks of noise on a screen)."""
-        h, w = self.shape
-        if k not in self.fields:
-            # memory is committed only for the pages a run writes (np.empty maps the rest lazily)
-            self.fields[k] = np.empty(self.values.shape, np.float32)
-            self.todo[k] = np.ones((-(-h // TILE), -(-w // TILE)), bool)
-        field, todo = self.fields[k], self.todo[k]
-        need = np.zeros_like(todo)
-        ys, xs = np.divmod(idx, w)
-        need[ys // TILE, xs // TILE] = True
-        need &= todo
-        sigma = self.sigmas[k]
-        reach = int(np.ceil(4 * sigma)) + 1  # past the kernel's half width, whichever way OpenCV rounds it
-        # a run starts a whole number of tiles into the frame, so its rows end as the frame's do, in the same
-        # vector lanes (OpenCV's last few pixels of a row, past its vector loop, may round apart): its margin
-        # on the left is the reach rounded up to whole tiles
-        before = -(-reach // TILE) * TILE
-        runs = []  # (y0, y1, x0, x1) of each run of tiles, and (top, bottom, left, right) of what is blurred
-        for ty in np.flatnonzero(need.any(1)).tolist():
-            ends = np.flatnonzero(np.diff(np.concatenate([[False], need[ty], [False]]).astype(np.int8))).tolist()
-            y0, y1 = ty * TILE, min(h, ty * TILE + TILE)
-            for a, b in zip(ends[0::2], ends[1::2], strict=True):
-                x0, x1 = a * TILE, min(w, b * TILE)
-                blurred = (max(0, y0 - reach), min(h, y1 + reach), max(0, x0 - before), min(w, x1 + reach))
-                runs.append(((y0, y1, x0, x1), blurred))
-        if 2 * sum((bottom - top) * (right - left) for _, (top, bottom, left, right) in runs) >= h * w:
-            field[...] = cv2.GaussianBlur(self.weighted(), (0, 0), sigma)
-            todo[...] = False
-            return field
-        for (y0, y1, x0, x1), (top, bottom, left, right) in runs:
-            part = cv2.GaussianBlur(self.weighted((top, bottom, left, right)), (0, 0), sigma)
-            field[y0:y1, x0:x1] = part[y0 - top : y1 - top, x0 - left : x1 - left]
-        todo &= ~need
-        return field
-
-    def sample(self, k: int, idx: NDArray[np.intp]) -> F32:
-        """Field ``k`` at the frame's flat pixel indices ``idx`` (N x C+1)."""
-        field = self.field(k, idx)
-        h, w = self.shape
-        if self.scale(k) == 1:
-            return field.reshape(-1, field.shape[2])[idx]
-        hs, ws = field.shape[:2]
-        y, x = np.divmod(idx, w)
-        x0, fx = _linear(x, ws, w)
-        y0, fy = _linear(y, hs, h)
-        dx = (x0 < ws - 1).astype(np.intp)
-        row0 = y0 * ws + x0
-        row1 = row0 + ws * (y0 < hs - 1)
-        flat = field.reshape(-1, field.shape[2])
-        fx, fy = fx[:, None], fy[:, None]
-        top = flat[row0] * (1 - fx) + flat[row0 + dx] * fx
-        bottom = flat[row1] * (1 - fx) + flat[row1 + dx] * fx
-        return np.asarray(top * (1 - fy) + bottom * fy, np.float32)
-
-    def at(self, idx: NDArray[np.intp]) -> tuple[F32, F32]:
-        """The means at the flat pixel indices ``idx`` (N x C), and where there was any weight (N, 0/1)."""
-        c = self.values.shape[2] - 1
-        out = np.zeros((len(idx), c), np.float32)
-        done = np.zeros(len(idx), bool)
-        for k in range(len(self.sigmas)):
-            rest = np.flatnonzero(~done)
-            if not len(rest):
-                break
-            at = self.sample(k, idx[rest])
-            take = at[:, -1] > 0.02
-            out[rest[take]] = at[take, :-1] / at[take, -1:]
-            done[rest[take]] = True
-        return out, done.astype(np.float32)
-
-
-def _linear(dst: NDArray[np.intp], small: int, size: int) -> tuple[NDArray[np.intp], F32]:
-    """Where OpenCV's bilinear resize of ``small`` pixels to ``size`` reads destination pixel ``dst``: the
-    left source pixel and the weight of the right one (half-pixel centres, clamped at both ends)."""
-    src = (dst + 0.5) * (small / size) - 0.5
-    left = np.floor(src).astype(np.intp)
-    frac = (src - left).astype(np.float32)
-    frac[left < 0] = 0.0
-    frac[left >= small - 1] = 0.0
-    return np.clip(left, 0, small - 1), frac
-
-
-def _with_ones(values: F32) -> F32:
-    """H x W x C values with a channel of ones after them (what :class:`_LocalMean` weighs)."""
-    out = np.empty((*values.shape[:2], values.shape[2] + 1), np.float32)
-    out[..., :-1] = values
-    out[..., -1] = 1.0
-    return out
-
-
-def _local_mean(values: F32, weight: F32, sigmas: tuple[float, ...]) -> tuple[F32, F32]:
-    """:class:`_LocalMean` at every pixel (H x W x C, H x W)."""
-    h, w = weight.shape
-    out, done = _LocalMean(_with_ones(values), weight, sigmas).at(np.arange(h * w))
-    return out.reshape(h, w, -1), done.reshape(h, w)
 
 
 @dataclass
@@ -277,7 +129,7 @@ class _Pass:
     have_front: F32
 
 
-def _solve(ycc: F32, idx: NDArray[np.intp], front_mean: _LocalMean, back_mean: _LocalMean, pairs: bool) -> _Pass:
+def _solve(ycc: F32, idx: NDArray[np.intp], front_mean: LocalMean, back_mean: LocalMean, pairs: bool) -> _Pass:
     """The key's alpha at ``idx`` (every 4:2:2 pair whole, in frame order) for one estimate of the screen;
     ``ycc``: the picture's Y, Cb, Cr (and anything after them) per pixel, N x 3 or more."""
     pix = ycc[idx, :3]
@@ -373,7 +225,7 @@ def _key_band(rgb: F32, hard: F32, everywhere: bool) -> tuple[F32, NDArray[np.in
     solid = cv2.erode((hard >= 1).astype(np.uint8), k3).astype(np.float32)
     screen = cv2.erode((hard <= 0).astype(np.uint8), k3).astype(np.float32)
     inner = (cv2.erode(solid.astype(np.uint8), k3) > 0).reshape(-1)  # well inside the hard key: the subject
-    ycc1 = _with_ones(ycc)
+    ycc1 = with_ones(ycc)
     del ycc  # read from ycc1: the same values, without a second frame of them
     pix_ycc = ycc1.reshape(-1, 4)
     r = max(4, round(BAND_PX * w / 1920))
@@ -383,12 +235,12 @@ def _key_band(rgb: F32, hard: F32, everywhere: bool) -> tuple[F32, NDArray[np.in
     # the nearby subject (the same in both passes) and the screen: their fine blurs on the band, the key's
     # dearest step, side by side (OpenCV lets go of the GIL; both are held at once either way, within a few MB)
     with ThreadPoolExecutor(1, thread_name_prefix="soft-key-front") as beside:
-        made = beside.submit(lambda: _LocalMean(ycc1, solid, (3.0, 12.0)).made(0, idx))
-        back = _LocalMean(ycc1, screen, (4.0, 16.0, 64.0)).made(0, idx)
+        made = beside.submit(lambda: LocalMean(ycc1, solid, (3.0, 12.0)).made(0, idx))
+        back = LocalMean(ycc1, screen, (4.0, 16.0, 64.0)).made(0, idx)
         front = made.result()
     full = inner.astype(np.float32)  # the key over the frame: 1 inside, 0 on the screen
 
-    def solve(idx: NDArray[np.intp], back: _LocalMean) -> _Pass:
+    def solve(idx: NDArray[np.intp], back: LocalMean) -> _Pass:
         done = _solve(pix_ycc, idx, front, back, pairs)
         done.alpha[inner[idx]] = 1.0  # solved as part of a pair, but inside the subject
         full[idx] = done.alpha
@@ -407,7 +259,7 @@ def _key_band(rgb: F32, hard: F32, everywhere: bool) -> tuple[F32, NDArray[np.in
     # the second pass measures the screen without the faint strands the first one found
     del back  # its fields (the second pass's take their place)
     screen = cv2.erode((full.reshape(h, w) <= 0).astype(np.uint8), k3).astype(np.float32)
-    done = solve(idx, _LocalMean(ycc1, screen, (4.0, 16.0, 64.0)))
+    done = solve(idx, LocalMean(ycc1, screen, (4.0, 16.0, 64.0)))
     solved = pix_ycc[idx, :3]
     return full.reshape(h, w), idx, done, solved
 

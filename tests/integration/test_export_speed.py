@@ -20,7 +20,8 @@ from rigctl.depth.options import DepthOptions
 from rigctl.depth.pipeline import TakeProcessor
 from rigctl.depth.sources import OneGrid
 from rigctl.exr import read_exr
-from rigctl.keying import Keyer, _local_mean
+from rigctl.keying import Keyer
+from rigctl.local_mean import local_mean as _local_mean
 
 CAMS = ("r0c0", "r0c1", "r0c2")
 H, W = 96, 128

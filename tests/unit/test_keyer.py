@@ -6,7 +6,8 @@ import cv2
 import numpy as np
 import skimage.data
 
-from rigctl.keying import Keyer, _LocalMean
+from rigctl.keying import Keyer
+from rigctl.local_mean import LocalMean as _LocalMean
 
 
 def _screen_behind_a_subject(h: int = 300, w: int = 400) -> tuple[np.ndarray, np.ndarray]:
