@@ -54,19 +54,20 @@ def view_part(
 ) -> tuple[int, int, int, int]:
     """(y0, y1, x0, x1) of a view at baseline ``rel`` (its frame ``frame``, h x w) that disparities within
     ``reach`` (px of this scale) sample from ``box``: the bilinear sample's second pixel and ``margin`` more,
-    clipped to the frame; the whole frame without ``reach``. A sample there is the same as in the whole view."""
+    clipped to the frame (at least its edge row or column); the whole frame without ``reach``. A sample there is
+    the same as in the whole view."""
     h, w = frame
     if reach is None:
         return 0, h, 0, w
     y0, y1, x0, x1 = box
     sx = [d * rel[0] for d in reach]
     sy = [d * rel[1] for d in reach]
-    return (
-        max(0, math.floor(y0 - max(sy)) - margin),
-        min(h, math.ceil(y1 - min(sy)) + margin),
-        max(0, math.floor(x0 - max(sx)) - margin),
-        min(w, math.ceil(x1 - min(sx)) + margin),
-    )
+    a0, b0 = max(0, math.floor(y0 - max(sy)) - margin), max(0, math.floor(x0 - max(sx)) - margin)
+    a1, b1 = min(h, math.ceil(y1 - min(sy)) + margin), min(w, math.ceil(x1 - min(sx)) + margin)
+    # every sample beyond the frame (a view that sees none of the box at these disparities): the frame's edge
+    # pixel nearest them, a part of one row or column rather than none, as the whole view gives beyond its edge
+    a0, b0 = min(a0, h - 1), min(b0, w - 1)
+    return a0, max(a1, a0 + 1), b0, max(b1, b0 + 1)
 
 
 class SweepLevel:

@@ -175,3 +175,51 @@ def test_a_running_mean_longer_than_a_byte_counts_is_refused() -> None:
     for bad in (0, 256, -1):
         with pytest.raises(ParameterError, match="max_frames must be 1 to 255"):
             TemporalParams(max_frames=bad)
+
+
+def whole_crop_costs(grid: Grid, d_new: np.ndarray, d_prev: np.ndarray, where: np.ndarray) -> np.ndarray:
+    """The deciding costs as the stabiliser computed them before issue 24's bands: one box around every pixel
+    of ``where`` and every view's whole normalised frame."""
+    import math
+
+    from rigctl.depth.cost import SweepLevel
+
+    p, ref = TemporalParams(), "r1c1"
+    views = [n for n in grid.names if n != ref]
+    ys, xs = np.nonzero(where)
+    r = p.cost_window
+    y0, y1, x0, x1 = max(0, ys.min() - r), min(H, ys.max() + r + 1), max(0, xs.min() - r), min(W, xs.max() + r + 1)
+    level = SweepLevel(grid, ref, views, 1.0, (y0, y1, x0, x1))
+    a, b = d_new[y0:y1, x0:x1], d_prev[y0:y1, x0:x1]
+    a_f = np.where(np.isfinite(a), a, np.where(np.isfinite(b), b, 0.0)).astype(np.float32)
+    b_f = np.where(np.isfinite(b), b, a_f).astype(np.float32)
+    return level.costs_where([a_f, b_f], where[y0:y1, x0:x1], r, math.ceil(p.cost_keep * len(views)))
+
+
+@pytest.mark.parametrize("band", [1, 7, 13, 128])
+def test_the_deciding_costs_in_bands_are_the_whole_crops(band: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The costs that decide between the new and the previous depth are matched in bands of rows, each view
+    only where the band's candidates reach (issue 24: a chunk's memory at 3840x2160), and are the same bits
+    as over one crop with every view's whole frame: pixels at the frame's edges, estimates missing in either
+    or both, candidates that reach out of the frame or that no view sees."""
+    import rigctl.depth.temporal as temporal_module
+
+    rng = np.random.default_rng(3)
+    grid = scene(40, 2.0, 4)
+    d_new = (truth(40) + rng.normal(0, 0.3, (H, W))).astype(np.float32)
+    d_prev = (truth(None) + rng.normal(0, 0.3, (H, W))).astype(np.float32)
+    d_new[rng.random((H, W)) < 0.1] = np.nan
+    d_prev[rng.random((H, W)) < 0.1] = np.nan
+    d_prev[50:60, 90:100] = 20.0  # a band whose reach is set by a few pixels
+    d_prev[0:6, 0:10] = 40.0  # samples beyond the frame
+    d_new[0:12, 100:] = d_prev[0:12, 100:] = 400.0  # a band whose every sample lies beyond every view's frame
+    where = rng.random((H, W)) < 0.15
+    where[0:3] = False  # rows 0 to 2: that band alone
+    where[0:3, 110:120] = where[3, :5] = where[-1, -5:] = where[55, 95] = True
+    reference = whole_crop_costs(grid, d_new, d_prev, where)
+    monkeypatch.setattr(temporal_module, "COST_BAND_ROWS", band)
+    c_new, c_prev = Temporal()._costs(grid, "r1c1", d_new, d_prev, where)
+    assert np.array_equal(c_new, reference[0]) and np.array_equal(c_prev, reference[1])
+    assert (c_new != c_prev).mean() > 0.5
+    empty = Temporal()._costs(grid, "r1c1", d_new, d_prev, np.zeros((H, W), bool))
+    assert empty[0].size == empty[1].size == 0
