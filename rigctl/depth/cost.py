@@ -26,7 +26,10 @@ def normalise(g: F32, win: int = 7) -> tuple[F32, F32]:
     return np.asarray((g - mean) / (std + 0.01), dtype=np.float32), np.asarray(std, dtype=np.float32)
 
 
-def normalise_part(g: F32, part: tuple[int, int, int, int], win: int = 7) -> tuple[F32, F32]:
+NORMALISE_WIN = 7  # the local normalisation's window, px
+
+
+def normalise_part(g: F32, part: tuple[int, int, int, int], win: int = NORMALISE_WIN) -> tuple[F32, F32]:
     """``normalise(g)`` cropped to ``part`` (y0, y1, x0, x1), made from that part and the window's reach
     around it (inside the frame) rather than from the frame (issue 24: a view's part is what is matched, and
     at 3840x2160 a whole frame's five temporaries are 165 MB). The same values: the window reads only the
@@ -95,17 +98,24 @@ class SweepLevel:
         self.views = views
         scaled = None if reach is None else (reach[0] * scale, reach[1] * scale)
         for n in [ref, *views]:  # one camera at a time: its grey and whole normalised image go before the next
-            g = grey_of(grid.images, n)
-            if scale != 1.0:
+            if scale == 1.0:  # the grey's rows that the part and the normalisation's window read, alone
+                self.h, self.w = grid.shape
+                part = self.box if n == ref else view_part(self.box, grid.shape, self.rel[n], scaled)
+                top, end = max(0, part[0] - NORMALISE_WIN // 2), min(self.h, part[1] + NORMALISE_WIN // 2)
+                g = grey_of(grid.images, n, (top, end))
+            else:
+                g = grey_of(grid.images, n)
                 g = np.asarray(cv2.resize(g, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA), np.float32)
-            self.h, self.w = g.shape
+                self.h, self.w = g.shape
+                top = 0
+                part = self.box if n == ref else view_part(self.box, g.shape, self.rel[n], scaled)
+            rows = (part[0] - top, part[1] - top, part[2], part[3])  # the part in ``g``
             if n == ref:
-                self.ref, self.texture = normalise_part(g, self.box)
-                self.bright = np.ascontiguousarray(g[y0:y1, x0:x1])
+                self.ref, self.texture = normalise_part(g, rows)
+                self.bright = np.ascontiguousarray(g[rows[0] : rows[1], x0:x1])
                 continue
-            a0, a1, b0, b1 = view_part(self.box, (self.h, self.w), self.rel[n], scaled)
-            self.org[n] = (a0, b0)
-            self.norm[n] = normalise_part(g, (a0, a1, b0, b1))[0]
+            self.org[n] = (part[0], part[2])
+            self.norm[n] = normalise_part(g, rows)[0]
             del g
 
     def cost_const(self, d: float, win: int) -> F32:

@@ -4,11 +4,12 @@ rectify``'s output, or an ``ideal=true`` simulated take, rectified as recorded),
 
 A grid holds each picture as it came: a take's frame bytes in their captured format, 8-bit BGR from an 8-bit
 PNG, float RGB from a 16-bit PNG or an array. What an engine reads is derived from it, each straight from what
-was given, so a take's frames reach the matcher without a float round trip and the float picture is not
-quantised on the way: :meth:`Grid.bgr8` (8-bit BGR: the semi-global matcher) and :meth:`FrameImages.grey`
-(the cost volume's grey) are made on first use and kept; ``grid.images[name]`` (float RGB in [0, 1]: the
-keyer, the EXR picture) is made when asked and only the last one kept, and :meth:`FrameImages.region` makes
-a part of it (issue 24: nine float pictures held for the whole frame set were 0.83 GiB at 3840x2160)."""
+was given, so a take's frames reach the matcher without a float round trip and the float picture is not quantised on
+the way: :meth:`Grid.bgr8` (8-bit BGR: the semi-global matcher) and :meth:`FrameImages.grey` (the cost volume's
+grey) are made on first use and kept (the greys while they fit in ``GREY_KEEP_BYTES``); ``grid.images[name]`` (float
+RGB in [0, 1]: the keyer, the EXR picture) is made when asked and only the last one kept, and
+:meth:`FrameImages.region` makes a part of it (issue 24: nine float pictures held for the whole frame set were 0.83
+GiB at 3840x2160)."""
 
 from __future__ import annotations
 
@@ -34,6 +35,11 @@ log = logging.getLogger(__name__)
 
 F32 = NDArray[np.float32]
 U8 = NDArray[np.uint8]
+# greys kept for a frame set's estimates up to this many bytes (nine of 1920x1080 are 75 MB); beyond it each
+# read makes its grey again, GREY_BAND_ROWS rows at a time (issue 24: nine of 3840x2160 are 0.28 GiB held
+# through the estimates' peak, where making them again costs a few % of the time)
+GREY_KEEP_BYTES = 96 << 20
+GREY_BAND_ROWS = 64
 
 
 def grey(rgb: F32) -> F32:
@@ -101,14 +107,39 @@ class FrameImages(Mapping[str, F32]):
         return self[name][rows, cols]
 
     def grey(self, name: str) -> F32:
-        """:func:`grey` of the float picture, made on first use and kept (every camera's estimate reads every
-        view's); the float picture made for it is not."""
+        """:func:`grey` of the float picture (every camera's estimate reads every view's), kept while the greys
+        kept stay within ``GREY_KEEP_BYTES``, else made again on each read (:meth:`grey_rows`); the float
+        picture made for it is not kept."""
         g = self._grey.get(name)
-        if g is None:  # the float picture made for it is not kept
-            last, given = self._last, self._float.get(name)
-            rgb = given if given is not None else last[1] if last is not None and last[0] == name else self._made(name)
-            g = self._grey[name] = grey(rgb)
+        if g is not None:
+            return g
+        g = self.grey_rows(name, 0, self.shape()[0])
+        if g.nbytes + sum(k.nbytes for k in self._grey.values()) <= GREY_KEEP_BYTES:
+            self._grey[name] = g
         return g
+
+    def grey_rows(self, name: str, a: int, b: int) -> F32:
+        """Rows a..b of :meth:`grey`, made from those rows alone when the grey is not kept: from the 8-bit or
+        captured picture ``GREY_BAND_ROWS`` rows at a time (the same values: the conversions are per pixel
+        and a row of every format is its own bytes; ``tests/unit/test_take_model.py``)."""
+        kept = self._grey.get(name)
+        if kept is not None or b <= a:
+            return kept[a:b] if kept is not None else np.empty((0, self.shape()[1]), np.float32)
+        last, given = self._last, self._float.get(name)
+        rgb = given if given is not None else last[1] if last is not None and last[0] == name else None
+        if rgb is not None:
+            return grey(rgb[a:b])
+        out = np.empty((b - a, self.shape()[1]), np.float32)
+        for r in range(a, b, GREY_BAND_ROWS):
+            out[r - a : min(b, r + GREY_BAND_ROWS) - a] = grey(self._rows(name, r, min(b, r + GREY_BAND_ROWS)))
+        return out
+
+    def _rows(self, name: str, a: int, b: int) -> F32:
+        """Rows a..b of the float picture of a camera whose picture was not given as float."""
+        if name in self._captured:
+            pixel_format, width, height = self._format
+            return to_rgb(self._captured[name].reshape(height, -1)[a:b], pixel_format, width, b - a)
+        return bgr8_to_rgb(self._u8[name][a:b])
 
     def bgr8(self, name: str) -> U8:
         bgr = self._u8.get(name)
@@ -150,9 +181,13 @@ class FrameImages(Mapping[str, F32]):
         return len(self._names)
 
 
-def grey_of(images: Mapping[str, F32], name: str) -> F32:
-    """Camera ``name``'s grey: kept by the grid's pictures (:meth:`FrameImages.grey`), else made."""
-    return images.grey(name) if isinstance(images, FrameImages) else grey(images[name])
+def grey_of(images: Mapping[str, F32], name: str, rows: tuple[int, int] | None = None) -> F32:
+    """Camera ``name``'s grey (``rows``: a..b of it alone): the grid's pictures' (:meth:`FrameImages.grey`),
+    else made."""
+    if rows is None:
+        return images.grey(name) if isinstance(images, FrameImages) else grey(images[name])
+    a, b = rows
+    return images.grey_rows(name, a, b) if isinstance(images, FrameImages) else grey(images[name][a:b])
 
 
 @dataclass

@@ -210,6 +210,37 @@ def test_sweep_level_cut_to_the_reach_gives_the_whole_views_costs() -> None:
     assert np.array_equal(cut.cost_map(cands[0], 3), whole.cost_map(cands[0], 3))
 
 
+@pytest.mark.parametrize("eight_bit", [False, True])
+def test_sweep_level_reads_only_the_greys_rows_it_needs_and_gets_the_whole_greys_values(
+    eight_bit: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """At full scale a SweepLevel reads each camera's grey only over its part's rows and the normalisation's
+    window around them (issue 24: the greys are not all kept at 4K); the reference's and every view's
+    normalised part are the bits the whole grey gives, boxes at the frame's edges and inside it."""
+    import rigctl.depth.grid as grid_module
+    from rigctl.depth.cost import SweepLevel, normalise
+    from rigctl.depth.grid import Grid, grey
+    from rigctl.pixfmt import to_u8
+
+    base = surfaces((96, 160))
+    images = {n: to_u8(base.images[n]) if eight_bit else base.images[n] for n in base.names}
+    grid = Grid(list(base.names), images, dict(base.offsets), base.focal_px, base.spacing, base.doffs)
+    monkeypatch.setattr(grid_module, "GREY_KEEP_BYTES", 0)  # nothing kept: every read makes its rows
+    ref = "r1c1"
+    views = [n for n in grid.names if n != ref]
+    whole = {n: normalise(grey(grid.images[n])) for n in grid.names}
+    for box, reach in (((30, 70, 50, 110), (1.0, 4.0)), ((0, 96, 0, 160), None), ((0, 9, 150, 160), (-3.0, 2.0))):
+        level = SweepLevel(grid, ref, views, 1.0, box, reach)
+        y0, y1, x0, x1 = box
+        assert np.array_equal(level.ref, whole[ref][0][y0:y1, x0:x1])
+        assert np.array_equal(level.texture, whole[ref][1][y0:y1, x0:x1])
+        assert np.array_equal(level.bright, grey(grid.images[ref])[y0:y1, x0:x1])
+        for n in views:
+            (a, b), (h, w) = level.org[n], level.norm[n].shape
+            assert np.array_equal(level.norm[n], whole[n][0][a : a + h, b : b + w]), (box, n)
+    assert grid.frames.made_bytes() == (grid.frames._last[1].nbytes if grid.frames._last else 0)
+
+
 def test_the_compiled_visible_count_matches_the_reference() -> None:
     """Views that see each pixel's point (inside the frame, not behind a nearer pixel of the reference), on
     a crop whose disparity has steps up and down, parts keyed out (no occluders there) and points beyond

@@ -253,6 +253,40 @@ def test_a_grey_keeps_no_float_picture_and_the_last_picture_can_be_let_go_of() -
     assert np.array_equal(images["r0c0"], picture) and np.array_equal(images.grey("r0c1"), grey)
 
 
+@pytest.mark.parametrize("pixel_format", ["UYVY", "v210", "BGR3", "8-bit given", "float given"])
+def test_greys_beyond_the_budget_are_made_again_row_by_row_alike(
+    pixel_format: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 24: the greys are kept up to ``GREY_KEEP_BYTES`` (nine of 3840x2160 are 0.28 GiB at the
+    estimates' peak); beyond it a grey, or any run of its rows, is made again from the picture's own rows, in
+    bands, with the same bits as the whole picture's grey, for every way a picture comes."""
+    import rigctl.depth.grid as grid_module
+
+    h, w = 37, 96  # bands of 5 rows leave a part of one at the end
+    rgb = np.random.default_rng(7).random((h, w, 3), dtype=np.float32)
+    if pixel_format == "8-bit given":
+        images = FrameImages({"a": to_u8(rgb), "b": to_u8(rgb[::-1])})
+    elif pixel_format == "float given":
+        images = FrameImages({"a": rgb, "b": rgb[::-1].copy()})
+    else:
+        images = FrameImages.captured(
+            {"a": from_rgb(rgb, pixel_format).reshape(-1), "b": from_rgb(rgb[::-1], pixel_format).reshape(-1)},
+            pixel_format,
+            w,
+            h,
+        )
+    whole = {n: grid_module.grey(images[n]) for n in ("a", "b")}
+    images.forget_last()
+    monkeypatch.setattr(grid_module, "GREY_BAND_ROWS", 5)
+    monkeypatch.setattr(grid_module, "GREY_KEEP_BYTES", whole["a"].nbytes)  # room for one grey
+    for a, b in ((0, h), (3, 4), (0, 12), (30, h), (10, 10)):
+        assert np.array_equal(images.grey_rows("b", a, b), whole["b"][a:b])
+    assert np.array_equal(images.grey("a"), whole["a"]) and np.array_equal(images.grey("b"), whole["b"])
+    assert images.made_bytes() == whole["a"].nbytes  # the first fitted, the second is made on each read
+    assert images.grey("a") is images.grey("a") and images.grey("b") is not images.grey("b")
+    assert np.array_equal(images.grey_rows("a", 3, 9), whole["a"][3:9])
+
+
 def test_a_frame_pool_is_bounded_by_count_and_memory() -> None:
     """``--buffers 999999999`` was an ENOMEM traceback from the pool's mmap; now one line before allocating."""
     assert check_buffers(2, 1 << 20, 9, memory=64 << 30) == 2
