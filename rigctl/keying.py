@@ -8,6 +8,7 @@ image (its dominant green); the matte falls from 1 to 0 between ``low`` and ``hi
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -15,7 +16,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.local_mean import LocalMean, with_ones
+from rigctl.local_mean import LocalMean
 
 F32 = NDArray[np.float32]
 
@@ -70,12 +71,15 @@ class Keyer:
             a[small[labels]] = 0.0
         return a
 
-    def soft(self, rgb: F32, hard: F32 | None = None, everywhere: bool = False) -> SoftKey:
+    def soft(
+        self, rgb: F32, hard: F32 | None = None, everywhere: bool = False, again: Callable[[], F32] | None = None
+    ) -> SoftKey:
         """The subject's coverage of every pixel (alpha, fractional on the edge) and its colour unmixed from
         the screen behind it (:func:`soft_key`); all ones and the picture itself without a screen. ``hard``:
         this keyer's :meth:`matte` of the same picture when it was already computed (depth keys each camera);
-        ``everywhere``: the reference solved on every pixel, not only the edge band."""
-        return soft_key(rgb, self, hard, everywhere)
+        ``everywhere``: the reference solved on every pixel, not only the edge band; ``again``: see
+        :func:`soft_key`."""
+        return soft_key(rgb, self, hard, everywhere, again)
 
     @staticmethod
     def despill(rgb: F32, matte: F32) -> F32:
@@ -168,7 +172,9 @@ def _cover(rgb: F32, hard: F32) -> NDArray[np.bool_]:
     return np.asarray((hard > 0) | (s < SPECK * level)) if level > 0 else np.asarray(hard > 0)
 
 
-def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None, everywhere: bool = False) -> SoftKey:
+def soft_key(
+    rgb: F32, keyer: Keyer, hard: F32 | None = None, everywhere: bool = False, again: Callable[[], F32] | None = None
+) -> SoftKey:
     """Alpha and the unmixed subject colour on a green screen.
 
     The screen's colour is estimated at every pixel from the screen around it (a smooth field: uneven light is
@@ -195,7 +201,11 @@ def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None, everywhere: bool =
 
     ``hard``: ``keyer.matte`` of the picture clipped to [0, 1], when the caller has it (then it is not computed
     again). It is below 1 somewhere exactly when the keyer found a screen (the screen's own pixels key to 0),
-    so it also says whether there is one."""
+    so it also says whether there is one.
+
+    ``again``: makes the same picture anew, a new array each call (``rgb`` then being one of them, held by no
+    one else): the key lets go of the picture while it is solved and takes a new one for the colour, instead
+    of holding the picture and a copy of it (issue 24: 0.1 GiB at 4K, at the write's peak)."""
     captured = np.asarray(rgb, np.float32)
     # NaN fails both tests: clipped, as before; an empty picture has nothing to clip
     least, most = (float(captured.min()), float(captured.max())) if captured.size else (0.0, 0.0)
@@ -203,34 +213,58 @@ def soft_key(rgb: F32, keyer: Keyer, hard: F32 | None = None, everywhere: bool =
     if hard is None:
         hard = keyer.matte(rgb)
     if not bool((hard < 1).any()):
-        return SoftKey(np.ones(rgb.shape[:2], np.float32), captured.copy())
-    full, idx, done, solved = _key_band(rgb, hard, everywhere)
+        return SoftKey(np.ones(rgb.shape[:2], np.float32), captured.copy() if again is None else captured)
+    cover = _cover(rgb, hard)
+    ycc1 = ycc_with_ones(rgb)
     del rgb  # the clipped copy, when one was made
+    if again is not None:
+        del captured  # made again for the colour
+    full, idx, done, solved = _key_band(ycc1, cover, hard, everywhere)
+    del ycc1
     lo, hi = min(0.0, least), max(1.0, most)
-    fg = captured.copy()
+    fg = captured.copy() if again is None else np.asarray(again(), np.float32)
     at = fg.reshape(-1, fg.shape[2])
     at[idx] = _unmix(solved, done, at[idx], (lo, hi))
     return SoftKey(full, fg, len(idx))
 
 
-def _key_band(rgb: F32, hard: F32, everywhere: bool) -> tuple[F32, NDArray[np.intp], _Pass, F32]:
-    """:func:`soft_key`'s alpha over the frame, the pixels it was solved on, the last pass there and their
-    Y, Cb, Cr; every frame-sized temporary (the local means' fields) is gone when it returns, before the
-    colour is unmixed into a copy of the picture (issue 24: the write's memory)."""
-    ycc = np.asarray(rgb @ RGB_TO_YCC.T, np.float32)
+YCC_BAND_ROWS = 64  # rows of the picture turned into Y, Cb, Cr at a time by :func:`ycc_with_ones`
+
+
+def ycc_with_ones(rgb: F32) -> F32:
+    """The picture's Y, Cb, Cr and a channel of ones (:func:`rigctl.local_mean.with_ones`, what the local means
+    weigh), made YCC_BAND_ROWS rows at a time: numpy multiplies a stack of rows by the matrix one row at a time,
+    so the bits are the whole picture's, without a frame of Y, Cb, Cr beside them (issue 24: 0.1 GiB at 4K, at
+    the write's peak)."""
+    h, w = rgb.shape[:2]
+    out = np.empty((h, w, 4), np.float32)
+    for y0 in range(0, h, YCC_BAND_ROWS):
+        out[y0 : y0 + YCC_BAND_ROWS, :, :3] = rgb[y0 : y0 + YCC_BAND_ROWS] @ RGB_TO_YCC.T
+    out[..., 3] = 1.0
+    return out
+
+
+def _key_band(
+    ycc1: F32, cover: NDArray[np.bool_], hard: F32, everywhere: bool
+) -> tuple[F32, NDArray[np.intp], _Pass, F32]:
+    """:func:`soft_key`'s alpha over the frame from the picture's Y, Cb, Cr and ones (``ycc1``,
+    :func:`ycc_with_ones`) and where the subject may be (``cover``, :func:`_cover`), the pixels it was solved on,
+    the last pass there and their Y, Cb, Cr; every frame-sized temporary (the local means' fields) is gone
+    when it returns, before the colour is unmixed into a copy of the picture (issue 24: the write's memory)."""
     # 4:2:2 decoded: the two pixels of each pair share their chroma (but where decoding clipped)
     h, w = hard.shape
-    pairs = w % 2 == 0 and float(np.mean(np.abs(ycc[:, 0::2, 1:] - ycc[:, 1::2, 1:]) < 2e-3)) > 0.95
+    chroma = ycc1[..., 1:3]
+    pairs = w % 2 == 0 and float(np.mean(np.abs(chroma[:, 0::2] - chroma[:, 1::2]) < 2e-3)) > 0.95
     k3 = np.ones((3, 3), np.uint8)
-    solid = cv2.erode((hard >= 1).astype(np.uint8), k3).astype(np.float32)
-    screen = cv2.erode((hard <= 0).astype(np.uint8), k3).astype(np.float32)
-    inner = (cv2.erode(solid.astype(np.uint8), k3) > 0).reshape(-1)  # well inside the hard key: the subject
-    ycc1 = with_ones(ycc)
-    del ycc  # read from ycc1: the same values, without a second frame of them
+    # the means' weights, 0 or 1 in bytes (a byte times a float32 is that float32's product: issue 24, the
+    # write's peak, 25 MB each at 4K)
+    solid = np.asarray(cv2.erode((hard >= 1).astype(np.uint8), k3), np.uint8)
+    screen = np.asarray(cv2.erode((hard <= 0).astype(np.uint8), k3), np.uint8)
+    inner = (cv2.erode(solid, k3) > 0).reshape(-1)  # well inside the hard key: the subject
     pix_ycc = ycc1.reshape(-1, 4)
     r = max(4, round(BAND_PX * w / 1920))
     outside = _near(~inner.reshape(h, w), 0, pairs)  # and both pixels of a pair one of which is outside
-    band = np.ones((h, w), bool) if everywhere else _near(_cover(rgb, hard), r, pairs) & outside
+    band = np.ones((h, w), bool) if everywhere else _near(cover, r, pairs) & outside
     idx = np.flatnonzero(band)
     # the nearby subject (the same in both passes) and the screen: their fine blurs on the band, the key's
     # dearest step, side by side (OpenCV lets go of the GIL; both are held at once either way, within a few MB)
@@ -258,7 +292,7 @@ def _key_band(rgb: F32, hard: F32, everywhere: bool) -> tuple[F32, NDArray[np.in
     idx = np.flatnonzero(band)
     # the second pass measures the screen without the faint strands the first one found
     del back  # its fields (the second pass's take their place)
-    screen = cv2.erode((full.reshape(h, w) <= 0).astype(np.uint8), k3).astype(np.float32)
+    screen = np.asarray(cv2.erode((full.reshape(h, w) <= 0).astype(np.uint8), k3), np.uint8)
     done = solve(idx, LocalMean(ycc1, screen, (4.0, 16.0, 64.0)))
     solved = pix_ycc[idx, :3]
     return full.reshape(h, w), idx, done, solved

@@ -23,13 +23,15 @@ class LocalMean:
     bit for bit; the wide ones at a coarser scale, read at the pixels asked for (:meth:`at`) as OpenCV's
     bilinear enlargement would give them, without enlarging the frame."""
 
-    def __init__(self, values: F32, weight: F32, sigmas: tuple[float, ...]) -> None:
-        """``values``: H x W x C+1, the last channel ones (:func:`with_ones`, shared by every mean)."""
+    def __init__(self, values: F32, weight: NDArray[np.float32 | np.uint8], sigmas: tuple[float, ...]) -> None:
+        """``values``: H x W x C+1, the last channel ones (:func:`with_ones`, shared by every mean); ``weight``:
+        H x W, float32 or bytes (0 and 1: the same products in a quarter of the memory)."""
         self.shape = weight.shape
         self.sigmas = sigmas
         self.values, self.weight = values, weight  # their product made where read: 133 MB a mean at 4K
-        self.fields: dict[int, F32] = {}
+        self.fields: dict[int, F32] = {}  # a wide field (coarse), or a fine one's made tiles (or its frame)
         self.todo: dict[int, NDArray[np.bool_]] = {}  # a fine field's tiles not blurred yet
+        self.slots: dict[int, NDArray[np.int32]] = {}  # where each tile of a fine field is held (-1: nowhere)
 
     def weighted(self, box: tuple[int, int, int, int] | None = None) -> F32:
         """The values times the weight over ``box`` (top, bottom, left, right; default the frame), bit for bit."""
@@ -78,48 +80,65 @@ class LocalMean:
         """Field ``k`` at full resolution, blurred on the tiles ``idx`` lies in that were not blurred before:
         each run of them along a row of tiles with the Gaussian's reach around it (OpenCV's kernel for float:
         8 sigma + 1 taps, rounded), so every value in the run is the frame's blur bit for bit (the frame's own
-        edges are the run's). Over the frame at once when the runs and their margins would blur half as many
-        pixels as the frame has or more (scattered tiles: specks of noise on a screen)."""
+        edges are the run's). Only the tiles made are held (N x TILE x TILE x C, where :attr:`slots` says;
+        issue 24: a frame-sized field committed a page wherever a tile's row touched it, 0.12 GiB a field at
+        4K, at the write's peak). Over the frame at once (H x W x C) when the runs and their margins would blur
+        half as many pixels as the frame has or more (scattered tiles: specks of noise on a screen)."""
         h, w = self.shape
+        c = self.values.shape[2]
         if k not in self.fields:
-            # memory is committed only for the pages a run writes (np.empty maps the rest lazily)
-            self.fields[k] = np.empty(self.values.shape, np.float32)
             self.todo[k] = np.ones((-(-h // TILE), -(-w // TILE)), bool)
-        field, todo = self.fields[k], self.todo[k]
+            self.slots[k] = np.full(self.todo[k].shape, -1, np.int32)
+            self.fields[k] = np.empty((0, TILE, TILE, c), np.float32)
+        todo, slots = self.todo[k], self.slots[k]
         need = np.zeros_like(todo)
         ys, xs = np.divmod(idx, w)
         need[ys // TILE, xs // TILE] = True
         need &= todo
+        if not need.any():
+            return self.fields[k]
         sigma = self.sigmas[k]
         reach = int(np.ceil(4 * sigma)) + 1  # past the kernel's half width, whichever way OpenCV rounds it
         # a run starts a whole number of tiles into the frame, so its rows end as the frame's do, in the same
         # vector lanes (OpenCV's last few pixels of a row, past its vector loop, may round apart): its margin
         # on the left is the reach rounded up to whole tiles
         before = -(-reach // TILE) * TILE
-        runs = []  # (y0, y1, x0, x1) of each run of tiles, and (top, bottom, left, right) of what is blurred
+        runs = []  # (ty, a, b): tiles a..b-1 of row ty, and (top, bottom, left, right) of what is blurred
         for ty in np.flatnonzero(need.any(1)).tolist():
             ends = np.flatnonzero(np.diff(np.concatenate([[False], need[ty], [False]]).astype(np.int8))).tolist()
             y0, y1 = ty * TILE, min(h, ty * TILE + TILE)
             for a, b in zip(ends[0::2], ends[1::2], strict=True):
-                x0, x1 = a * TILE, min(w, b * TILE)
-                blurred = (max(0, y0 - reach), min(h, y1 + reach), max(0, x0 - before), min(w, x1 + reach))
-                runs.append(((y0, y1, x0, x1), blurred))
+                blurred = (max(0, y0 - reach), min(h, y1 + reach), max(0, a * TILE - before), min(w, b * TILE + reach))
+                runs.append(((ty, a, b), blurred))
         if 2 * sum((bottom - top) * (right - left) for _, (top, bottom, left, right) in runs) >= h * w:
-            field[...] = cv2.GaussianBlur(self.weighted(), (0, 0), sigma)
+            self.fields[k] = np.asarray(cv2.GaussianBlur(self.weighted(), (0, 0), sigma), np.float32)
             todo[...] = False
-            return field
-        for (y0, y1, x0, x1), (top, bottom, left, right) in runs:
+            return self.fields[k]
+        held = self.fields[k]
+        new = np.empty((int(need.sum()), TILE, TILE, c), np.float32)
+        slots[need] = len(held) + np.arange(len(new), dtype=np.int32)  # in frame order, as the runs are
+        n = 0
+        for (ty, a, b), (top, bottom, left, right) in runs:
             part = cv2.GaussianBlur(self.weighted((top, bottom, left, right)), (0, 0), sigma)
-            field[y0:y1, x0:x1] = part[y0 - top : y1 - top, x0 - left : x1 - left]
+            y0, x0 = ty * TILE, a * TILE
+            rows = part[y0 - top : min(h, y0 + TILE) - top, x0 - left : min(w, b * TILE) - left]
+            strip = np.zeros((TILE, (b - a) * TILE, c), np.float32)  # the frame's edge: the rest is not read
+            strip[: rows.shape[0], : rows.shape[1]] = rows
+            new[n : n + b - a] = strip.reshape(TILE, b - a, TILE, c).transpose(1, 0, 2, 3)
+            n += b - a
+        self.fields[k] = np.concatenate([held, new]) if len(held) else new
         todo &= ~need
-        return field
+        return self.fields[k]
 
     def sample(self, k: int, idx: NDArray[np.intp]) -> F32:
         """Field ``k`` at the frame's flat pixel indices ``idx`` (N x C+1)."""
         field = self.field(k, idx)
         h, w = self.shape
-        if self.scale(k) == 1:
+        if self.scale(k) == 1 and field.ndim == 3:  # made over the frame
             return field.reshape(-1, field.shape[2])[idx]
+        if self.scale(k) == 1:
+            ys, xs = np.divmod(idx, w)
+            return field[self.slots[k][ys // TILE, xs // TILE], ys % TILE, xs % TILE]
         hs, ws = field.shape[:2]
         y, x = np.divmod(idx, w)
         x0, fx = linear(x, ws, w)

@@ -11,6 +11,7 @@ import functools
 import hashlib
 import shutil
 import uuid
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -163,14 +164,21 @@ class Target:
 KEYER = Keyer()  # the soft key of every EXR picture
 
 
-def soft_key(image: F32, res: DepthResult) -> SoftKey:
+def soft_key(image: F32, res: DepthResult, again: Callable[[], F32] | None = None) -> SoftKey:
     """The picture's soft key, from the hard matte depth already computed when it is :data:`KEYER`'s of the
     same picture (within [0, 1], so clipping it first, as the soft key does, changes nothing); the same key as
-    ``KEYER.soft(image)``, without keying the picture a second time."""
+    ``KEYER.soft(image)``, without keying the picture a second time. ``again``: as :meth:`Keyer.soft`'s."""
     matte = res.matte
     same = res.keyed_by == KEYER and matte.shape == image.shape[:2]
     hard = matte if same and float(image.min()) >= 0.0 and float(image.max()) <= 1.0 else None
-    return KEYER.soft(image, hard)
+    return KEYER.soft(image, hard, again=again)
+
+
+def fresh_soft_key(grid: Grid, name: str, res: DepthResult) -> SoftKey:
+    """:func:`soft_key` of camera ``name``'s picture, made for it and let go of while the key is solved (made
+    again for the colour): neither the key nor ``grid`` holds it through the solve (issue 24: the write's
+    peak, where the next camera's key runs beside this one's EXR)."""
+    return soft_key(grid.frames.fresh(name), res, again=lambda: grid.frames.fresh(name))
 
 
 def write_outputs(
@@ -194,7 +202,7 @@ def write_all(
         def start(i: int) -> Future[SoftKey] | None:
             if i >= len(cams) or "exr" not in formats or not results[cams[i]].keyed_a_screen():
                 return None
-            return beside.submit(soft_key, grid.images[cams[i]], results[cams[i]])
+            return beside.submit(fresh_soft_key, grid, cams[i], results[cams[i]])
 
         pending = start(0)
         for i, name in enumerate(cams):

@@ -90,6 +90,13 @@ class FrameImages(Mapping[str, F32]):
             return to_rgb(self._captured[name], *self._format)
         return bgr8_to_rgb(self._u8[name])  # KeyError for a camera the grid does not have, as a mapping's
 
+    def fresh(self, name: str) -> F32:
+        """Camera ``name``'s float picture as a new array, neither kept here nor shared (a copy of a given
+        one): the caller's to change, and gone when the caller lets go of it (issue 24: the write's soft key,
+        which makes its picture twice rather than hold one through its solve)."""
+        rgb = self._float.get(name)
+        return rgb.copy() if rgb is not None else self._made(name)
+
     def forget_last(self) -> None:
         """Let go of the last float picture made (made again if asked: the same values): the depth's search
         reads only the greys (issue 24: 0.1 GiB at 4K through each camera's search)."""

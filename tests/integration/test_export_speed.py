@@ -6,6 +6,7 @@ but for the screen's noise."""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -205,7 +206,7 @@ def test_a_soft_key_that_fails_fails_the_write(
     """An error in the key's thread is the write's error, and no EXR is left at its name."""
     grid, results = computed
 
-    def broken(*_: object) -> None:
+    def broken(*_: object, **__: object) -> None:
         raise MemoryError("the soft key ran out of memory")
 
     monkeypatch.setattr(export, "soft_key", broken)
@@ -228,9 +229,9 @@ def test_the_next_cameras_key_is_made_while_this_one_writes_its_exr(
     started = {c: threading.Event() for c in CAMS}
     real_key, real_exr = export.soft_key, export.write_depth_exr
 
-    def key(image: np.ndarray, res: DepthResult) -> object:
+    def key(image: np.ndarray, res: DepthResult, again: Callable[[], np.ndarray] | None = None) -> object:
         started[next(c for c in CAMS if results[c] is res)].set()
-        return real_key(image, res)
+        return real_key(image, res, again)
 
     overlapped = []
 

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 import skimage.data
 
+from rigctl import keying
 from rigctl.keying import Keyer
 from rigctl.local_mean import LocalMean as _LocalMean
 
@@ -100,3 +102,41 @@ def test_a_local_mean_holds_no_frame_of_weighted_values() -> None:
     whole = values * weight[..., None]
     assert np.array_equal(mean.weighted(), whole)
     assert np.array_equal(mean.weighted((7, 90, 33, 170)), whole[7:90, 33:170])
+
+
+def test_the_ycc_in_bands_of_rows_is_the_whole_pictures_bit_for_bit(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 24, the write's peak: the key's Y, Cb, Cr are made a band of rows at a time, the same bits as the
+    whole picture's product, whether the band divides the picture or not."""
+    rng = np.random.default_rng(3)
+    rgb = (rng.random((131, 77, 3), dtype=np.float32) * np.float32(1.2) - np.float32(0.1)).astype(np.float32)
+    whole = np.asarray(rgb @ keying.RGB_TO_YCC.T, np.float32)
+    for rows in (1, 7, 64, 500):
+        monkeypatch.setattr(keying, "YCC_BAND_ROWS", rows)
+        got = keying.ycc_with_ones(rgb)
+        assert got.shape == (131, 77, 4) and got.dtype == np.float32
+        assert np.array_equal(got[..., :3].view(np.uint32), whole.view(np.uint32))
+        assert np.all(got[..., 3] == 1.0)
+
+
+def test_a_key_that_makes_its_picture_again_is_the_same_key_and_keeps_the_new_picture() -> None:
+    """Issue 24, the write's peak: given a way to make the picture again, the key lets go of the picture while
+    it is solved and takes a new one for its colour (no copy): the same alpha and colour, bit for bit, with a
+    screen and without one, and with a picture beyond [0, 1] (clipped for the key, kept for the colour)."""
+    rgb, _ = _screen_behind_a_subject()
+    bright = rgb.copy()
+    bright[100:120, 160:200] = 1.3  # super-whites on the subject
+    no_screen = skimage.data.astronaut()[:120, :160].astype(np.float32) / 255
+    for picture in (rgb, bright, no_screen):
+        made: list[np.ndarray] = []
+
+        def again(picture: np.ndarray = picture, made: list[np.ndarray] = made) -> np.ndarray:
+            made.append(picture.copy())
+            return made[-1]
+
+        reference = Keyer().soft(picture)
+        key = Keyer().soft(again(), again=again)
+        assert np.array_equal(key.alpha.view(np.uint32), reference.alpha.view(np.uint32))
+        assert np.array_equal(key.foreground.view(np.uint32), reference.foreground.view(np.uint32))
+        assert key.foreground is made[-1]  # the picture made last is the colour: not copied
+        assert len(made) == (1 if picture is no_screen else 2)  # made again only when there is a key to solve
+        assert key.solved == reference.solved

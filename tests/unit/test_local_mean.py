@@ -37,3 +37,45 @@ def test_the_shrunk_weighted_values_in_bands_are_the_frames(
         else:
             assert None not in made and all((b[1] - b[0]) % scale == 0 for b in made)
             assert len(made) == -(-h // (-(-rows // scale) * scale))  # bands of whole blocks
+
+
+def test_a_fine_field_holds_only_the_tiles_made_and_reads_the_frames_blur() -> None:
+    """Issue 24, the write's peak: a fine blur is held as the tiles made (N x TILE x TILE x C), not a frame
+    whose pages a tile's rows touch (0.12 GiB a field at 4K); what it reads is OpenCV's blur over the frame,
+    bit for bit, through calls that add tiles (the band, then the strands it grows), at the frame's edges."""
+    rng = np.random.default_rng(7)
+    h, w = 250, 333  # not whole tiles either way
+    values = with_ones(rng.normal(0, 1, (h, w, 3)).astype(np.float32))
+    weight = (rng.random((h, w)) > 0.3).astype(np.float32)
+    mean = LocalMean(values, weight, (3.0, 12.0))
+    whole = cv2.GaussianBlur(values * weight[..., None], (0, 0), 3.0).reshape(-1, 4)
+    t = local_mean.TILE
+    made = 0
+    calls = ([0, w - 1], [(h - 1) * w + w - 1, 5 * w + 100, 5 * w + 101], [40 * w + 40])
+    for idx in map(np.array, calls):
+        got = mean.sample(0, idx)
+        assert np.array_equal(got.view(np.uint32), whole[idx].view(np.uint32))
+        ys, xs = np.divmod(idx, w)
+        asked = {(int(y) // t, int(x) // t) for y, x in zip(ys, xs, strict=True)}
+        assert asked <= {(int(a), int(b)) for a, b in np.argwhere(~mean.todo[0])}
+        made = int((~mean.todo[0]).sum())
+        assert mean.fields[0].shape == (made, t, t, 4)  # the tiles made, nothing of the frame's
+    assert made == 5
+    earlier = np.array([0, w - 1, 5 * w + 100])  # tiles made by earlier calls read the same after more were added
+    assert np.array_equal(mean.sample(0, earlier).view(np.uint32), whole[earlier].view(np.uint32))
+
+
+def test_weights_in_bytes_weigh_as_float_weights_bit_for_bit() -> None:
+    """The soft key's weights are 0 and 1 in bytes (a quarter of float32's memory at the write's peak): every
+    blur, fine on tiles, fine over the frame and wide at a coarser scale, reads the same bits."""
+    rng = np.random.default_rng(8)
+    h, w = 256, 320
+    values = with_ones(rng.random((h, w, 3), dtype=np.float32))
+    byte = (rng.random((h, w)) > 0.5).astype(np.uint8)
+    as_bytes = LocalMean(values, byte, (4.0, 16.0, 64.0))
+    as_float = LocalMean(values, byte.astype(np.float32), (4.0, 16.0, 64.0))
+    assert np.array_equal(as_bytes.weighted().view(np.uint32), as_float.weighted().view(np.uint32))
+    for idx in (rng.choice(h * w, 40, replace=False), np.arange(h * w)):
+        for k in range(3):
+            a, b = as_bytes.sample(k, idx), as_float.sample(k, idx)
+            assert a.dtype == np.float32 and np.array_equal(a.view(np.uint32), b.view(np.uint32))

@@ -253,6 +253,25 @@ def test_a_grey_keeps_no_float_picture_and_the_last_picture_can_be_let_go_of() -
     assert np.array_equal(images["r0c0"], picture) and np.array_equal(images.grey("r0c1"), grey)
 
 
+def test_a_fresh_picture_is_a_new_array_kept_by_no_one() -> None:
+    """Issue 24, the write's peak: the soft key takes its picture through ``fresh``, a new array each call with
+    the picture's values, which the grid does not keep (not as its last picture either) and which the caller
+    may change without changing the grid's (a given float picture is copied)."""
+    rgb = np.random.default_rng(5).random((H, W, 3), dtype=np.float32)
+    packed = from_rgb(rgb, "UYVY").reshape(-1)
+    for images in (
+        FrameImages({"r0c0": (rgb * 255).astype(np.uint8)}),
+        FrameImages({"r0c0": rgb.copy()}),
+        FrameImages.captured({"r0c0": packed}, "UYVY", W, H),
+    ):
+        a, b = images.fresh("r0c0"), images.fresh("r0c0")
+        assert images.made_bytes() == 0  # neither kept (a read as a mapping keeps the last picture)
+        assert a is not b and not np.shares_memory(a, b)
+        assert np.array_equal(a, b) and np.array_equal(a, images["r0c0"])
+        a[...] = -1.0
+        assert np.array_equal(b, images["r0c0"]) and not np.shares_memory(b, images["r0c0"])
+
+
 @pytest.mark.parametrize("pixel_format", ["UYVY", "v210", "BGR3", "8-bit given", "float given"])
 def test_greys_beyond_the_budget_are_made_again_row_by_row_alike(
     pixel_format: str, monkeypatch: pytest.MonkeyPatch
