@@ -99,17 +99,22 @@ def steps(offsets: Mapping[str, tuple[float, float]], name: str) -> Steps:
 def layers(disparity: F32, st: Steps) -> dict[str, F32]:
     """The NUKE disparity layers of one camera; a missing estimate (+inf) is 0 (no motion), as NUKE has no
     marker for it (``depth.Z`` is 0 there)."""
-    fin = np.where(np.isfinite(disparity), disparity, 0.0).astype(np.float32)
+    fin = np.asarray(np.where(np.isfinite(disparity), disparity, np.float32(0.0)), np.float32)
     zero = np.zeros_like(fin)
+
+    def times(step: float, sign: float) -> F32:  # sign * fin * step, made in place (no frame-sized temporaries)
+        out = np.negative(fin) if sign < 0 else fin.copy()
+        return np.multiply(out, np.float32(step), out=out)
+
     out: dict[str, F32] = {}
     if st.right is not None and st.left is not None:
-        out["disparityL.x"] = (-fin * np.float32(st.right)).astype(np.float32)
+        out["disparityL.x"] = times(st.right, -1)
         out["disparityL.y"] = zero
-        out["disparityR.x"] = (fin * np.float32(st.left)).astype(np.float32)
+        out["disparityR.x"] = times(st.left, 1)
         out["disparityR.y"] = zero
     if st.below is not None:
         out["disparityV.x"] = zero
-        out["disparityV.y"] = (-fin * np.float32(st.below)).astype(np.float32)
+        out["disparityV.y"] = times(st.below, -1)
     return out
 
 

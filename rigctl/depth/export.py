@@ -222,11 +222,13 @@ def write_all(
 
 
 def depth_channels(grid: Grid, name: str, res: DepthResult) -> dict[str, F32]:
-    """The EXR's channels but the picture: 1/Z, confidence and the disparity layers."""
-    disparity = res.disparity  # each read makes the plane (held packed)
-    z = grid.depth(disparity)
-    inv_z = np.where(np.isfinite(z) & (z > 0), 1.0 / z, 0.0).astype(np.float32)
-    return {"depth.Z": inv_z, "confidence.Y": res.confidence, **layers(disparity, steps(grid.offsets, name))}
+    """The EXR's channels but the picture: 1/Z, confidence and the disparity layers. The disparity is read
+    (made from its packed form) for each, not held beside them (issue 24: the write's peak)."""
+    z = grid.depth(res.disparity)
+    with np.errstate(divide="ignore"):
+        inv_z = np.asarray(np.where(np.isfinite(z) & (z > 0), 1.0 / z, np.float32(0.0)), np.float32)
+    del z
+    return {"depth.Z": inv_z, "confidence.Y": res.confidence, **layers(res.disparity, steps(grid.offsets, name))}
 
 
 def exr_picture(grid: Grid, name: str, res: DepthResult, key: SoftKey | None, colour: str) -> dict[str, F16]:
