@@ -72,7 +72,11 @@ class Keyer:
         return a
 
     def soft(
-        self, rgb: F32, hard: F32 | None = None, everywhere: bool = False, again: Callable[[], F32] | None = None
+        self,
+        rgb: F32 | None,
+        hard: F32 | None = None,
+        everywhere: bool = False,
+        again: Callable[[], F32] | None = None,
     ) -> SoftKey:
         """The subject's coverage of every pixel (alpha, fractional on the edge) and its colour unmixed from
         the screen behind it (:func:`soft_key`); all ones and the picture itself without a screen. ``hard``:
@@ -173,7 +177,11 @@ def _cover(rgb: F32, hard: F32) -> NDArray[np.bool_]:
 
 
 def soft_key(
-    rgb: F32, keyer: Keyer, hard: F32 | None = None, everywhere: bool = False, again: Callable[[], F32] | None = None
+    rgb: F32 | None,
+    keyer: Keyer,
+    hard: F32 | None = None,
+    everywhere: bool = False,
+    again: Callable[[], F32] | None = None,
 ) -> SoftKey:
     """Alpha and the unmixed subject colour on a green screen.
 
@@ -199,21 +207,28 @@ def soft_key(
     (and the colour as captured, which alpha hides): a speck of screen noise away from the subject is screen.
     ``everywhere``: solve every pixel (the reference the band is tested against).
 
-    ``hard``: ``keyer.matte`` of the picture clipped to [0, 1], when the caller has it (then it is not computed
-    again). It is below 1 somewhere exactly when the keyer found a screen (the screen's own pixels key to 0),
-    so it also says whether there is one.
+    ``hard``: ``keyer.matte`` of the picture, when the caller has it (depth keys each camera): used when the
+    picture lies within [0, 1] (where clipping it, as the key does first, changes nothing) and has its shape,
+    else made again. It is below 1 somewhere exactly when the keyer found a screen (the screen's own pixels
+    key to 0), so it also says whether there is one.
 
-    ``again``: makes the same picture anew, a new array each call (``rgb`` then being one of them, held by no
-    one else): the key lets go of the picture while it is solved and takes a new one for the colour, instead
-    of holding the picture and a copy of it (issue 24: 0.1 GiB at 4K, at the write's peak)."""
+    ``again``: makes the picture anew, a new array each call. With ``rgb`` None the key makes it so, holds it
+    only until it has its Y, Cb, Cr and makes it again for the colour, instead of holding the picture and a
+    copy of it through the solve (issue 24: 0.1 GiB at 4K, at the write's peak); nothing above holds it."""
+    if rgb is None:
+        if again is None:
+            raise ValueError("soft_key: no picture and no way to make one")
+        rgb = again()
     captured = np.asarray(rgb, np.float32)
+    del rgb
     # NaN fails both tests: clipped, as before; an empty picture has nothing to clip
     least, most = (float(captured.min()), float(captured.max())) if captured.size else (0.0, 0.0)
-    rgb = captured if least >= 0.0 and most <= 1.0 else np.clip(captured, 0.0, 1.0)  # no copy when within
-    if hard is None:
+    within = least >= 0.0 and most <= 1.0
+    rgb = captured if within else np.clip(captured, 0.0, 1.0)  # no copy when within
+    if hard is None or not within or hard.shape != rgb.shape[:2]:
         hard = keyer.matte(rgb)
     if not bool((hard < 1).any()):
-        return SoftKey(np.ones(rgb.shape[:2], np.float32), captured.copy() if again is None else captured)
+        return SoftKey(np.ones(rgb.shape[:2], np.float32), captured if again is not None else captured.copy())
     cover = _cover(rgb, hard)
     ycc1 = ycc_with_ones(rgb)
     del rgb  # the clipped copy, when one was made

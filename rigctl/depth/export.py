@@ -164,21 +164,19 @@ class Target:
 KEYER = Keyer()  # the soft key of every EXR picture
 
 
-def soft_key(image: F32, res: DepthResult, again: Callable[[], F32] | None = None) -> SoftKey:
-    """The picture's soft key, from the hard matte depth already computed when it is :data:`KEYER`'s of the
-    same picture (within [0, 1], so clipping it first, as the soft key does, changes nothing); the same key as
-    ``KEYER.soft(image)``, without keying the picture a second time. ``again``: as :meth:`Keyer.soft`'s."""
-    matte = res.matte
-    same = res.keyed_by == KEYER and matte.shape == image.shape[:2]
-    hard = matte if same and float(image.min()) >= 0.0 and float(image.max()) <= 1.0 else None
-    return KEYER.soft(image, hard, again=again)
+def soft_key(image: F32 | None, res: DepthResult, again: Callable[[], F32] | None = None) -> SoftKey:
+    """The picture's soft key, from the hard matte depth already computed when it is :data:`KEYER`'s (used
+    where the picture lies in [0, 1], where clipping it, as the soft key does first, changes nothing); the same
+    key as ``KEYER.soft(image)``, without keying the picture a second time. ``image`` None: made by
+    ``again`` (:meth:`Keyer.soft`)."""
+    return KEYER.soft(image, res.matte if res.keyed_by == KEYER else None, again=again)
 
 
 def fresh_soft_key(grid: Grid, name: str, res: DepthResult) -> SoftKey:
-    """:func:`soft_key` of camera ``name``'s picture, made for it and let go of while the key is solved (made
-    again for the colour): neither the key nor ``grid`` holds it through the solve (issue 24: the write's
-    peak, where the next camera's key runs beside this one's EXR)."""
-    return soft_key(grid.frames.fresh(name), res, again=lambda: grid.frames.fresh(name))
+    """:func:`soft_key` of camera ``name``'s picture, made by the key and let go of while it is solved (made
+    again for the colour): neither the key's callers nor ``grid`` hold it through the solve (issue 24: the
+    write's peak, where the next camera's key runs beside this one's EXR)."""
+    return soft_key(None, res, again=lambda: grid.frames.fresh(name))
 
 
 def write_outputs(

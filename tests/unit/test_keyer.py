@@ -118,10 +118,11 @@ def test_the_ycc_in_bands_of_rows_is_the_whole_pictures_bit_for_bit(monkeypatch:
         assert np.all(got[..., 3] == 1.0)
 
 
-def test_a_key_that_makes_its_picture_again_is_the_same_key_and_keeps_the_new_picture() -> None:
-    """Issue 24, the write's peak: given a way to make the picture again, the key lets go of the picture while
-    it is solved and takes a new one for its colour (no copy): the same alpha and colour, bit for bit, with a
-    screen and without one, and with a picture beyond [0, 1] (clipped for the key, kept for the colour)."""
+def test_a_key_that_makes_its_picture_itself_is_the_same_key_and_keeps_the_new_picture() -> None:
+    """Issue 24, the write's peak: given no picture but a way to make it, the key makes it, lets go of it while
+    it is solved (no caller holds it) and makes it again for its colour (no copy): the same alpha and colour,
+    bit for bit, with a screen and without one, and with a picture beyond [0, 1] (clipped for the key, kept
+    for the colour); with neither, one clear error."""
     rgb, _ = _screen_behind_a_subject()
     bright = rgb.copy()
     bright[100:120, 160:200] = 1.3  # super-whites on the subject
@@ -134,9 +135,23 @@ def test_a_key_that_makes_its_picture_again_is_the_same_key_and_keeps_the_new_pi
             return made[-1]
 
         reference = Keyer().soft(picture)
-        key = Keyer().soft(again(), again=again)
+        key = Keyer().soft(None, again=again)
         assert np.array_equal(key.alpha.view(np.uint32), reference.alpha.view(np.uint32))
         assert np.array_equal(key.foreground.view(np.uint32), reference.foreground.view(np.uint32))
         assert key.foreground is made[-1]  # the picture made last is the colour: not copied
         assert len(made) == (1 if picture is no_screen else 2)  # made again only when there is a key to solve
         assert key.solved == reference.solved
+    with pytest.raises(ValueError, match="no picture"):
+        Keyer().soft(None)
+
+
+def test_a_hard_matte_given_is_made_again_where_it_cannot_be_the_clipped_pictures() -> None:
+    """The depth's matte spares the key its own only where it is the clipped picture's: a picture beyond [0, 1]
+    (clipped first) or of another shape has its matte made again, so the key is the key of the picture."""
+    rgb, _ = _screen_behind_a_subject()
+    bright = rgb.copy()
+    bright[100:120, 160:200] = 1.3
+    wrong = np.zeros(rgb.shape[:2], np.float32)  # a matte that would key everything away
+    for picture in (bright, rgb[:, :-2].copy()):
+        assert np.array_equal(Keyer().soft(picture, wrong).alpha, Keyer().soft(picture).alpha)
+    assert not np.array_equal(Keyer().soft(rgb, wrong).alpha, Keyer().soft(rgb).alpha)  # used where it may be
