@@ -79,10 +79,10 @@ class TemporalParams:
 
 @dataclass
 class Previous:
-    """What the next frame set reads of this one: its pictures at half size (the change test's), each camera's
-    final disparity and the frames in each pixel's mean. Not the frame set itself, nor the rest of its results
-    (at 3840x2160 that held 16 bytes a pixel and camera more, about 1.1 GiB for nine cameras, through the
-    next frame set's depth; issue 24: a chunk's memory)."""
+    """What the next frame set reads of this one: its pictures at half size (the change test's, which lets go
+    of each as it reads it), each camera's final disparity and the frames in each pixel's mean. Not the frame
+    set itself, nor the rest of its results (at 3840x2160 that held 16 bytes a pixel and camera more, about
+    1.1 GiB for nine cameras, through the next frame set's depth; issue 24: a chunk's memory)."""
 
     shape: tuple[int, int]
     pictures: HalfPictures
@@ -170,16 +170,16 @@ class Temporal:
             self.previous = None
             return
         frames = {n: self._frames[n] for n in results if n in self._frames}
-        # the half-size pictures the change test made of this frame set (the first of a run: made now)
-        made = self._change[1].pictures if self._change is not None and self._change[0] is grid else None
-        pictures = (made if made is not None else HalfPictures.of(grid)).made()
+        # made again, not kept from the change test: held through the depth they were 0.22 GiB at 3840x2160
+        pictures = HalfPictures.of(grid).made()
         disparity = {n: PackedField.held(r, "disparity") for n, r in results.items()}
         self.previous = Previous(grid.shape, pictures, disparity, frames)
         self._frames = {}
         self._change = None
 
     def _frame_change(self, prev: HalfPictures, grid: Grid) -> FrameChange:
-        """The colour change of every camera between the previous frame set and this one, once per frame set."""
+        """The colour change of every camera between the previous frame set and this one, once per frame set
+        (it lets go of the previous frame set's pictures as it reads them)."""
         if self._change is None or self._change[0] is not grid:
             p = self.params
             self._change = (grid, frame_change(prev, grid, self.noise, p.window, p.change_sigmas))

@@ -127,7 +127,6 @@ class FrameChange:
     changed: dict[str, NDArray[np.uint8]]  # 1: changed (dilated by the window), per camera
     sigma: dict[str, float]  # sensor noise, 8-bit levels
     share: dict[str, float]  # share of the camera's pixels that changed
-    pictures: HalfPictures | None = None  # the later frame set's, as the test read them (the next one's earlier)
 
 
 @dataclass
@@ -150,6 +149,12 @@ class HalfPictures:
             self.pictures[name] = half(self.grid.images[name])
         return self.pictures[name]
 
+    def take(self, name: str) -> F32:
+        """Camera ``name``'s picture, no longer held here (made if it was not)."""
+        picture = self[name]
+        del self.pictures[name]
+        return picture
+
     def made(self) -> HalfPictures:
         """Every camera's picture made and the frame set let go of."""
         for name in self.names:
@@ -170,7 +175,12 @@ def frame_change(
 ) -> FrameChange:
     """The change of every camera present in both frame sets (``prev`` may be the half-size pictures kept of
     it); adds this pair's noise figures to ``history``. The test runs at half size (``window`` is in
-    full-size pixels), its answer is given at full size, with ``cur``'s half-size pictures."""
+    full-size pixels), its answer is given at full size.
+
+    One camera at a time, and each of ``prev``'s pictures is let go of once read (``HalfPictures.take``), as
+    are ``cur``'s: holding both frame sets' half-size pictures through the frame set's depth was 0.45 GiB of
+    a chunk's peak at 3840x2160 (issue 24). The next frame set's earlier pictures are made again from the
+    grid when it is done (``Temporal.advance``): the same values, 9 resizes a frame set."""
     changed, sigma, share = {}, {}, {}
     win = max(3, window // 2 | 1)
     kernel = np.ones((win, win), np.uint8)
@@ -180,9 +190,10 @@ def frame_change(
     for name in cur.names:
         if name not in before.names:
             continue
-        a, b = before[name], now[name]
+        a, b = before.take(name), now.take(name)
         flat = flat_pixels(a, b, win)
         stat = change_statistic(a, b, win, flat)
+        del a, b
         hist = history.setdefault(name, NoiseHistory())
         hist.add(*noise_figures(stat, flat))
         moved = (stat > hist.threshold(sigmas)).astype(np.uint8)
@@ -191,19 +202,25 @@ def frame_change(
         changed[name] = np.asarray(cv2.resize(grown, (w, h), interpolation=cv2.INTER_NEAREST), np.uint8)
         sigma[name] = hist.sigma()
         share[name] = float(changed[name].mean())
-    return FrameChange(changed, sigma, share, now)
+    return FrameChange(changed, sigma, share)
 
 
 def still_in_every_view(change: FrameChange, grid: Grid, ref: str, disparity: F32) -> NDArray[np.bool_]:
     """Pixels of ``ref`` (with a finite ``disparity``) unchanged in ``ref`` and in every other camera that sees
     them: the point at disparity d lies at (x - d dx, y - d dy) in a camera at offset (dx, dy)."""
-    h, w = disparity.shape
     have = np.isfinite(disparity)
     still = have & (change.changed[ref] == 0)
-    if not still.any():
+    rows, cols = np.flatnonzero(still.any(axis=1)), np.flatnonzero(still.any(axis=0))
+    if not rows.size:
         return still
-    gy, gx = np.mgrid[0:h, 0:w].astype(np.float32)
-    d = np.where(have, disparity, 0.0).astype(np.float32)
+    # only the box of the pixels that can stay still: a whole frame's coordinate grids and maps were 0.3 GiB
+    # at 3840x2160 (issue 24); each pixel's map is the same number either way
+    y0, y1, x0, x1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+    box = still[y0:y1, x0:x1]
+    gy = np.arange(y0, y1, dtype=np.float32)[:, None]
+    gx = np.arange(x0, x1, dtype=np.float32)[None, :]
+    part = disparity[y0:y1, x0:x1]
+    d = np.where(have[y0:y1, x0:x1], part, 0.0).astype(np.float32)
     ox, oy = grid.offsets[ref]
     for name, moved in change.changed.items():
         if name == ref:
@@ -214,5 +231,5 @@ def still_in_every_view(change: FrameChange, grid: Grid, ref: str, disparity: F3
         mx, my = gx - d * np.float32(rx), gy - d * np.float32(ry)
         # outside the camera's picture: it does not see the point, so it has no say (border value 0)
         seen_moved = cv2.remap(moved, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-        still &= seen_moved == 0
+        box &= seen_moved == 0
     return still

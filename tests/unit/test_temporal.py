@@ -13,7 +13,7 @@ import pytest
 from rigctl.depth.estimate import DepthResult
 from rigctl.depth.grid import Grid, grid_from_arrays
 from rigctl.depth.temporal import Temporal, TemporalParams
-from rigctl.depth.temporal_change import NoiseHistory, frame_change, still_in_every_view
+from rigctl.depth.temporal_change import FrameChange, HalfPictures, NoiseHistory, frame_change, still_in_every_view
 from rigctl.errors import ParameterError
 
 H, W = 96, 128
@@ -223,3 +223,76 @@ def test_the_deciding_costs_in_bands_are_the_whole_crops(band: int, monkeypatch:
     assert (c_new != c_prev).mean() > 0.5
     empty = Temporal()._costs(grid, "r1c1", d_new, d_prev, np.zeros((H, W), bool))
     assert empty[0].size == empty[1].size == 0
+
+
+def whole_frame_still(change: FrameChange, grid: Grid, ref: str, disparity: np.ndarray) -> np.ndarray:
+    """``still_in_every_view`` as it was before issue 24's box: coordinate grids and maps of the whole frame."""
+    h, w = disparity.shape
+    have = np.isfinite(disparity)
+    still = have & (change.changed[ref] == 0)
+    gy, gx = np.mgrid[0:h, 0:w].astype(np.float32)
+    d = np.where(have, disparity, 0.0).astype(np.float32)
+    ox, oy = grid.offsets[ref]
+    for name, moved in change.changed.items():
+        rx, ry = grid.offsets[name][0] - ox, grid.offsets[name][1] - oy
+        if name == ref or (abs(rx) < 1e-9 and abs(ry) < 1e-9):
+            continue
+        mx, my = gx - d * np.float32(rx), gy - d * np.float32(ry)
+        seen = cv2.remap(moved, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        still &= seen == 0
+    return still
+
+
+@pytest.mark.parametrize("where", ["middle", "corner", "edges", "none", "one pixel"])
+def test_the_still_test_on_the_box_of_the_estimates_is_the_whole_frames(where: str) -> None:
+    """Issue 24, a chunk's memory: the still test maps only the box of the pixels that can be still, each
+    pixel's map the same number as the whole frame's (subjects at the frame's edges, NaN, +inf, fractions)."""
+    rng = np.random.default_rng(7)
+    grid = scene(50, 1.0, 1)
+    changed = {n: (rng.random((H, W)) < 0.02).astype(np.uint8) for n in grid.names}
+    changed["r0c2"][:, :20] = 1  # a view whose edge changed: points near x=0 in r1c1 that it sees there
+    change = FrameChange(changed, {n: 1.0 for n in grid.names}, {n: 0.0 for n in grid.names})
+    d = np.full((H, W), np.nan, np.float32)
+    if where == "middle":
+        d[30:60, 40:90] = rng.uniform(-2.0, 9.5, (30, 50)).astype(np.float32)
+    elif where == "corner":
+        d[H - 20 :, W - 25 :] = rng.uniform(0.0, 30.0, (20, 25)).astype(np.float32)
+    elif where == "edges":
+        d[:, :7] = 3.25
+        d[0, :] = rng.uniform(-40.0, 40.0, W).astype(np.float32)
+        d[H - 1, W - 1] = np.inf
+    elif where == "one pixel":
+        d[H // 2, 3] = 2.5
+    got = still_in_every_view(change, grid, "r1c1", d)
+    assert got.shape == (H, W) and got.dtype == bool
+    np.testing.assert_array_equal(got, whole_frame_still(change, grid, "r1c1", d))
+    if where in ("middle", "corner"):
+        assert 0 < got.sum() < np.isfinite(d).sum()  # some pixels still, some seen moving by a view
+
+
+def test_the_change_test_lets_go_of_both_frame_sets_pictures() -> None:
+    """Issue 24, a chunk's memory: the previous frame set's half-size pictures are let go of as the change test
+    reads them, and the test keeps none of this frame set's (``advance`` makes them again once it is done);
+    the stabilised results are those of a stabiliser that kept them (the same values made again)."""
+    a, b, c = scene(50, 1.0, 1), scene(50, 1.0, 2), scene(54, 1.0, 3)
+    temporal = Temporal()
+    out = []
+    for grid in (a, b, c):
+        results = {
+            n: temporal.stabilise(grid, n, result(truth(50) + 0.01 * len(out)), (0.0, 10.0)) for n in ("r1c1", "r0c0")
+        }
+        if temporal.previous is not None:
+            assert temporal.previous.pictures.pictures == {}  # read and let go of
+            assert temporal._change is not None and not hasattr(temporal._change[1], "pictures")
+        out.append({n: r.disparity.copy() for n, r in results.items()})
+        temporal.advance(grid, results)
+        assert temporal.previous is not None and set(temporal.previous.pictures.pictures) == set(grid.names)
+    assert out[1]["r1c1"][40, 60] != out[0]["r1c1"][40, 60]  # the second frame set was stabilised
+    # against the change test fed the half-size pictures straight from the grids
+    history: dict[str, NoiseHistory] = {}
+    first = frame_change(a, b, history, 5, 6.0)
+    kept: dict[str, NoiseHistory] = {}
+    again = frame_change(HalfPictures.of(a).made(), b, kept, 5, 6.0)
+    for n in a.names:
+        np.testing.assert_array_equal(first.changed[n], again.changed[n])
+    assert history["r1c1"].levels == kept["r1c1"].levels
