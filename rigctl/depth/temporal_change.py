@@ -178,9 +178,10 @@ def frame_change(
     full-size pixels), its answer is given at full size.
 
     One camera at a time, and each of ``prev``'s pictures is let go of once read (``HalfPictures.take``), as
-    are ``cur``'s: holding both frame sets' half-size pictures through the frame set's depth was 0.45 GiB of
-    a chunk's peak at 3840x2160 (issue 24). The next frame set's earlier pictures are made again from the
-    grid when it is done (``Temporal.advance``): the same values, 9 resizes a frame set."""
+    are ``cur``'s: both frame sets' half-size pictures were 0.45 GiB held through the frame set's depth at
+    3840x2160 (issue 24; the resident peak, glibc's, did not fall with them: see the README). The next frame
+    set's earlier pictures are made again from the grid when it is done (``Temporal.advance``): the same
+    values, 9 resizes a frame set."""
     changed, sigma, share = {}, {}, {}
     win = max(3, window // 2 | 1)
     kernel = np.ones((win, win), np.uint8)
