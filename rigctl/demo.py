@@ -153,7 +153,7 @@ def _run_demo(out: Path, say: Say, progress_factory: Callable[[str, str], Any]) 
     with progress_factory("depth", "cameras") as bar:
         depth = run_depth(
             takes / "presenter-rectified", out / "depth", DepthOptions(near_m=near, far_m=far), [0],
-            progress=bar.update,
+            ("exr", "pfm", "png"), progress=bar.update,  # every output: the previews make the montage
         )  # fmt: skip
     frame = next(iter(depth.frames.values()))
     montage = _montage(out / "depth" / "000000", rig.camera_names, out / "depth-previews.png")

@@ -122,6 +122,21 @@ def header(st: Steps) -> dict[str, object]:
     return {CONVENTION: NUKE, STEPS: st.header()}
 
 
+def disparity_file(folder: Path, name: str) -> Path:
+    """Where camera ``name``'s disparity is in a depth output's frame ``folder``: its PFM, or, where there is
+    none (written without ``--formats pfm``, the default since issue 24), its EXR (:func:`read_disparity`:
+    the same values, bit for bit). The PFM's path when neither is there, for a caller's message."""
+    pfm, exr = folder / f"{name}.pfm", folder / f"{name}.exr"
+    return exr if not pfm.exists() and exr.exists() else pfm
+
+
+def read_any_disparity(path: Path) -> F32:
+    """The disparity in ``path``, a PFM or a depth EXR (:func:`disparity_file`)."""
+    from rigctl.pfm import read_pfm
+
+    return read_disparity(path) if path.suffix == ".exr" else read_pfm(path)
+
+
 def read_disparity(path: Path) -> F32:
     """rigctl's disparity (pixels per horizontal spacing, +inf where there is none) from a depth EXR,
     in the NUKE convention or the one before it (told apart by ``CONVENTION``); an EXR without disparity

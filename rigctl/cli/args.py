@@ -175,9 +175,18 @@ def add_layout(p: argparse.ArgumentParser) -> None:
 
 def add_pipeline_options(p: argparse.ArgumentParser) -> None:
     """The take-level pipeline's options, the same for rigctl depth and rigctl process."""
+    from rigctl.depth.export import DEFAULT_FORMATS, FORMATS
     from rigctl.depth.options import DEFAULT_CHUNK, DEFAULT_WARMUP
 
     p.add_argument("--no-temporal", action="store_true", help="each frame set on its own (no temporal stabilisation)")
+    p.add_argument(
+        "--formats",
+        type=output_formats,
+        default=DEFAULT_FORMATS,
+        metavar="LIST",
+        help=f"what to write per frame and camera, a comma-separated choice of {', '.join(FORMATS)} (default "
+        f"{','.join(DEFAULT_FORMATS)}: the EXR holds the disparity; pfm adds it as PFM, png a colour preview)",
+    )
     p.add_argument(
         "--chunk",
         type=positive_int,
@@ -192,6 +201,18 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
         metavar="W",
         help=f"frame sets before a chunk processed, not written, to settle the stabiliser (default {DEFAULT_WARMUP})",
     )
+
+
+def output_formats(text: str) -> tuple[str, ...]:
+    """``--formats``: what a depth run writes (:func:`rigctl.depth.export.parse_formats`), refused as argparse
+    refuses any other value (one line, exit 2)."""
+    from rigctl.depth.export import parse_formats
+    from rigctl.errors import ParameterError
+
+    try:
+        return parse_formats(text)
+    except ParameterError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--formats: ")) from None
 
 
 def depth_options(ns: argparse.Namespace) -> DepthOptions:

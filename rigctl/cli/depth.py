@@ -28,12 +28,14 @@ def register(sub: argparse._SubParsersAction) -> None:
             ("one camera of an ideal simulated take (already rectified), fast preset, scored against the truth",
              "rigctl depth takes/ideal --out ideal-depth --cameras r1c1 --preset fast"),
             ("an EXR sequence per camera for NUKE", "rigctl depth takes/ideal --out ideal-nuke --layout sequence"),
+            ("the disparity as PFM and a colour preview beside the EXR",
+             "rigctl depth takes/ideal --out ideal-all --cameras r1c1 --formats exr,pfm,png"),
         ),
-        help="per-camera disparity and depth of a rectified take or grid folder (EXR, PFM, PNG)",
+        help="per-camera disparity and depth of a rectified take or grid folder (EXR; PFM, PNG when asked)",
         description="Multi-baseline depth: every other camera of the grid with its own baseline, only the keyed "
         "subject, only the planned disparity range (from --near/--far). Writes <frame>/<camera>.exr (scene-linear "
         "RGB and A, disparityL/R/V as NUKE names them: onto the camera right/left/below, depth.Z = 1/Z), "
-        ".pfm (disparity, +inf where none) and .png (red near, "
+        "with --formats also .pfm (disparity, +inf where none) and .png (red near, "
         "blue far), and report.json (--layout sequence: <camera>/<camera>.<frame>.exr). Presets: "
         + "; ".join(f"{p.name}: {p.description}" for p in PRESETS.values()),
     )
@@ -87,6 +89,7 @@ def run(ns: argparse.Namespace) -> int:
                 ns.out,
                 opt,
                 frames,
+                ns.formats,
                 progress=bar.update,
                 skip_damaged=ns.skip_damaged,
                 layout=ns.layout,

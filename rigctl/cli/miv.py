@@ -78,7 +78,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     ex.add_argument(
         "disparity",
         type=args.InputPath("disparity"),
-        help="disparity folder: <frame>/<camera>.pfm (a depth output, truth)",
+        help="disparity folder: <frame>/<camera>.pfm or, without one, .exr (a depth output, truth)",
     )
     ex.add_argument("--out", type=Path, required=True, help="new folder for the content")
     ex.add_argument("--frames", metavar="A-B", help="frame sets A-B (default: every one with a disparity)")

@@ -154,6 +154,7 @@ def run(ns: argparse.Namespace) -> int:
         scheduler=scheduler_url(ns.scheduler) if ns.scheduler else None,
         workers=ns.workers,
         memory_limit=ns.memory_limit,
+        formats=ns.formats,
     )
     with Progress(f"process {ns.take.name}", "frame sets", ns.quiet) as bar:
 

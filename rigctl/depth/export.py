@@ -1,8 +1,9 @@
 """A frame set's outputs per camera: disparity + depth as EXR (NUKE layers: the picture in half floats, depth,
 disparity and confidence in float32, the take's time and the rectified camera as ``worldToCamera`` /
-``worldToNDC``, ``rigctl.exrcam``), PFM, a colour-mapped PNG preview (red near, blue far), written in a
-``rigctl.layout`` layout, or (``atomic``, the farm) staged beside the frame's folder and renamed into it file
-by file, each file's size and SHA-256 recorded so a resumed run can tell a whole file from a damaged one."""
+``worldToNDC``, ``rigctl.exrcam``) and, when asked, PFM and a colour-mapped PNG preview (red near, blue far),
+written in a ``rigctl.layout`` layout, or (``atomic``, the farm) staged beside the frame's folder and renamed
+into it file by file, each file's size and SHA-256 recorded so a resumed run can tell a whole file from a
+damaged one."""
 
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ from rigctl.depth.grid import Grid
 from rigctl.diskspace import check_free_space
 from rigctl.disparity_layers import header as disparity_header
 from rigctl.disparity_layers import layers, steps
+from rigctl.errors import ParameterError
 from rigctl.exr import FAST_LOSSLESS, half_picture, picture_attributes, write_exr
 from rigctl.exrcam import camera_attributes
 from rigctl.keying import Keyer, SoftKey
@@ -37,7 +39,10 @@ from rigctl.timecode import Timecode
 
 F32 = NDArray[np.float32]
 F16 = NDArray[np.float16]
-FORMATS = ("exr", "pfm", "png")
+FORMATS = ("exr", "pfm", "png")  # what a run can write
+# what it writes unless asked (issue 24: the PFM and the preview, 9 % of the write, only when asked; the EXR
+# holds the disparity the PFM did, rigctl render and rigctl miv read it from there)
+DEFAULT_FORMATS = ("exr",)
 PARTIAL_PREFIX = ".partial-"
 # what one camera's outputs take a pixel at most, as if nothing compressed (with a margin for what compression
 # adds): the EXR's half-float RGBA (8 bytes) and float32 depth.Z, confidence and six disparity layers (32); the
@@ -46,14 +51,27 @@ OUTPUT_BYTES_PER_PIXEL = {"exr": 44, "pfm": 4, "png": 4}
 OUTPUT_FILE_BYTES = 1 << 16
 
 
-def outputs_bytes(pictures: int, width: int, height: int, formats: tuple[str, ...] = FORMATS) -> int:
+def parse_formats(text: str) -> tuple[str, ...]:
+    """``--formats``: a comma-separated choice of :data:`FORMATS` (in their order, each once)."""
+    asked = [f.strip().lower() for f in text.split(",") if f.strip()]
+    unknown = [f for f in asked if f not in FORMATS]
+    if unknown or not asked:
+        raise ParameterError(
+            f"--formats: expected a comma-separated choice of {', '.join(FORMATS)} (such as exr,pfm), got {text!r}"
+        )
+    return tuple(f for f in FORMATS if f in asked)
+
+
+def outputs_bytes(pictures: int, width: int, height: int, formats: tuple[str, ...] = DEFAULT_FORMATS) -> int:
     """The most ``pictures`` cameras' outputs of ``width`` x ``height`` in ``formats`` take on disk: a run is
     refused up front rather than the disk filled halfway (report.json's 1 MB beside them)."""
     per = sum(width * height * OUTPUT_BYTES_PER_PIXEL[f] + OUTPUT_FILE_BYTES for f in formats)
     return pictures * per + (1 << 20)
 
 
-def check_room(out: Path, sets: int, cameras: int, size: tuple[int, int], formats: tuple[str, ...] = FORMATS) -> None:
+def check_room(
+    out: Path, sets: int, cameras: int, size: tuple[int, int], formats: tuple[str, ...] = DEFAULT_FORMATS
+) -> None:
     """Refuse (exit 4, one line) an --out whose file system cannot take ``cameras`` cameras' outputs in ``sets``
     frame sets of ``size`` (``rigctl.diskspace``): before the first of the work, not with the disk full halfway."""
     w, h = size
@@ -274,7 +292,7 @@ class Exporter:
     out: Path
     layout: str = "frames"
     colour: str = "rec709"
-    formats: tuple[str, ...] = FORMATS
+    formats: tuple[str, ...] = DEFAULT_FORMATS
     flat: bool = False
     atomic: bool = False
 

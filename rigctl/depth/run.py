@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from rigctl.depth.estimate import DepthResult
-from rigctl.depth.export import Exporter, Target, check_room, colour_preview, write_outputs
+from rigctl.depth.export import DEFAULT_FORMATS, Exporter, Target, check_room, colour_preview, write_outputs
 from rigctl.depth.grid import Grid, TakeGrid
 from rigctl.depth.options import DEFAULT_CHUNK, DepthOptions
 from rigctl.depth.pipeline import ChunkEnd, FrameDone, TakeProcessor, chunks, settle
@@ -79,7 +79,7 @@ def run_depth(
     out: Path,
     opt: DepthOptions,
     frames: Sequence[int] | None = None,
-    formats: tuple[str, ...] = ("exr", "pfm", "png"),
+    formats: tuple[str, ...] = DEFAULT_FORMATS,
     progress: Callable[[int, int, str], None] | None = None,
     skip_damaged: bool = False,
     layout: str = "frames",

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from rigctl.allocator import limit_arenas
-from rigctl.depth.export import Exporter, frame_name
+from rigctl.depth.export import DEFAULT_FORMATS, Exporter, frame_name
 from rigctl.depth.grid import TakeGrid
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.pipeline import ChunkEnd, FrameDone, TakeProcessor
@@ -46,6 +46,7 @@ class ChunkJob:
     decision: RangeDecision
     state: SearchState
     calibration: str | None = None
+    formats: tuple[str, ...] = DEFAULT_FORMATS
 
 
 def pin_threads() -> None:
@@ -99,7 +100,9 @@ def run_chunk(job: ChunkJob) -> tuple[list[tuple[int, FrameEntry]], ChunkEnd]:
     worker = worker_address()
     out: list[tuple[int, FrameEntry]] = []
     source = cached_source(job.take, job.calibration)
-    processor = TakeProcessor(source, job.options, job.decision, Exporter(Path(job.out), atomic=True))
+    processor = TakeProcessor(
+        source, job.options, job.decision, Exporter(Path(job.out), formats=job.formats, atomic=True)
+    )
     t0 = time.perf_counter()
     for item in processor.run_chunk(list(job.frames), catch=FAILURES, state=job.state):
         seconds = time.perf_counter() - t0

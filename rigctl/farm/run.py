@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel, ConfigDict
 
-from rigctl.depth.export import FORMATS, PARTIAL_PREFIX, Exporter, check_room, frame_name
+from rigctl.depth.export import DEFAULT_FORMATS, PARTIAL_PREFIX, Exporter, check_room, frame_name
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.pipeline import ChunkEnd, chunks, settle
 from rigctl.depth.take_range import RangeDecision, SearchRounds, SearchState, hull
@@ -67,6 +67,7 @@ class FarmOptions:
     scheduler: str | None = None
     workers: int = 2
     memory_limit: str | int = "auto"
+    formats: tuple[str, ...] = DEFAULT_FORMATS  # what each frame set writes per camera (rigctl.depth.export)
 
 
 @dataclass
@@ -196,12 +197,12 @@ def frames_to_do(options: FarmOptions) -> Work:
     ledger.data.chunk, ledger.data.warmup = options.depth.chunk, options.depth.warmup
     depth_dir = options.out / "depth"
     names = list(cams or reader.names)
-    files = [f"{c}.{ext}" for c in names for ext in FORMATS]
+    files = [f"{c}.{ext}" for c in names for ext in options.formats]  # a frame set is whole with what is asked
     whole = {n for n in numbers if ledger.whole(frame_name(n), depth_dir / frame_name(n))
              and all((depth_dir / frame_name(n) / f).exists() for f in files)}  # fmt: skip
     sets = sum(len(c) for c in chunks(numbers, options.depth.chunk) if options.redo or not whole.issuperset(c))
     if sets:  # a chunk is written whole
-        check_room(options.out, sets, len(names), (reader.width, reader.height))
+        check_room(options.out, sets, len(names), (reader.width, reader.height), options.formats)
     return Work(chunks(numbers, options.depth.chunk), whole, ledger, options.redo)
 
 
@@ -382,9 +383,8 @@ def process_take(
                 chunks_seen.update(tuple(c) for c in todo)
                 futures = {}
                 for chunk in todo:
-                    job = ChunkJob(
-                        take, str(depth_dir.resolve()), tuple(chunk), options.depth, decision, state, calibration
-                    )
+                    job = ChunkJob(take, str(depth_dir.resolve()), tuple(chunk), options.depth, decision, state,
+                                   calibration, options.formats)  # fmt: skip
                     key = f"rigctl-chunk-{frame_name(chunk[0])}-r{round_}-{run_id}"
                     futures[client.submit(run_chunk, job, key=key, pure=False)] = chunk
                 if progress:

@@ -109,12 +109,12 @@ def camera_entry(
 
 
 def _disparity(folder: Path, number: int, name: str, shape: tuple[int, int], take: Path) -> F32:
-    from rigctl.pfm import read_pfm
+    from rigctl.disparity_layers import disparity_file, read_any_disparity
 
-    path = folder / f"{number:06d}" / f"{name}.pfm"
+    path = disparity_file(folder / f"{number:06d}", name)  # the PFM or, without one, the depth EXR
     if not path.is_file():
-        raise TakeError(f"{path}: no disparity for camera {name} of frame {number}")
-    return checked_disparity(path, read_pfm(path), shape, take)
+        raise TakeError(f"{path}: no disparity for camera {name} of frame {number} (nor an EXR beside it)")
+    return checked_disparity(path, read_any_disparity(path), shape, take)
 
 
 def export_miv(take: Path, disparity_dir: Path, out: Path, frames: range | None = None) -> list[Path]:

@@ -16,10 +16,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.depth.sources import FrameSource, open_source
-from rigctl.disparity_layers import checked_disparity, read_disparity
+from rigctl.disparity_layers import checked_disparity, disparity_file, read_any_disparity
 from rigctl.errors import ParameterError, TakeError
 from rigctl.keying import Keyer
-from rigctl.pfm import read_pfm
 from rigctl.regular import read_regular
 from rigctl.rig import CAMERA_NAME
 from rigctl.take.framesets import check_frames, ranges
@@ -149,16 +148,14 @@ class RenderInput:
         folder = self._disparity_file(number, names[0]).parent
         raise TakeError(
             f"{self.disparity_dir}: no disparity for frame {number} of {self.source} "
-            f"(expected {folder}/<camera>.pfm for cameras {', '.join(names)})"
+            f"(expected {folder}/<camera>.exr or .pfm for cameras {', '.join(names)})"
         )
 
     def _disparity_file(self, number: int, name: str) -> Path:
         folder = self.disparity_dir / f"{number:06d}"
         if self.frames.flat and not folder.is_dir():
             folder = self.disparity_dir  # a grid folder's depth output has no frame level
-        pfm = folder / f"{name}.pfm"
-        exr = folder / f"{name}.exr"  # a depth output written with --format exr only
-        return exr if not pfm.exists() and exr.exists() else pfm
+        return disparity_file(folder, name)
 
     def timing(self, number: int) -> tuple[float | None, Timecode | None]:
         """A take's rate and frame set ``number``'s timecode, which its views carry (None for a grid folder)."""
@@ -198,8 +195,7 @@ class RenderInput:
             self._no_disparity(number)
         disps: dict[str, F32] = {}
         for n, path in found.items():
-            disp = read_disparity(path) if path.suffix == ".exr" else read_pfm(path)
-            disps[n] = checked_disparity(path, disp, (h, w), self.source)
+            disps[n] = checked_disparity(path, read_any_disparity(path), (h, w), self.source)
         estimated = {n for n, d in disps.items() if bool(np.isfinite(d).any())}
         if not estimated and self.refuse_unestimated:  # every view would be empty, every score one of nothing
             raise TakeError(

@@ -194,7 +194,8 @@ def test_an_ideal_take_is_recorded_with_its_rectification_and_an_old_one_is_rect
         assert diff.max() <= 1, (cam, diff.max())
 
 
-def test_cli_depth_writes_every_output(ideal_take: Path, tmp_path: Path) -> None:
+def test_cli_depth_writes_every_output_asked_for(ideal_take: Path, tmp_path: Path) -> None:
+    from rigctl.disparity_layers import read_disparity
     from rigctl.exr import read_exr
     from rigctl.pfm import read_pfm
 
@@ -211,6 +212,8 @@ def test_cli_depth_writes_every_output(ideal_take: Path, tmp_path: Path) -> None
         "--cameras",
         "r1c1",
         "r1c0",
+        "--formats",
+        "png,exr,pfm",
         "--json",
     )
     assert res.returncode == 0, res.stderr
@@ -225,6 +228,7 @@ def test_cli_depth_writes_every_output(ideal_take: Path, tmp_path: Path) -> None
     # the end camera of the row carries both fields too (the NUKE convention of issue 29: the grid defines both)
     assert {"disparityL.x", "disparityR.x"} <= set(read_exr(out / "000000" / "r1c0.exr")[0])
     d = read_pfm(out / "000000" / "r1c1.pfm")
+    assert np.array_equal(read_disparity(out / "000000" / "r1c1.exr"), d)  # what a reader finds without the PFM
     fg = np.isfinite(d)
     assert np.allclose(channels["depth.Z"][fg], d[fg] / (header_focal(header) * 0.12), rtol=1e-4)
     assert not np.isnan(d).any() and np.isinf(d[~fg]).all()
@@ -241,6 +245,10 @@ def header_focal(header: dict) -> float:  # type: ignore[type-arg]
 
 
 def test_cli_depth_refuses_unrectified_takes_and_bad_options(tmp_path: Path) -> None:
+    for bad in ("exr,tiff", ",", "EXR;pfm"):
+        res = run_rigctl("depth", str(tmp_path), "--out", str(tmp_path / "d"), "--formats", bad)
+        assert res.returncode == 2 and "--formats: expected a comma-separated choice of exr, pfm, png" in res.stderr
+        assert len(res.stderr.strip().splitlines()) <= 2 and not (tmp_path / "d").exists(), res.stderr
     res = run_rigctl("record", "--take", "raw", "--frames", "1", "--out", str(tmp_path), "--sim", "motion=false")
     assert res.returncode == 0, res.stderr
     res = run_rigctl("depth", str(tmp_path / "raw"), "--out", str(tmp_path / "d"))
@@ -258,9 +266,11 @@ def test_grid_folder_input(tmp_path: Path) -> None:
     )
     res = run_rigctl("depth", str(tmp_path), "--out", str(tmp_path / "out"), "--no-key", "--json")
     assert res.returncode == 0, res.stderr
-    from rigctl.pfm import read_pfm
+    from rigctl.disparity_layers import read_disparity
 
-    d = read_pfm(tmp_path / "out" / "r0c0.pfm")
+    # the EXR alone unless --formats asks for more (issue 24): it holds the disparity
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["r0c0.exr", "r0c1.exr", "report.json"]
+    d = read_disparity(tmp_path / "out" / "r0c0.exr")
     assert np.median(np.abs(d[10:-10, 10:-10] - 6.0)) < 0.5
 
 
@@ -454,7 +464,7 @@ def test_cli_depth_sequence_layout_carries_linear_rgb_alpha_and_timecode(ideal_t
     assert res.returncode == 0, res.stderr
     # one folder per camera holding a numbered sequence, for NUKE (r1c1.######.exr) and Unreal's Img Media
     assert sorted(p.relative_to(out).as_posix() for p in out.rglob("r1c1.*")) == [
-        "r1c1/r1c1.000000.exr", "r1c1/r1c1.000000.pfm", "r1c1/r1c1.000000.png",
+        "r1c1/r1c1.000000.exr",  # no PFM or PNG unless --formats asks (issue 24)
     ]  # fmt: skip
     channels, header = read_exr(out / "r1c1" / "r1c1.000000.exr")
     reader = TakeReader(ideal_take)

@@ -152,4 +152,4 @@ def test_cli_names_size_mismatch_gap_and_nothing_to_estimate(tmp_path: Path) -> 
     (gap / "grid.yaml").write_text(spec)
     res = run_rigctl("depth", str(gap), "--out", str(tmp_path / "o3"), "--no-key")
     assert res.returncode == 0, res.stderr
-    assert (tmp_path / "o3" / "r0c0.pfm").exists() and (tmp_path / "o3" / "r0c5.pfm").exists()
+    assert (tmp_path / "o3" / "r0c0.exr").exists() and (tmp_path / "o3" / "r0c5.exr").exists()

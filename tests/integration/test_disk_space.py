@@ -75,10 +75,11 @@ def test_an_export_the_disk_cannot_hold_is_refused_before_writing(
     refused_then_run(argv, out, need, f"18 pictures of {w}x{h} ({fmt.upper()})", given, asked, capsys)
 
 
+@pytest.mark.parametrize("formats", [("exr",), ("exr", "pfm", "png")])
 @pytest.mark.parametrize("verb", [["depth"], ["process", "--workers", "1"]])
 def test_a_depth_or_process_run_the_disk_cannot_hold_is_refused_before_writing(
     tiny: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
-    verb: list[str],
+    verb: list[str], formats: tuple[str, ...],
 ) -> None:  # fmt: skip
     """``process`` as ``depth``: what its chunks will write, checked on the client before any worker starts."""
     rect = tiny[1]
@@ -86,10 +87,11 @@ def test_a_depth_or_process_run_the_disk_cannot_hold_is_refused_before_writing(
     reader = TakeReader(rect)
     w, h = reader.width, reader.height
     out = tmp_path / "new" / "d"
-    need = outputs_bytes(4, w, h)  # frame sets 0 and 1 of two cameras, EXR + PFM + PNG
+    need = outputs_bytes(4, w, h, formats)  # frame sets 0 and 1 of two cameras, in the formats asked for
+    asked_for = ["--formats", ",".join(formats)] if len(formats) > 1 else []  # the EXR alone unless asked
     argv = [verb[0], str(rect), "--out", str(out), "--frames", "0-1", "--cameras", "r1c1", "r1c2", "--preset",
-            "fast", *verb[1:], "--quiet"]  # fmt: skip
-    what = f"2 cameras' depth in 2 frame sets at {w}x{h} (EXR + PFM + PNG)"
+            "fast", *verb[1:], *asked_for, "--quiet"]  # fmt: skip
+    what = f"2 cameras' depth in 2 frame sets at {w}x{h} ({' + '.join(f.upper() for f in formats)})"
     refused_then_run(argv, out, need, what, given, asked, capsys)
     if verb[0] == "process":  # a second run finds every frame set whole: nothing to write, nothing to find room for
         given[0] = 0

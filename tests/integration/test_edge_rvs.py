@@ -20,6 +20,7 @@ from tests_support import run_rigctl
 from rigctl import registry
 from rigctl.depth.grid import TakeGrid
 from rigctl.depth.metrics import silhouette
+from rigctl.disparity_layers import read_disparity
 from rigctl.interop import yuv
 from rigctl.interop.miv import depth_name, texture_name
 from rigctl.pfm import read_pfm
@@ -116,7 +117,7 @@ def test_depth_ends_where_the_subject_ends_on_all_nine_cameras(take: Path, our_d
     has (it was 0.72 %: a 1-px halo and the burnt-in id), none on at most 0.5 % of the subject."""
     false = missed = subject = 0
     for p in sorted((take / "truth" / "disparity" / "000000").glob("*.pfm")):
-        truth, est = read_pfm(p), read_pfm(our_depth / "000000" / p.name)
+        truth, est = read_pfm(p), read_disparity(our_depth / "000000" / f"{p.stem}.exr")  # no PFM unless asked
         sc = silhouette(est, truth, np.isfinite(truth))
         n = int(np.isfinite(truth).sum())
         false += int(sc["false_fg_pixels"])

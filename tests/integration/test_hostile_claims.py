@@ -93,7 +93,7 @@ def test_a_rectification_that_is_no_rotation_is_one_line(ideal: Path, tmp_path: 
         else ["depth", str(take), "--out", str(tmp_path / "d"), "--preset", "fast"]
     )
     one_line(rigctl(*cmd), EXIT_BAD_INPUT, f"{take / 'take.yaml'}:", "rectification.R", "is not a rotation")
-    assert not (tmp_path / "d").exists() or not any((tmp_path / "d").rglob("*.pfm"))
+    assert not (tmp_path / "d").exists() or not any((tmp_path / "d").rglob("*.exr"))
 
 
 def test_a_rotation_written_in_float32_by_another_tool_is_read(ideal: Path, tmp_path: Path) -> None:
@@ -131,7 +131,7 @@ def test_two_grids_far_apart_in_one_folder_are_refused_naming_both(tmp_path: Pat
         res, EXIT_BAD_INPUT, f"{grid}: the pictures form 2 grids that share no view",
         "r0c0..r2c2 (9 cameras)", "r100c100..r102c102 (9 cameras)",
     )  # fmt: skip
-    assert not (tmp_path / "d").exists() or not any((tmp_path / "d").rglob("*.pfm"))
+    assert not (tmp_path / "d").exists() or not any((tmp_path / "d").rglob("*.exr"))
 
 
 def test_a_chain_of_cameras_that_share_views_pairwise_is_one_grid(tmp_path: Path) -> None:
@@ -140,7 +140,7 @@ def test_a_chain_of_cameras_that_share_views_pairwise_is_one_grid(tmp_path: Path
     grid = grid_folder(tmp_path / "g", [(0, 0), (0, 40), (0, 80), (0, 120)])
     res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=300)
     assert res.returncode == 0, res.stderr
-    assert len(list((tmp_path / "d").glob("*.pfm"))) == 4
+    assert len(list((tmp_path / "d").glob("*.exr"))) == 4
 
 
 def _groups_by_pairs(cams: list[tuple[int, int]], size: tuple[int, int], ratio: float) -> int:

@@ -267,6 +267,30 @@ def test_export_into_an_existing_folder_is_refused(take: Path, content: Path) ->
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and "already exists" in res.stderr
 
 
+def test_export_reads_a_depth_output_without_pfms_from_its_exrs(take: Path, content: Path, tmp_path: Path) -> None:
+    """Depth outputs hold the PFM only when asked (``--formats``, issue 24): each camera's disparity is read
+    from its EXR's NUKE layers, and the content is the same, byte for byte, as from the PFMs."""
+    from rigctl.disparity_layers import header, layers, steps
+    from rigctl.exr import write_exr
+
+    exrs = tmp_path / "exr-only"
+    offsets = TakeGrid(take).offsets
+    for pfm in sorted((take / "truth" / "disparity").glob("*/*.pfm")):
+        d = read_pfm(pfm)
+        (exrs / pfm.parent.name).mkdir(parents=True, exist_ok=True)
+        z = np.where(np.isfinite(d), np.float32(1.0), np.float32(0.0))  # 0 where there is none, as depth writes
+        st = steps(offsets, pfm.stem)
+        write_exr(exrs / pfm.parent.name / f"{pfm.stem}.exr", {"depth.Z": z, **layers(d, st)}, header(st))
+    assert not list(exrs.rglob("*.pfm"))
+    res = run_rigctl("miv", "export", str(take), str(exrs), "--out", str(tmp_path / "miv"))
+    assert res.returncode == 0, res.stderr
+    ours = sorted(p.relative_to(tmp_path / "miv") for p in (tmp_path / "miv").rglob("*") if p.is_file())
+    assert ours == sorted(p.relative_to(content) for p in content.rglob("*") if p.is_file())
+    for rel in ours:  # README.txt names the folder the disparities came from
+        if rel.name != "README.txt":
+            assert (tmp_path / "miv" / rel).read_bytes() == (content / rel).read_bytes(), rel
+
+
 @pytest.mark.parametrize(
     ("value", "message"), [(np.nan, "holds NaN"), (3e38, "beyond the image's width"), (-3e38, "beyond the image")]
 )

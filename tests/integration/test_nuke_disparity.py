@@ -36,7 +36,8 @@ def depth(module_tmp: Callable[[str], Path]) -> tuple[Path, Path]:
     assert res.returncode == 0, res.stderr
     take, out = root / "ideal", root / "depth"
     res = run_rigctl(
-        "depth", str(take), "--out", str(out), "--near", "1.95", "--far", "3.0", "--cameras", *CAMS
+        "depth", str(take), "--out", str(out), "--near", "1.95", "--far", "3.0", "--cameras", *CAMS,
+        "--formats", "exr,pfm",
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
     return take, out

@@ -12,7 +12,7 @@ import cv2
 import numba
 import pytest
 
-from rigctl.depth.export import Exporter
+from rigctl.depth.export import FORMATS, Exporter
 from rigctl.depth.options import DepthOptions
 from rigctl.depth.pipeline import TakeProcessor
 from rigctl.depth.sources import OneGrid
@@ -42,7 +42,7 @@ def test_outputs_do_not_depend_on_opencvs_threads(tmp_path: Path, restore_thread
         cv2.setNumThreads(threads)
         out = tmp_path / f"t{threads}"
         opt = DepthOptions(preset="best", disparity_range=d_range)
-        TakeProcessor(OneGrid(grid), opt, exporter=Exporter(out, atomic=True)).process(0)
+        TakeProcessor(OneGrid(grid), opt, exporter=Exporter(out, formats=FORMATS, atomic=True)).process(0)
         outputs[threads] = _files(out)
     assert len(outputs[1]) >= 9 * 3  # every camera's EXR, PFM and PNG
     assert any(name.endswith(".exr") for name in outputs[1])

@@ -499,7 +499,7 @@ def test_a_stray_png_beside_the_grid_is_left_out_not_misreported(tmp_path: Path)
     res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=120)
     assert res.returncode == 0, res.stderr
     assert "rXcY.png: not named r{row}c{col}.png" in res.stderr
-    assert sorted(p.name for p in (tmp_path / "d").glob("*.pfm")) == ["r0c0.pfm", "r0c1.pfm"]
+    assert sorted(p.name for p in (tmp_path / "d").glob("*.exr")) == ["r0c0.exr", "r0c1.exr"]
 
 
 @pytest.mark.parametrize("kind", ["a FIFO", "a device", "a folder", "a symlink loop", "a dangling symlink"])
@@ -521,7 +521,7 @@ def test_a_truth_pfm_that_is_there_but_no_regular_file_is_refused_not_skipped(tm
         pfm.symlink_to(tmp_path / "nowhere.pfm")
     res = rigctl("depth", str(grid), "--out", str(tmp_path / "d"), "--preset", "fast", timeout=60)
     one_line(res, EXIT_BAD_INPUT, f"{pfm}: ")
-    assert not (tmp_path / "d" / "r0c0.pfm").exists()
+    assert not (tmp_path / "d" / "r0c0.exr").exists()
 
 
 def test_a_truth_that_is_no_folder_is_refused(tmp_path: Path) -> None:
@@ -572,7 +572,7 @@ def test_a_camera_that_shares_no_view_with_the_grid_is_refused_a_gap_is_not(tmp_
     (grid / "r9999c9999.png").rename(grid / "r1c7.png")
     res = rigctl("depth", str(grid), "--out", str(tmp_path / "d2"), "--preset", "fast", timeout=120)
     assert res.returncode == 0, res.stderr
-    assert sorted(p.name for p in (tmp_path / "d2").glob("*.pfm")) == ["r0c0.pfm", "r0c1.pfm", "r1c7.pfm"]
+    assert sorted(p.name for p in (tmp_path / "d2").glob("*.exr")) == ["r0c0.exr", "r0c1.exr", "r1c7.exr"]
 
 
 def test_bench_depth_size_is_checked_against_the_memory_it_needs() -> None:

@@ -29,6 +29,7 @@ CAMS = ("r1c1", "r1c0")
 CHUNK = 2  # three chunks of the six frame sets: both workers get some
 WARMUP = 2  # the last chunk warms up on two frame sets of the one before (not on the take's start)
 FAST = ["--preset", "fast", "--cameras", *CAMS, "--chunk", str(CHUNK), "--warmup", str(WARMUP)]
+FAST += ["--formats", "exr,pfm,png"]  # every output, so that each is compared between depth and process
 FRAMES = 6
 
 
@@ -108,19 +109,19 @@ def test_a_rerun_after_an_interruption_computes_only_the_missing_frames(take: Pa
         process_take(opt, progress=stop_after_two)
     first = json.loads((tmp_path / "process.json").read_text())["frames"]
     assert len(first) == 2 and all(e["status"] == "done" for e in first.values())
-    stamps = {name: (tmp_path / "depth" / name / "r1c1.pfm").stat().st_mtime_ns for name in first}
+    stamps = {name: (tmp_path / "depth" / name / "r1c1.exr").stat().st_mtime_ns for name in first}
     (tmp_path / "depth" / ".partial-000004-deadbeef").mkdir()  # what a write cut short leaves
 
     summary = process_take(opt)
     assert summary.skipped_done == 2 and summary.computed == FRAMES - 2 and summary.failed == 0
     ledger = json.loads((tmp_path / "process.json").read_text())["frames"]
     assert len(ledger) == FRAMES and all(e["status"] == "done" for e in ledger.values())
-    assert {n: (tmp_path / "depth" / n / "r1c1.pfm").stat().st_mtime_ns for n in first} == stamps
+    assert {n: (tmp_path / "depth" / n / "r1c1.exr").stat().st_mtime_ns for n in first} == stamps
     assert not list((tmp_path / "depth").glob(".partial-*"))
 
     # a done frame whose file was damaged after the ledger recorded it (same size, other bytes): its chunk is
     # computed again, and the file is whole again
-    damaged = tmp_path / "depth" / "000003" / "r1c0.png"
+    damaged = tmp_path / "depth" / "000003" / "r1c0.exr"
     whole = damaged.read_bytes()
     damaged.write_bytes(whole[:-1] + bytes([whole[-1] ^ 0xFF]))
     fixed = process_take(opt)
@@ -129,6 +130,15 @@ def test_a_rerun_after_an_interruption_computes_only_the_missing_frames(take: Pa
 
     again = process_take(FarmOptions(take, tmp_path, opt.depth, workers=1, frames=[0], redo=True))
     assert again.computed == 1 and again.skipped_done == 0
+    assert not list((tmp_path / "depth").rglob("*.pfm")) and not list((tmp_path / "depth").rglob("r*.png"))
+
+    # a frame set written without the PFM is not whole for a run that asks for it: computed again, with it
+    pfm = process_take(FarmOptions(take, tmp_path, opt.depth, workers=1, frames=[0], formats=("exr", "pfm")))
+    assert pfm.computed == 1 and pfm.skipped_done == 0
+    assert sorted(p.name for p in (tmp_path / "depth" / "000000").iterdir()) == sorted(
+        f"{c}.{e}" for c in CAMS for e in ("exr", "pfm")
+    )
+    assert process_take(FarmOptions(take, tmp_path, opt.depth, workers=1, frames=[0])).skipped_done == 1
 
 
 def test_ctrl_c_ends_with_one_line_and_nothing_from_dask(take: Path, tmp_path: Path) -> None:
