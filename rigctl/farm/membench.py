@@ -180,7 +180,7 @@ def format_speed(r: dict[str, Any]) -> str:
     return "\n".join(
         [
             f"{w}x{h}, preset {r['preset']}, {len(r['cameras'])} cameras: {r['seconds']:.2f} s per frame set "
-            f"(depth {t['depth']:.2f} s, write {t['write']:.2f} s)",
+            f"(depth {t['depth']:.2f} s, write {t['write']:.2f} s: {'+'.join(map(str.upper, r.get('formats', [])))})",
             f"one OpenCV SGBM 3WAY pair, same size, {sg['levels']} levels, {sg['threads']} thread(s): "
             f"{sg['seconds']:.3f} s",
             f"ratio to the SGBM pair: depth {sm['ratio_depth']:.1f}x, depth + write {sm['ratio_total']:.1f}x"
@@ -226,7 +226,8 @@ def _measure(make: Callable[[], Any], width: int, height: int, preset: str, came
     with tempfile.TemporaryDirectory() as tmp:
         # one frame set through the pipeline as a worker runs it (TakeProcessor.process, in its two steps to
         # tell their peaks apart): depth, then staged and published by rename
-        processor = TakeProcessor(OneGrid(grid), opt, exporter=Exporter(Path(tmp), atomic=True))
+        exporter = Exporter(Path(tmp), atomic=True)  # what rigctl depth and process write unless asked for more
+        processor = TakeProcessor(OneGrid(grid), opt, exporter=exporter)
         computed, peak_depth = phase_peak(lambda: processor.computed(0))
         done, peak_write = phase_peak(computed.write)
         del computed
@@ -242,6 +243,7 @@ def _measure(make: Callable[[], Any], width: int, height: int, preset: str, came
         "size": [width, height],
         "preset": preset,
         "cameras": list(stats.cameras),
+        "formats": list(exporter.formats),
         "seconds": seconds,
         "cpu_seconds": cpu_seconds,
         "timings_s": {

@@ -60,6 +60,7 @@ def test_the_text_names_the_reference_ratio_and_real_time_factor() -> None:
         "size": [1920, 1080],
         "preset": "best",
         "cameras": ["c"] * 9,
+        "formats": ["exr"],
         "seconds": 10.0,
         "timings_s": times,
         "pixel_levels": {"integer_sweep": 1e9},
@@ -72,6 +73,7 @@ def test_the_text_names_the_reference_ratio_and_real_time_factor() -> None:
         "summary": summary,
     }
     text = format_speed(r)
+    assert "(depth 8.00 s, write 2.00 s: EXR)" in text  # what the write wrote
     assert "SGBM 3WAY pair" in text and "128 levels" in text and "0.250 s" in text
     assert "depth 32.0x" in text and "depth + write 40.0x" in text and "in CPU seconds (depth + write) 30.0x" in text
     assert "write share 20.0 % of the elapsed time (nothing overlaps the write)" in text
