@@ -34,7 +34,7 @@ from rigctl.exrcam import camera_attributes
 from rigctl.keying import Keyer, SoftKey
 from rigctl.layout import inside, output_path
 from rigctl.pfm import write_pfm
-from rigctl.publish import move_into, publish_png
+from rigctl.publish import move_into, output_error, publish_png
 from rigctl.timecode import Timecode
 
 F32 = NDArray[np.float32]
@@ -276,6 +276,25 @@ def write_depth_exr(target: Target, name: str, grid: Grid, pic: dict[str, F16], 
     write_exr(target.path(name, ".exr"), channels, attrs, half=("RGB", "A"), compression=FAST_LOSSLESS)
 
 
+def drop_unasked(target: Target, cameras: list[str], formats: tuple[str, ...]) -> None:
+    """Remove the cameras' outputs in the formats this run did not write, left by an earlier run into the same
+    folder (one of an older rigctl, which wrote every format, or one asked for more): a camera's outputs are
+    then one run's, and no reader takes an earlier run's PFM for this one's disparity (the EXR holds it; a
+    script that reads the PFM finds none rather than a stale one). Only files and symlinks are removed; a
+    folder or a FIFO at such a name is left as it is (every reader refuses it)."""
+    for name in cameras:
+        for ext in FORMATS:
+            path = target.path(name, f".{ext}")
+            if ext in formats or not (path.is_symlink() or path.is_file()):
+                continue
+            try:
+                path.unlink()
+            except FileNotFoundError:
+                pass
+            except OSError as exc:
+                raise output_error(path, exc) from None
+
+
 def publish(tmp: Path, final: Path) -> dict[str, FileRecord]:
     """Move every finished file into the frame's folder by rename (a reader sees a whole file or none), the
     folder fsynced after (:func:`rigctl.publish.move_into`); returns each file's record."""
@@ -308,12 +327,15 @@ class Exporter:
         target = Target(self.out, self.layout, number, fps, timecode, flat=self.flat, colour=self.colour)
         if not self.atomic:
             write_all(target, grid, results, d_range, self.formats)
+            drop_unasked(target, list(results), self.formats)
             return {}
         name = frame_name(number)
         tmp = self.out / f"{PARTIAL_PREFIX}{name}-{uuid.uuid4().hex[:12]}"
         staging = dataclasses.replace(target, out=tmp, flat=True)
         try:
             write_all(staging, grid, results, d_range, self.formats)
-            return publish(tmp, inside(self.out, self.out / name))
+            records = publish(tmp, inside(self.out, self.out / name))
+            drop_unasked(target, list(results), self.formats)  # after: the frame's folder is never emptier
+            return records
         finally:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -237,6 +237,11 @@ def test_cli_depth_writes_every_output_asked_for(ideal_take: Path, tmp_path: Pat
     near = np.unravel_index(np.nanargmax(np.where(fg, d, np.nan)), d.shape)
     assert preview[near][2] > preview[near][0]  # red near
     assert (out / "report.json").exists()
+    # run again into the same folder without --formats: the camera it computes keeps no earlier PFM or PNG
+    # (a reader would take them for this run's), the camera it does not compute keeps its three
+    res = run_rigctl("depth", str(ideal_take), "--out", str(out), "--near", "1.95", "--far", "3.0", "--cameras", "r1c1")
+    assert res.returncode == 0, res.stderr
+    assert sorted(p.name for p in (out / "000000").iterdir()) == ["r1c0.exr", "r1c0.pfm", "r1c0.png", "r1c1.exr"]
 
 
 def header_focal(header: dict) -> float:  # type: ignore[type-arg]

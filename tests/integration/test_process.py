@@ -139,6 +139,9 @@ def test_a_rerun_after_an_interruption_computes_only_the_missing_frames(take: Pa
         f"{c}.{e}" for c in CAMS for e in ("exr", "pfm")
     )
     assert process_take(FarmOptions(take, tmp_path, opt.depth, workers=1, frames=[0])).skipped_done == 1
+    # computed again without it: the earlier PFMs go, so that none is read as this computation's
+    redone = process_take(FarmOptions(take, tmp_path, opt.depth, workers=1, frames=[0], redo=True))
+    assert redone.computed == 1 and not list((tmp_path / "depth").rglob("*.pfm"))
 
 
 def test_ctrl_c_ends_with_one_line_and_nothing_from_dask(take: Path, tmp_path: Path) -> None:
