@@ -406,6 +406,10 @@ def test_a_frame_set_stays_within_the_worker_memory_bound(tmp_path: Path) -> Non
     assert set(stages) == set(STAGES) and all(v >= 0 for v in stages.values())
     assert all(stages[k] > 0 for k in ("cost", "key", "sensor_fixed", "views_count", "occlusion_order"))
     assert sum(stages.values()) <= r["timings_s"]["depth"]
+    # the kernels were loaded on a smaller frame set before the clock started: the timed one loaded none
+    warm = r["warmup"]
+    assert warm["size"] == [240, 135] and warm["seconds"] > 0 and warm["kernels"] > 0
+    assert warm["loaded_while_timed"] == 0
 
 
 def test_bench_size_refuses_a_bad_size() -> None:
