@@ -151,24 +151,52 @@ def sample3(
     # weight (halving is exact), so each corner's product is the features' bit for bit
     half = np.float32(0.5)
     h00, h01, h10, h11 = w00 * half, w01 * half, w10 * half, w11 * half
-    s1 = (levels[v, a0, b0 + 1] - levels[v, a0, b0 - 1]) * h00 + (levels[v, a0, b1 + 1] - levels[v, a0, b1 - 1]) * h01
-    s1 += (levels[v, a1, b0 + 1] - levels[v, a1, b0 - 1]) * h10
-    s1 += (levels[v, a1, b1 + 1] - levels[v, a1, b1 - 1]) * h11
-    s2 = (levels[v, a0 + 1, b0] - levels[v, a0 - 1, b0]) * h00 + (levels[v, a0 + 1, b1] - levels[v, a0 - 1, b1]) * h01
-    s2 += (levels[v, a1 + 1, b0] - levels[v, a1 - 1, b0]) * h10
-    s2 += (levels[v, a1 + 1, b1] - levels[v, a1 - 1, b1]) * h11
+    # inside the part the two columns (rows) are neighbours, so half of the derivatives' samples are the
+    # corners already read: the same values, read once (12 reads instead of 20); at a clamped edge all twenty
+    if b1 == b0 + 1:
+        s1 = (i01 - levels[v, a0, b0 - 1]) * h00 + (levels[v, a0, b1 + 1] - i00) * h01
+        s1 += (i11 - levels[v, a1, b0 - 1]) * h10
+        s1 += (levels[v, a1, b1 + 1] - i10) * h11
+    else:
+        s1 = (levels[v, a0, b0 + 1] - levels[v, a0, b0 - 1]) * h00
+        s1 += (levels[v, a0, b1 + 1] - levels[v, a0, b1 - 1]) * h01
+        s1 += (levels[v, a1, b0 + 1] - levels[v, a1, b0 - 1]) * h10
+        s1 += (levels[v, a1, b1 + 1] - levels[v, a1, b1 - 1]) * h11
+    if a1 == a0 + 1:
+        s2 = (i10 - levels[v, a0 - 1, b0]) * h00 + (i11 - levels[v, a0 - 1, b1]) * h01
+        s2 += (levels[v, a1 + 1, b0] - i00) * h10
+        s2 += (levels[v, a1 + 1, b1] - i01) * h11
+    else:
+        s2 = (levels[v, a0 + 1, b0] - levels[v, a0 - 1, b0]) * h00
+        s2 += (levels[v, a0 + 1, b1] - levels[v, a0 - 1, b1]) * h01
+        s2 += (levels[v, a1 + 1, b0] - levels[v, a1 - 1, b0]) * h10
+        s2 += (levels[v, a1 + 1, b1] - levels[v, a1 - 1, b1]) * h11
     return s0, s1, s2
 
 
 @njit(inline="always")
 def _row_sums(row: F32, r: int, out: F32) -> None:
-    # the box's horizontal sums (the vertical ones are taken in ``_aggregate``)
+    # the box's horizontal sums (the vertical ones are taken in ``_aggregate``), each added from 0 in the order
+    # dx = -r..r; the columns whose window lies inside the row without the reflection's branches
     w = row.shape[0]
-    for x in range(w):
+    inner_a, inner_b = min(r, w), max(min(r, w), w - r)
+    for x in range(inner_a):
+        out[x] = _reflected_sum(row, x, r, w)
+    for x in range(inner_a, inner_b):
         acc = np.float32(0.0)
         for dx in range(-r, r + 1):
-            acc += row[_reflect(x + dx, w)]
+            acc += row[x + dx]
         out[x] = acc
+    for x in range(inner_b, w):
+        out[x] = _reflected_sum(row, x, r, w)
+
+
+@njit(inline="always")
+def _reflected_sum(row: F32, x: int, r: int, w: int) -> np.float32:
+    acc = np.float32(0.0)
+    for dx in range(-r, r + 1):
+        acc += row[_reflect(x + dx, w)]
+    return acc
 
 
 @njit(inline="always")
