@@ -241,20 +241,15 @@ def default_memory_limit(take: Path, cameras: int | None) -> int:
     return worker_memory_bytes(reader.width, reader.height, cameras or len(reader.names))
 
 
-# Peak resident memory of a worker, measured with ``rigctl bench depth --size`` (preset best, every camera): a
-# fixed part (interpreter, OpenCV, Dask) and a part per pixel and camera: 56 B for one frame set (measured
-# between 1920x1080, 1.29 GiB, and 3840x2160, 4.17 GiB, with the cost volume at every range: issue 24; 1.33
-# and 4.47 GiB since the soft key is made in a thread of its own beside the other files; 1.40 and 4.59 GiB
-# since OpenCV has the kernels' threads on a worker: all within the bound), and
-# 18 B more in a chunk, where the temporal stabiliser holds the previous frame set's pictures and results
-# (a chunk of three 1920x1080 frame sets peaked at 1.66 GiB against 1.33 GiB for one, in one script on one
-# day). Measured over a chunk's later frame sets since the stabiliser keeps only what the next frame set reads
-# (its half-size pictures and final disparities): 1.39 to 1.42 GiB at 1920x1080 and 4.82 and 4.91 GiB at
-# 3840x2160, nine cameras (about 64 B a pixel and camera over the process; 37 B more than one frame set before
-# it, 17 B after). The worker limit is this with a margin of 25 %: Dask pauses a worker at 80 % of it (above
-# the measured peaks) and restarts it at 95 %.
-BASE_BYTES = 600e6
-BYTES_PER_CAMERA_PIXEL = 74.0
+# A worker's peak resident memory: a fixed part (interpreter, OpenCV, Dask) and a part per pixel and camera,
+# fitted from a chunk's later frame sets as a worker runs them (``benchmarks/chunk_memory.py``: the moving
+# realistic presenter, nine cameras, best, the stabiliser's state carried; README "Memory"): 0.87, 1.12 and
+# 2.52 GiB at 960x540, 1920x1080 and 3840x2160 after issue 24's memory steps, about 27 B a pixel and camera
+# between the two larger sizes. The bound is 1 GB + 36 B, 25 to 39 % above the measured peaks;
+# the worker limit is that with a margin of 25 %, and Dask pauses a worker at 80 % of its limit (the bound)
+# and restarts it at 95 %. It was 600 MB + 74 B (7.7 GB a 4K worker) while a chunk peaked at 4.9 GiB.
+BASE_BYTES = 1.0e9
+BYTES_PER_CAMERA_PIXEL = 36.0
 MARGIN = 1.25
 
 

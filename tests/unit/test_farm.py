@@ -95,14 +95,18 @@ def test_worker_memory_grows_with_pixels_and_cameras() -> None:
 
 @pytest.mark.parametrize(
     "size,peak_gib",
-    [((960, 540), 0.50), ((1920, 1080), 1.40), ((3840, 2160), 4.59), ((1920, 1080), 1.66), ((3840, 2160), 2.99)],
-    ids=["540p", "1080p", "4K", "1080p-chunk", "4K-chunk"],
+    [
+        *(((480, 270), 0.40), ((1920, 1080), 0.74), ((3840, 2160), 1.92)),
+        *(((960, 540), 0.87), ((1920, 1080), 1.12), ((3840, 2160), 2.52)),
+    ],
+    ids=["270p", "1080p", "4K", "540p-chunk", "1080p-chunk", "4K-chunk"],
 )
 def test_the_worker_bound_leaves_the_measured_peaks_below_dasks_pause(size: tuple[int, int], peak_gib: float) -> None:
-    """``rigctl bench depth --size`` peaks of nine cameras (README, issue 24), and chunks with the temporal
-    stabiliser's state (three 1920x1080 frame sets; two 3840x2160, the later one's peak): Dask pauses a
-    worker at 80 % of its limit, which must lie above what a worker was measured to hold."""
-    assert 0.8 * worker_memory_bytes(*size, 9) > peak_gib * 2**30
+    """``rigctl bench depth --size`` peaks of nine cameras (README, issue 24), and the peaks of a chunk's
+    frame sets with the temporal stabiliser's state (``benchmarks/chunk_memory.py``: three at 960x540 and
+    1920x1080, two at 3840x2160): Dask pauses a worker at 80 % of its limit, which must lie above what a worker
+    was measured to hold, with a fifth to spare for pictures other than the simulator's."""
+    assert 0.8 * worker_memory_bytes(*size, 9) > 1.2 * peak_gib * 2**30
 
 
 def test_the_take_search_settles_on_the_hull_of_every_chunk_whatever_their_order() -> None:
