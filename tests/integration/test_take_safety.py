@@ -75,7 +75,10 @@ def test_sigkill_mid_take_leaves_a_readable_take(tmp_path: Path) -> None:
     for name in reader.names:  # everything indexed reads back whole, checksum and all
         for i in range(len(reader.index[name])):
             reader.frame_bytes(name, i, verify=True)
-    assert len(reader.complete_sets()) >= 20
+    # every frame all nine cameras delivered (the simulator numbers simultaneous frames alike) makes a complete
+    # set, the last one perhaps torn; how many depends on the machine's load (a busy one drops frames)
+    common = set.intersection(*(set(reader.index[n]["sequence"].tolist()) for n in reader.names))
+    assert len(common) >= 2 and len(reader.complete_sets()) >= len(common) - 1, (len(common), counts)
     # a power loss can leave the last frame's bytes short of what its index says: excluded, not fatal
     essence = reader.essence_path("r1c1")
     last = reader.index["r1c1"][-1]
