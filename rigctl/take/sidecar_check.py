@@ -1,0 +1,141 @@
+"""``rigctl take check`` of the per-camera sidecars editorial reads (``sidecars.py``): ``log.csv`` (what each
+camera delivered and lost) and the Avid ALE ``TAKE.ale`` (one clip per camera). Nothing of rigctl reads them
+back, so a hand edit, another tool's rewrite or a copy from another take went unnoticed while ``take check``
+said ok. Each is held to ``take.yaml`` and the indexes; the first problem is one line naming the file, the
+line and the field. Absent sidecars are not a problem (a rectified take, or one whose recording did not end,
+has none)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from pathlib import Path
+
+from rigctl.errors import ParameterError, RigctlError, TakeError
+from rigctl.regular import read_regular
+from rigctl.take.names import check_take_name
+from rigctl.take.reader import TakeReader
+from rigctl.timecode import Timecode, TimecodeError, rate_of
+
+LOG_COLUMNS = [
+    *("camera", "device", "frames", "first_sequence", "last_sequence"),
+    *("source_drops", "error_frames", "writer_drops", "not_written", "bytes", "ended_early"),
+]
+ALE_COLUMNS = ["Name", "Tracks", "Start", "End", "Tape", "Camera", "Frames", "Drops"]
+ROW_BYTES = 4096  # a sidecar's row at the most (a device path, a reason the stream ended); the header's as many
+
+
+def _text(path: Path, cameras: int, what: str) -> str:
+    data = read_regular(path, ROW_BYTES * (cameras + 12), TakeError, what)
+    try:
+        return data.decode()
+    except UnicodeDecodeError as exc:
+        raise TakeError(f"{path}: byte {exc.start}: {what} is not UTF-8 text") from None
+
+
+def _expected(reader: TakeReader, name: str) -> dict[str, str]:
+    """What ``log.csv`` says of camera ``name`` when it holds to take.yaml and the index."""
+    entry = reader.manifest.cameras[name]
+    first, last = entry.first_sequence, entry.last_sequence
+    return {
+        "frames": str(entry.frames),
+        "first_sequence": "" if first is None else str(first),
+        "last_sequence": "" if last is None else str(last),
+        "source_drops": str(len(entry.source_drops)),
+        "error_frames": str(len(entry.error_frames)),
+        "writer_drops": str(len(entry.writer_drops)),
+        "not_written": str(len(entry.not_written)),
+        "bytes": str(int(reader.index[name]["size"].sum())),
+        "ended_early": entry.ended_early or "",
+    }
+
+
+def log_problem(reader: TakeReader) -> str | None:
+    """``log.csv`` against the take: its header, one row per camera of take.yaml in order, and each row's
+    frames, sequence numbers, losses, bytes (the index's frames) and why the stream ended as take.yaml has them."""
+    path = reader.folder / "log.csv"
+    if not os.path.lexists(path):
+        return None
+    names = reader.names
+    try:
+        rows = list(csv.reader(io.StringIO(_text(path, len(names), "camera log"), newline="")))
+    except RigctlError as exc:
+        return str(exc)
+    except csv.Error as exc:
+        return f"{path}: {exc}"
+    if not rows or rows[0] != LOG_COLUMNS:
+        got = ",".join(rows[0]) if rows else ""
+        return f"{path}: line 1: header {got!r:.100} is not {','.join(LOG_COLUMNS)!r:.100}"
+    for line, (name, row) in enumerate(zip(names, rows[1:], strict=False), start=2):
+        if len(row) != len(LOG_COLUMNS):
+            return f"{path}: line {line}: {len(row)} fields, the header has {len(LOG_COLUMNS)}"
+        if row[0] != name:
+            return f"{path}: line {line}: camera {row[0]!r:.40} is not {name} (take.yaml's cameras, in order)"
+        for column, want in _expected(reader, name).items():
+            got = row[LOG_COLUMNS.index(column)]
+            if got != want:
+                return f"{path}: line {line}: {name} {column} {got!r:.40}, take.yaml and the index say {want!r:.40}"
+    if len(rows) - 1 != len(names):
+        return f"{path}: {len(rows) - 1} camera rows, take.yaml has {len(names)} cameras"
+    return None
+
+
+def ale_problem(reader: TakeReader) -> str | None:
+    """``TAKE.ale`` against the take: tab-delimited, the take's frame rate, its columns, one clip per camera of
+    take.yaml in order named TAKE_CAMERA on tape TAKE, timecodes at the take's rate spanning the camera's
+    sequence numbers, its frames and its losses."""
+    man = reader.manifest
+    try:
+        take = check_take_name(man.take)
+    except ParameterError:
+        return None  # a name that is no plain file name: no ALE of it is looked for (nor written by rigctl)
+    path = reader.folder / f"{take}.ale"
+    if not os.path.lexists(path):
+        return None
+    try:
+        lines = _text(path, len(reader.names), "ALE").split("\n")
+    except RigctlError as exc:
+        return str(exc)
+    rate, drop = rate_of(man.format.fps)
+    heading = {"FIELD_DELIM": "TABS", "FPS": f"{man.format.fps:g}"}
+    try:
+        column, data = lines.index("Column"), lines.index("Data")
+    except ValueError:
+        return f"{path}: no 'Column' and 'Data' lines: not an ALE"
+    for key, want in heading.items():
+        got = next((ln.split("\t", 1)[1] for ln in lines[:column] if ln.startswith(f"{key}\t")), None)
+        if got != want:
+            return f"{path}: {key} {got!r:.40}, the take's is {want!r}"
+    if column + 1 >= len(lines) or lines[column + 1].split("\t") != ALE_COLUMNS:
+        return f"{path}: line {column + 2}: columns are not {' '.join(ALE_COLUMNS)!r}"
+    rows = [ln for ln in lines[data + 1 :] if ln]
+    for line, (name, text) in enumerate(zip(reader.names, rows, strict=False), start=data + 2):
+        problem = _clip_problem(reader, take, name, text.split("\t"), rate, drop)
+        if problem:
+            return f"{path}: line {line}: {problem}"
+    if len(rows) != len(reader.names):
+        return f"{path}: {len(rows)} clips, take.yaml has {len(reader.names)} cameras"
+    return None
+
+
+def _clip_problem(reader: TakeReader, take: str, name: str, row: list[str], rate: int, drop: bool) -> str | None:
+    if len(row) != len(ALE_COLUMNS):
+        return f"{len(row)} fields, the columns are {len(ALE_COLUMNS)}"
+    entry = reader.manifest.cameras[name]
+    lost = len(entry.source_drops) + len(entry.writer_drops) + len(entry.error_frames) + len(entry.not_written)
+    fixed = {"Name": f"{take}_{name}", "Tracks": "V", "Tape": take, "Camera": name}
+    fixed |= {"Frames": str(entry.frames), "Drops": str(lost)}
+    for column, want in fixed.items():
+        got = row[ALE_COLUMNS.index(column)]
+        if got != want:
+            return f"{name} {column} {got!r:.40}, take.yaml says {want!r:.40}"
+    try:
+        start, end = (Timecode.parse(row[ALE_COLUMNS.index(c)], rate, drop) for c in ("Start", "End"))
+    except TimecodeError as exc:
+        return f"{name}: {exc}"
+    first, last = entry.first_sequence, entry.last_sequence
+    span = last - first + 1 if first is not None and last is not None else 0
+    if end - start != span:
+        return f"{name} Start {start} to End {end} spans {end - start} frames, its sequence numbers {span}"
+    return None

@@ -1,0 +1,114 @@
+"""``rigctl take check`` holds the sidecars editorial reads to the take: ``log.csv`` (what each camera delivered
+and lost) and the Avid ALE (one clip per camera). Before, a hand edit or a sidecar copied from another take
+passed as ok (exit 0). Each problem is one error line naming the file, the line and the field."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from reliab_support import copy_take, edit_manifest, record_tiny, rigctl  # type: ignore[import-not-found]
+
+from rigctl.timecode import Timecode
+
+
+@pytest.fixture(scope="module")
+def dropping(module_tmp: Callable[[str], Path]) -> Path:
+    """A tiny take (recorded with the simulator's defaults, motion on) in which r1c1 drops two frames."""
+    return record_tiny(module_tmp("sidecars"), "t", 6, "drops.r1c1=[5,7]")
+
+
+def _edit(path: Path, sep: str, line: int, column: int, value: str) -> None:
+    rows = [ln.split(sep) for ln in path.read_text().split("\n")]
+    rows[line - 1][column] = value
+    path.write_text("\n".join(sep.join(r) for r in rows))
+
+
+def _error(take: Path) -> str:
+    res = rigctl("take", "check", str(take))
+    assert res.returncode == 1 and "Traceback" not in res.stderr, res.stderr
+    errors = [ln for ln in res.stderr.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1, res.stderr
+    return errors[0]
+
+
+def test_the_recorders_own_sidecars_hold(dropping: Path) -> None:
+    assert (dropping / "log.csv").is_file() and (dropping / "t.ale").is_file()
+    res = rigctl("take", "check", str(dropping))
+    assert res.returncode == 0, res.stderr
+
+
+# line numbers: log.csv's header is line 1, r1c1 (the fifth camera) line 6; the ALE's first clip is line 10
+# (file, line, column, value), what the error says. log.csv's header is line 1, r1c1 (the fifth camera) line 6;
+# the ALE's first clip is line 10. A value None: End one frame later than the clip's frames reach
+EDITS: dict[str, tuple[tuple[str, int, int, str | None], str]] = {
+    "log frames": (("log.csv", 6, 2, "6"), "line 6: r1c1 frames '6', take.yaml and the index say '4'"),
+    "log a loss hidden": (("log.csv", 6, 5, "0"), "line 6: r1c1 source_drops '0', take.yaml and the index say '2'"),
+    "log first sequence": (("log.csv", 2, 3, "3"), "line 2: r0c0 first_sequence '3'"),
+    "log bytes": (("log.csv", 2, 9, "1"), "line 2: r0c0 bytes '1'"),
+    "log an end that was not": (("log.csv", 2, 10, "signal lost"), "line 2: r0c0 ended_early 'signal lost'"),
+    "log cameras swapped": (("log.csv", 2, 0, "r0c1"), "line 2: camera 'r0c1' is not r0c0"),
+    "log a header renamed": (("log.csv", 1, 2, "count"), "line 1: header"),
+    "ale frames": (("t.ale", 14, 6, "6"), "line 14: r1c1 Frames '6', take.yaml says '4'"),
+    "ale drops": (("t.ale", 14, 7, "0"), "line 14: r1c1 Drops '0', take.yaml says '2'"),
+    "ale a clip of another take": (("t.ale", 10, 0, "u_r0c0"), "line 10: r0c0 Name 'u_r0c0', take.yaml says 't_r0c0'"),
+    "ale an end a frame late": (("t.ale", 10, 3, None), "line 10: r0c0 Start"),
+    "ale no timecode": (("t.ale", 10, 2, "25:99:00:00"), "line 10: r0c0: timecode 25:99:00:00 does not exist"),
+    "ale another frame rate": (("t.ale", 4, 1, "30"), "FPS '30', the take's is '25'"),
+}
+
+
+@pytest.mark.parametrize("how", EDITS)
+def test_take_check_holds_log_csv_and_the_ale_to_the_take(dropping: Path, tmp_path: Path, how: str) -> None:
+    take = copy_take(dropping, tmp_path / "t")
+    (name, line, column, value), said = EDITS[how]
+    path, sep = take / name, "," if name.endswith(".csv") else "\t"
+    if value is None:
+        value = str(Timecode.parse(path.read_text().split("\n")[line - 1].split("\t")[3], 25) + 1)
+    _edit(path, sep, line, column, value)
+    error = _error(take)
+    assert f"{path}:" in error and said in error, error
+
+
+def test_a_log_csv_missing_a_camera_is_an_error(dropping: Path, tmp_path: Path) -> None:
+    take = copy_take(dropping, tmp_path / "t")
+    lines = (take / "log.csv").read_text().splitlines()
+    (take / "log.csv").write_text("\n".join(lines[:-1]) + "\n")
+    assert "8 camera rows, take.yaml has 9 cameras" in _error(take)
+    (take / "log.csv").write_text("\n".join(lines) + "\n")  # as the recorder wrote it
+    assert rigctl("take", "check", str(take)).returncode == 0
+
+
+@pytest.mark.parametrize("kind", ["a FIFO", "a device", "too large", "not UTF-8"])
+@pytest.mark.parametrize("name", ["log.csv", "t.ale"])
+def test_a_sidecar_that_is_no_file_or_no_text_is_one_problem_without_waiting(
+    dropping: Path, tmp_path: Path, kind: str, name: str
+) -> None:
+    take = copy_take(dropping, tmp_path / "t")
+    path = take / name
+    path.unlink()
+    if kind == "a FIFO":
+        os.mkfifo(path)
+    elif kind == "a device":
+        path.symlink_to("/dev/zero")
+    elif kind == "too large":
+        path.write_text("x" * 10_000_000)
+    else:
+        path.write_bytes(b"camera,\xff\n")
+    res = rigctl("take", "check", str(take), timeout=60)
+    assert res.returncode == 1 and "Traceback" not in res.stderr, res.stderr
+    error = _error(take)
+    assert error.startswith(f"error: {path}:"), error
+    if kind == "not UTF-8":
+        assert "byte 7: " in error and "not UTF-8" in error, error
+
+
+def test_a_take_name_that_is_a_path_is_not_followed_to_an_ale(dropping: Path, tmp_path: Path) -> None:
+    """take.yaml's take names the ALE; a name that is a path is not a file of the take's to open."""
+    take = copy_take(dropping, tmp_path / "t")
+    (tmp_path / "outside.ale").write_text("not an ALE\n")
+    edit_manifest(take, lambda m: m.update(take="../outside"))
+    res = rigctl("take", "check", str(take))
+    assert "outside.ale" not in res.stderr, res.stderr
