@@ -16,11 +16,15 @@ from typing import Any
 import cv2
 import numpy as np
 
+from rigctl.diskspace import FreeSpace, check_free_space
 from rigctl.errors import OutputError, ParameterError
 from rigctl.publish import OutputLock, prepare_output, publish_png, publish_text, utf8_path
 
 Say = Callable[[str], None]
 MARKER = ".rigctl-demo"
+# what a finished demo's folder holds, with a quarter to spare (0.88 GB measured in session 26: the calibration
+# take 0.7 GB, the presenter takes, the depth outputs; tests/integration/test_depth.py holds a demo to it)
+DEMO_BYTES = 1_100_000_000
 
 
 def _montage(folder: Path, names: list[str], out: Path) -> Path:
@@ -65,12 +69,24 @@ def prepare_folder(out: Path, fresh: bool) -> Iterator[Path]:
             unfinished = not (out / "report.md").exists()
             if not fresh and not unfinished:
                 raise ParameterError(f"{out}: exists and is not empty (choose another --out, or --fresh to replace it)")
+        check_demo_room(out)  # before anything is cleared or written
+        if entries:
             # the report first and the marker last: a run killed while clearing leaves an unfinished demo, which
             # the next run replaces, never a "finished" one missing its figures or a folder with no marker
             for p in sorted(entries, key=lambda p: (p.name != "report.md", p.name == MARKER)):
                 shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
         publish_text(out / MARKER, "rigctl demo: until report.md is written, the next demo here replaces this folder\n")
         yield out
+
+
+def check_demo_room(out: Path, free_space: FreeSpace | None = None) -> None:
+    """Refuse in one line (exit 4) a destination without room for a whole demo, counting as free what the demo
+    already in ``out`` takes (it is replaced); ``free_space`` injected by tests."""
+    from rigctl.rectification.rectify import tree_bytes
+
+    replaced = tree_bytes(out) if (out / MARKER).is_file() else 0
+    what = "the demo's takes, calibration, depth and report"
+    check_free_space(out, max(0, DEMO_BYTES - replaced), what, free_space)
 
 
 def run_demo(out: Path, say: Say, progress_factory: Callable[[str, str], Any], fresh: bool = False) -> Path:

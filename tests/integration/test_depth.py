@@ -386,6 +386,28 @@ def test_demo_runs_end_to_end_and_its_report_opens_with_figures(tmp_path: Path) 
         assert (tmp_path / "demo" / name).stat().st_size > 1000
     res = run_rigctl("demo", "--out", str(tmp_path / "demo"))
     assert res.returncode == 2 and "exists and is not empty" in res.stderr
+    # the room the demo asks for before it starts holds what it wrote
+    from rigctl.demo import DEMO_BYTES
+    from rigctl.rectification.rectify import tree_bytes
+
+    assert 0.5 * DEMO_BYTES < tree_bytes(tmp_path / "demo") < DEMO_BYTES
+
+
+def test_the_demo_asks_for_its_room_counting_a_demo_it_replaces_as_free(tmp_path: Path) -> None:
+    from rigctl.demo import DEMO_BYTES, MARKER, check_demo_room
+    from rigctl.errors import DiskFullError
+
+    out = tmp_path / "demo"
+    out.mkdir()
+    with open(out / "takes.bin", "wb") as f:  # an earlier demo's bytes (sparse: no disk used)
+        f.truncate(DEMO_BYTES - 100_000_000)
+    free = 200_000_000
+    with pytest.raises(DiskFullError, match=r"about 1.10 GB needed for the demo's takes.*0.20 GB free"):
+        check_demo_room(out, lambda _: free)  # no demo here: nothing of it is replaced
+    (out / MARKER).write_text("")
+    check_demo_room(out, lambda _: free)  # 0.1 GB more than the demo it replaces
+    with pytest.raises(DiskFullError):
+        check_demo_room(out, lambda _: 99_000_000)
 
 
 def test_best_beats_the_best_opencv_baseline_on_the_realistic_presenter_by_30_percent() -> None:

@@ -274,6 +274,7 @@ def test_read_only_and_full_destinations_are_one_line(tiny, tmp_path: Path) -> N
         ("size=48k", ("take", "export", str(tiny[0]), "--out", str(mnt / "x")), "MB free on its file system"),
         ("size=48k", ("depth", str(tiny[1]), "--out", str(mnt), "--preset", "fast"), "MB free on its file system"),
         ("size=48k", ("rectify", str(tiny[0]), "--calibration", cal, "--out", str(mnt / "r")), "MB free on its"),
+        ("size=48k", ("demo", "--out", str(mnt / "d")), "needed for the demo's takes"),
     ]
     for options, argv, fragment in cases:
         res = in_mount(mnt, options, *argv)
