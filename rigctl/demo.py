@@ -6,6 +6,7 @@ report. Every step runs the same code as its own command."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import time
 from collections.abc import Callable, Iterator
@@ -82,11 +83,25 @@ def prepare_folder(out: Path, fresh: bool) -> Iterator[Path]:
 def check_demo_room(out: Path, free_space: FreeSpace | None = None) -> None:
     """Refuse in one line (exit 4) a destination without room for a whole demo, counting as free what the demo
     already in ``out`` takes (it is replaced); ``free_space`` injected by tests."""
-    from rigctl.rectification.rectify import tree_bytes
-
-    replaced = tree_bytes(out) if (out / MARKER).is_file() else 0
+    replaced = _freed_bytes(out) if (out / MARKER).is_file() else 0
     what = "the demo's takes, calibration, depth and report"
     check_free_space(out, max(0, DEMO_BYTES - replaced), what, free_space)
+
+
+def _freed_bytes(folder: Path) -> int:
+    """The disk space removing ``folder`` gives back, as far as it can be told: the blocks its files hold (not
+    their apparent sizes: a sparse file frees less), each file once (hard links), symlinks not followed."""
+    seen, total = set(), 0
+    for root, _dirs, names in os.walk(folder):
+        for name in names:
+            try:
+                st = os.lstat(os.path.join(root, name))
+            except OSError:
+                continue
+            if (st.st_dev, st.st_ino) not in seen:
+                seen.add((st.st_dev, st.st_ino))
+                total += st.st_blocks * 512
+    return total
 
 
 def run_demo(out: Path, say: Say, progress_factory: Callable[[str, str], Any], fresh: bool = False) -> Path:

@@ -10,13 +10,14 @@ from __future__ import annotations
 import csv
 import io
 import os
+import re
 from pathlib import Path
 
 from rigctl.errors import ParameterError, RigctlError, TakeError
 from rigctl.regular import read_regular
 from rigctl.take.names import check_take_name
 from rigctl.take.reader import TakeReader
-from rigctl.timecode import Timecode, TimecodeError, rate_of
+from rigctl.timecode import Timecode, TimecodeError, rate_of, start_timecode
 
 LOG_COLUMNS = [
     *("camera", "device", "frames", "first_sequence", "last_sequence"),
@@ -59,15 +60,17 @@ def log_problem(reader: TakeReader) -> str | None:
         return None
     names = reader.names
     try:
-        rows = list(csv.reader(io.StringIO(_text(path, len(names), "camera log"), newline="")))
+        parse = csv.reader(io.StringIO(_text(path, len(names), "camera log"), newline=""))
+        numbered = [(parse.line_num, row) for row in parse if row]  # each record's last line; blank lines skipped
     except RigctlError as exc:
         return str(exc)
     except csv.Error as exc:
-        return f"{path}: {exc}"
+        return f"{path}: line {parse.line_num}: {exc}"
+    rows = [row for _, row in numbered]
     if not rows or rows[0] != LOG_COLUMNS:
         got = ",".join(rows[0]) if rows else ""
         return f"{path}: line 1: header {got!r:.100} is not {','.join(LOG_COLUMNS)!r:.100}"
-    for line, (name, row) in enumerate(zip(names, rows[1:], strict=False), start=2):
+    for (line, row), name in zip(numbered[1:], names, strict=False):
         if len(row) != len(LOG_COLUMNS):
             return f"{path}: line {line}: {len(row)} fields, the header has {len(LOG_COLUMNS)}"
         if row[0] != name:
@@ -94,10 +97,10 @@ def ale_problem(reader: TakeReader) -> str | None:
     if not os.path.lexists(path):
         return None
     try:
-        lines = _text(path, len(reader.names), "ALE").split("\n")
+        lines = re.split(r"\r?\n", _text(path, len(reader.names), "ALE"))  # other tools write CRLF
     except RigctlError as exc:
         return str(exc)
-    rate, drop = rate_of(man.format.fps)
+    rate, _ = rate_of(man.format.fps)
     heading = {"FIELD_DELIM": "TABS", "FPS": f"{man.format.fps:g}"}
     try:
         column, data = lines.index("Column"), lines.index("Data")
@@ -109,9 +112,9 @@ def ale_problem(reader: TakeReader) -> str | None:
             return f"{path}: {key} {got!r:.40}, the take's is {want!r}"
     if column + 1 >= len(lines) or lines[column + 1].split("\t") != ALE_COLUMNS:
         return f"{path}: line {column + 2}: columns are not {' '.join(ALE_COLUMNS)!r}"
-    rows = [ln for ln in lines[data + 1 :] if ln]
-    for line, (name, text) in enumerate(zip(reader.names, rows, strict=False), start=data + 2):
-        problem = _clip_problem(reader, take, name, text.split("\t"), rate, drop)
+    rows = [(i, ln) for i, ln in enumerate(lines[data + 1 :], start=data + 2) if ln]
+    for (line, text), name in zip(rows, reader.names, strict=False):
+        problem = _clip_problem(reader, take, name, text.split("\t"), rate)
         if problem:
             return f"{path}: line {line}: {problem}"
     if len(rows) != len(reader.names):
@@ -119,7 +122,7 @@ def ale_problem(reader: TakeReader) -> str | None:
     return None
 
 
-def _clip_problem(reader: TakeReader, take: str, name: str, row: list[str], rate: int, drop: bool) -> str | None:
+def _clip_problem(reader: TakeReader, take: str, name: str, row: list[str], rate: int) -> str | None:
     if len(row) != len(ALE_COLUMNS):
         return f"{len(row)} fields, the columns are {len(ALE_COLUMNS)}"
     entry = reader.manifest.cameras[name]
@@ -130,12 +133,28 @@ def _clip_problem(reader: TakeReader, take: str, name: str, row: list[str], rate
         got = row[ALE_COLUMNS.index(column)]
         if got != want:
             return f"{name} {column} {got!r:.40}, take.yaml says {want!r:.40}"
+    first_label = _clip_start(reader, name)
+    label = row[ALE_COLUMNS.index("Start")]
+    if first_label is not None and label != first_label:
+        return f"{name} Start {label!r:.40}, its first frame's timecode (or the take's start) is {first_label}"
     try:
-        start, end = (Timecode.parse(row[ALE_COLUMNS.index(c)], rate, drop) for c in ("Start", "End"))
+        # drop-frame or not as written (the camera's own timecode, whatever the rate's custom)
+        start, end = (Timecode.parse(row[ALE_COLUMNS.index(c)], rate) for c in ("Start", "End"))
+        frames = end - start
     except TimecodeError as exc:
         return f"{name}: {exc}"
     first, last = entry.first_sequence, entry.last_sequence
     span = last - first + 1 if first is not None and last is not None else 0
-    if end - start != span:
-        return f"{name} Start {start} to End {end} spans {end - start} frames, its sequence numbers {span}"
+    if frames != span:
+        return f"{name} Start {start} to End {end} spans {frames} frames, its sequence numbers {span}"
     return None
+
+
+def _clip_start(reader: TakeReader, name: str) -> str | None:
+    """The clip's Start as the recorder writes it: the camera's first frame's timecode when its frames carry one,
+    else the take's time-of-day start; None when neither can be told (a damaged index or start time)."""
+    try:
+        own = reader.timecode(name, 0) if len(reader.index[name]) else None
+        return str(own if own is not None else start_timecode(reader.manifest.started_utc, reader.manifest.format.fps))
+    except RigctlError:
+        return None

@@ -23,7 +23,7 @@ def write_sets_csv(
 ) -> None:
     """One row per frame set: number, timecode, time, complete, spread, and each camera's sequence number
     (blank: missing)."""
-    with open(path, "w", newline="") as f:
+    with open(path, "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
         w.writerow(["set", "timecode", "time_ns", "complete", "spread_us", *cameras])
         for s in sets:
@@ -34,7 +34,7 @@ def write_sets_csv(
 
 def write_log_csv(path: Path, names: list[str], devices: dict[str, str], stats: dict[str, CameraStats]) -> None:
     """One row per camera: what it delivered and what was lost where."""
-    with open(path, "w", newline="") as f:
+    with open(path, "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
         w.writerow(
             [

@@ -5,6 +5,7 @@ and the demo."""
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -393,21 +394,27 @@ def test_demo_runs_end_to_end_and_its_report_opens_with_figures(tmp_path: Path) 
     assert 0.5 * DEMO_BYTES < tree_bytes(tmp_path / "demo") < DEMO_BYTES
 
 
-def test_the_demo_asks_for_its_room_counting_a_demo_it_replaces_as_free(tmp_path: Path) -> None:
-    from rigctl.demo import DEMO_BYTES, MARKER, check_demo_room
+def test_the_demo_asks_for_its_room_counting_a_demo_it_replaces_as_free(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import rigctl.demo
+    from rigctl.demo import MARKER, check_demo_room
     from rigctl.errors import DiskFullError
 
+    monkeypatch.setattr(rigctl.demo, "DEMO_BYTES", 3_000_000)
     out = tmp_path / "demo"
     out.mkdir()
-    with open(out / "takes.bin", "wb") as f:  # an earlier demo's bytes (sparse: no disk used)
-        f.truncate(DEMO_BYTES - 100_000_000)
-    free = 200_000_000
-    with pytest.raises(DiskFullError, match=r"about 1.10 GB needed for the demo's takes.*0.20 GB free"):
+    (out / "takes.bin").write_bytes(os.urandom(2_000_000))  # an earlier demo's bytes
+    (out / "link.bin").hardlink_to(out / "takes.bin")  # the same blocks: freed once
+    with open(out / "sparse.bin", "wb") as f:  # an apparent size that frees nothing
+        f.truncate(10_000_000)
+    free = 1_500_000
+    with pytest.raises(DiskFullError, match=r"about 3.00 MB needed for the demo's takes.*1.50 MB free"):
         check_demo_room(out, lambda _: free)  # no demo here: nothing of it is replaced
     (out / MARKER).write_text("")
-    check_demo_room(out, lambda _: free)  # 0.1 GB more than the demo it replaces
+    check_demo_room(out, lambda _: free)  # about 1 MB more than the demo it replaces
     with pytest.raises(DiskFullError):
-        check_demo_room(out, lambda _: 99_000_000)
+        check_demo_room(out, lambda _: 900_000)
 
 
 def test_best_beats_the_best_opencv_baseline_on_the_realistic_presenter_by_30_percent() -> None:

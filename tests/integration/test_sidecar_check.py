@@ -9,6 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from hostile_support import SIM_RIG, write_yaml  # type: ignore[import-not-found]
 from reliab_support import copy_take, edit_manifest, record_tiny, rigctl  # type: ignore[import-not-found]
 
 from rigctl.timecode import Timecode
@@ -55,8 +56,10 @@ EDITS: dict[str, tuple[tuple[str, int, int, str | None], str]] = {
     "ale drops": (("t.ale", 14, 7, "0"), "line 14: r1c1 Drops '0', take.yaml says '2'"),
     "ale a clip of another take": (("t.ale", 10, 0, "u_r0c0"), "line 10: r0c0 Name 'u_r0c0', take.yaml says 't_r0c0'"),
     "ale an end a frame late": (("t.ale", 10, 3, None), "line 10: r0c0 Start"),
-    "ale no timecode": (("t.ale", 10, 2, "25:99:00:00"), "line 10: r0c0: timecode 25:99:00:00 does not exist"),
+    "ale no timecode": (("t.ale", 10, 3, "25:99:00:00"), "line 10: r0c0: timecode 25:99:00:00 does not exist"),
     "ale another frame rate": (("t.ale", 4, 1, "30"), "FPS '30', the take's is '25'"),
+    # Start and End both a frame late: the span holds, the clip is not where the camera's frames are
+    "ale a clip moved": (("t.ale", 10, 2, "moved"), "line 10: r0c0 Start"),
 }
 
 
@@ -67,6 +70,10 @@ def test_take_check_holds_log_csv_and_the_ale_to_the_take(dropping: Path, tmp_pa
     path, sep = take / name, "," if name.endswith(".csv") else "\t"
     if value is None:
         value = str(Timecode.parse(path.read_text().split("\n")[line - 1].split("\t")[3], 25) + 1)
+    if value == "moved":
+        row = path.read_text().split("\n")[line - 1].split("\t")
+        _edit(path, sep, line, 3, str(Timecode.parse(row[3], 25) + 1))
+        value = str(Timecode.parse(row[2], 25) + 1)
     _edit(path, sep, line, column, value)
     error = _error(take)
     assert f"{path}:" in error and said in error, error
@@ -79,6 +86,36 @@ def test_a_log_csv_missing_a_camera_is_an_error(dropping: Path, tmp_path: Path) 
     assert "8 camera rows, take.yaml has 9 cameras" in _error(take)
     (take / "log.csv").write_text("\n".join(lines) + "\n")  # as the recorder wrote it
     assert rigctl("take", "check", str(take)).returncode == 0
+
+
+def test_sidecars_other_tools_rewrote_with_crlf_or_a_trailing_blank_line_still_hold(
+    dropping: Path, tmp_path: Path
+) -> None:
+    take = copy_take(dropping, tmp_path / "t")
+    ale, log = take / "t.ale", take / "log.csv"
+    ale.write_bytes(ale.read_bytes().replace(b"\n", b"\r\n"))
+    log.write_bytes(log.read_bytes() + b"\r\n")
+    res = rigctl("take", "check", str(take))
+    assert res.returncode == 0, res.stderr
+
+
+def test_a_drop_frame_take_passes_and_a_clip_relabelled_non_drop_does_not(tmp_path: Path) -> None:
+    """At 29.97 fps the take's timecode is drop-frame (HH:MM:SS;FF), and its ALE holds. (A camera's own timecode
+    may be non-drop at 29.97: each label is read as its separator says; the simulator's frames carry none.)"""
+    rig = dict(SIM_RIG, format={**SIM_RIG["format"], "width_px": 96, "height_px": 54, "fps": 29.97})
+    write_yaml(tmp_path / "drop.yaml", rig)
+    res = rigctl(
+        "record", str(tmp_path / "drop.yaml"), "--take", "d", "--frames", "4", "--out", str(tmp_path), "--force",
+        "--sim", "deterministic=true",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    take, ale = tmp_path / "d", tmp_path / "d" / "d.ale"
+    row = ale.read_text().split("\n")[9].split("\t")
+    assert ";" in row[2] and "FPS\t29.97" in ale.read_text()
+    assert rigctl("take", "check", str(take)).returncode == 0
+    # relabelled non-drop, the clip no longer starts where the take's drop-frame timecode does
+    _edit(ale, "\t", 10, 2, row[2].replace(";", ":"))
+    assert "r0c0 Start" in _error(take)
 
 
 @pytest.mark.parametrize("kind", ["a FIFO", "a device", "too large", "not UTF-8"])
