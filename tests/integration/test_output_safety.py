@@ -582,7 +582,7 @@ def test_bench_depth_size_is_checked_against_the_memory_it_needs() -> None:
 
     check_depth_bench_memory((960, 540), 9, 8 << 30)
     check_depth_bench_memory((16384, 16384), 9, None)  # no figure, no check
-    with pytest.raises(ParameterError, match=r"needs about 208\.8 GB, 8\.0 GB available"):
+    with pytest.raises(ParameterError, match=r"needs about 102\.4 GB, 8\.0 GB available"):
         check_depth_bench_memory((16384, 16384), 9, 8 << 30)
     one_line(rigctl("bench", "depth", "--size", "16384x16384"), EXIT_USAGE, "--size 16384x16384", "GB available")
 
