@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import io
 from pathlib import Path
 from typing import Any
 
@@ -23,54 +24,56 @@ def write_sets_csv(
 ) -> None:
     """One row per frame set: number, timecode, time, complete, spread, and each camera's sequence number
     (blank: missing)."""
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        w = csv.writer(f)
-        w.writerow(["set", "timecode", "time_ns", "complete", "spread_us", *cameras])
-        for s in sets:
-            seqs = [stats[c].written[s.members[c]][0] if c in s.members else "" for c in cameras]
-            tc = str(set_timecode(s, start))
-            w.writerow([s.number, tc, s.time_ns, int(s.complete(cameras)), round(s.spread_ns / 1e3, 1), *seqs])
+    f = io.StringIO(newline="")
+    w = csv.writer(f)
+    w.writerow(["set", "timecode", "time_ns", "complete", "spread_us", *cameras])
+    for s in sets:
+        seqs = [stats[c].written[s.members[c]][0] if c in s.members else "" for c in cameras]
+        tc = str(set_timecode(s, start))
+        w.writerow([s.number, tc, s.time_ns, int(s.complete(cameras)), round(s.spread_ns / 1e3, 1), *seqs])
+    publish_text(path, f.getvalue())  # whole at its name or absent: a take can end in a kill or a full disk
 
 
 def write_log_csv(path: Path, names: list[str], devices: dict[str, str], stats: dict[str, CameraStats]) -> None:
     """One row per camera: what it delivered and what was lost where."""
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        w = csv.writer(f)
+    f = io.StringIO(newline="")
+    w = csv.writer(f)
+    w.writerow(
+        [
+            "camera",
+            "device",
+            "frames",
+            "first_sequence",
+            "last_sequence",
+            "source_drops",
+            "error_frames",
+            "writer_drops",
+            "not_written",
+            "bytes",
+            "ended_early",
+        ]
+    )
+    for name in names:
+        st = stats[name]
+        device = devices[name]
+        first = st.written[0][0] if st.written else ""
+        last = st.written[-1][0] if st.written else ""
         w.writerow(
             [
-                "camera",
-                "device",
-                "frames",
-                "first_sequence",
-                "last_sequence",
-                "source_drops",
-                "error_frames",
-                "writer_drops",
-                "not_written",
-                "bytes",
-                "ended_early",
+                name,
+                device,
+                st.frames_written,
+                first,
+                last,
+                len(st.source_drops),
+                len(st.error_frames),
+                len(st.writer_drops),
+                len(st.not_written),
+                st.bytes_written,
+                st.ended,
             ]
         )
-        for name in names:
-            st = stats[name]
-            device = devices[name]
-            first = st.written[0][0] if st.written else ""
-            last = st.written[-1][0] if st.written else ""
-            w.writerow(
-                [
-                    name,
-                    device,
-                    st.frames_written,
-                    first,
-                    last,
-                    len(st.source_drops),
-                    len(st.error_frames),
-                    len(st.writer_drops),
-                    len(st.not_written),
-                    st.bytes_written,
-                    st.ended,
-                ]
-            )
+    publish_text(path, f.getvalue())
 
 
 def write_ale(

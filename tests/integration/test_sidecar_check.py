@@ -149,3 +149,44 @@ def test_a_take_name_that_is_a_path_is_not_followed_to_an_ale(dropping: Path, tm
     edit_manifest(take, lambda m: m.update(take="../outside"))
     res = rigctl("take", "check", str(take))
     assert "outside.ale" not in res.stderr, res.stderr
+
+
+SIDECARS_PAST_A_LIMIT = """
+import resource, signal, sys
+from pathlib import Path
+from rigctl.errors import OutputError
+from rigctl.take import sidecars
+from rigctl.take.accounting import CameraStats
+from rigctl.take.framesets import FrameSet
+from rigctl.timecode import Timecode
+
+folder = Path(sys.argv[1])
+names = [f"r{i}c0" for i in range(300)]
+stats = {n: CameraStats(n, written=[(s, 40_000_000 * s) for s in range(3)], bytes_written=12345) for n in names}
+sets = [FrameSet(number=k, time_ns=40_000_000 * k, members={n: k % 3 for n in names}, spread_ns=0) for k in range(12)]
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG, as on a full disk
+resource.setrlimit(resource.RLIMIT_FSIZE, (4096, 4096))
+for write in (
+    lambda: sidecars.write_log_csv(folder / "log.csv", names, dict.fromkeys(names, "/dev/video0"), stats),
+    lambda: sidecars.write_sets_csv(folder / "sets.csv", sets, names, stats, Timecode(0, 25)),
+):
+    try:
+        write()
+    except OutputError as exc:
+        print(exc)
+"""
+
+
+def test_a_sidecar_that_cannot_be_written_whole_is_not_left_torn(tmp_path: Path) -> None:
+    """sets.csv and log.csv were written in place: a take ended by a kill or a full disk kept a torn one that
+    editorial would read as the take's. Now each is whole at its name or absent (the recorder notes the loss)."""
+    import subprocess
+    import sys
+
+    res = subprocess.run(
+        [sys.executable, "-c", SIDECARS_PAST_A_LIMIT, str(tmp_path)], capture_output=True, text=True, timeout=60
+    )
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    assert len(lines) == 2 and "log.csv" in lines[0] and "sets.csv" in lines[1], res.stdout
+    assert list(tmp_path.iterdir()) == []  # neither a torn file nor a temporary one
