@@ -202,7 +202,7 @@ def finalise(
     try:
         write_sidecars(state, sets, {n: state.rig.camera(n).device for n in state.names})
     except (OSError, OutputError, DiskFullError) as exc:  # rigctl.publish says a failed write in one line
-        state.notes.append(f"sidecar logs not written: {getattr(exc, 'strerror', None) or exc}")
+        state.notes.append(f"{sidecars.NOT_WRITTEN}: {getattr(exc, 'strerror', None) or exc}")
         extras_failed = True
     if truth is not None:
         if disk_full:

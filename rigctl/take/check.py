@@ -17,7 +17,7 @@ from rigctl.regular import open_regular, read_regular
 from rigctl.take.manifest import FrameSetSummary
 from rigctl.take.proof import SPAN_SLACK_FRAMES
 from rigctl.take.reader import TakeReader
-from rigctl.take.sidecar_check import ale_problem, log_problem
+from rigctl.take.sidecar_check import ale_problem, log_problem, missing_sidecars
 from rigctl.timecode import Timecode, TimecodeError, rate_of
 
 SETS_COLUMNS = ["set", "timecode", "time_ns", "complete", "spread_us"]  # then one column a camera
@@ -62,6 +62,7 @@ def check_take(folder: Path, verify_data: bool = True) -> CheckReport:
         )
     sidecars = (sets_problem(reader), log_problem(reader), ale_problem(reader))
     report.errors += [p for p in sidecars if p]
+    report.warnings += missing_sidecars(reader)
     for name in reader.names:
         idx = reader.index[name]
         ipath = reader.index_path(name)

@@ -2,11 +2,13 @@
 camera delivered and lost) and the Avid ALE ``TAKE.ale`` (one clip per camera). Nothing of rigctl reads them
 back, so a hand edit, another tool's rewrite or a copy from another take went unnoticed while ``take check``
 said ok. Each is held to ``take.yaml`` and the indexes; the first problem is one line naming the file, the
-line and the field. Absent sidecars are not a problem (a rectified take, or one whose recording did not end,
-has none)."""
+line and the field. An absent sidecar is a warning (:func:`missing_sidecars`) only where the recorder wrote
+it: a rectified take, one whose recording did not end, or one whose manifest notes that they could not be
+written has none."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import os
@@ -17,6 +19,7 @@ from rigctl.errors import ParameterError, RigctlError, TakeError
 from rigctl.regular import read_regular
 from rigctl.take.names import check_take_name
 from rigctl.take.reader import TakeReader
+from rigctl.take.sidecars import NOT_WRITTEN
 from rigctl.timecode import Timecode, TimecodeError, rate_of, start_timecode
 
 LOG_COLUMNS = [
@@ -50,6 +53,28 @@ def _expected(reader: TakeReader, name: str) -> dict[str, str]:
         "bytes": str(int(reader.index[name]["size"].sum())),
         "ended_early": entry.ended_early or "",
     }
+
+
+def missing_sidecars(reader: TakeReader) -> list[str]:
+    """The sidecars the recorder writes at a take's end (``sets.csv`` as ``frame_sets.file`` names it,
+    ``log.csv``, ``TAKE.ale``) that a take which ended is missing, a warning each: the frames are all there,
+    but editorial's lists were lost (a copy that left them behind, a hand clean-up). None is looked for in a take
+    still ``recording``, a rectified one (``rectification.source_take``: ``rigctl rectify`` writes none), one
+    without frame sets, or one whose notes say they could not be written (the recorder said why then)."""
+    man = reader.manifest
+    rectified = man.rectification is not None and man.rectification.source_take is not None
+    noted = any(n.startswith(NOT_WRITTEN) for n in man.notes)
+    if man.status == "recording" or man.frame_sets is None or rectified or noted:
+        return []
+    names = [man.frame_sets.file, "log.csv"]
+    with contextlib.suppress(ParameterError):  # a take name that is no plain file name: rigctl wrote no ALE of it
+        names.append(f"{check_take_name(man.take)}.ale")
+    return [
+        f"{reader.folder / n}: missing; the recorder writes it when a take ends (its frames are not affected: "
+        "nothing of rigctl reads it back, editorial does)"
+        for n in names
+        if not os.path.lexists(reader.folder / n)
+    ]
 
 
 def log_problem(reader: TakeReader) -> str | None:

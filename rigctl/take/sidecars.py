@@ -13,6 +13,10 @@ from rigctl.take.accounting import CameraStats
 from rigctl.take.framesets import FrameSet
 from rigctl.timecode import Timecode, start_timecode
 
+# how the recorder's note begins when it could not write them (``take.build.finalise``): ``take check`` then
+# does not warn of them missing (``sidecar_check.missing_sidecars``)
+NOT_WRITTEN = "sidecar logs not written"
+
 
 def set_timecode(s: FrameSet, start: Timecode) -> Timecode:
     """A frame set's timecode: its own when it was assembled by timecode, else the take's start plus its number."""

@@ -12,6 +12,7 @@ import pytest
 from hostile_support import SIM_RIG, write_yaml  # type: ignore[import-not-found]
 from reliab_support import copy_take, edit_manifest, record_tiny, rigctl  # type: ignore[import-not-found]
 
+from rigctl.take.sidecars import NOT_WRITTEN
 from rigctl.timecode import Timecode
 
 
@@ -86,6 +87,43 @@ def test_a_log_csv_missing_a_camera_is_an_error(dropping: Path, tmp_path: Path) 
     assert "8 camera rows, take.yaml has 9 cameras" in _error(take)
     (take / "log.csv").write_text("\n".join(lines) + "\n")  # as the recorder wrote it
     assert rigctl("take", "check", str(take)).returncode == 0
+
+
+def _warnings(take: Path) -> list[str]:
+    res = rigctl("take", "check", str(take))
+    assert res.returncode == 0 and "error:" not in res.stderr, res.stderr
+    return [ln for ln in res.stderr.splitlines() if ln.startswith("warning:")]
+
+
+def test_a_sidecar_missing_from_a_take_that_ended_is_a_warning_each(dropping: Path, tmp_path: Path) -> None:
+    """Before, a take that had lost its sidecars (a copy that left them behind) passed as ok without a word; its
+    frames are all there, so each missing one is a warning naming it, and the exit stays 0."""
+    assert _warnings(dropping) == []
+    take = copy_take(dropping, tmp_path / "t")
+    (take / "log.csv").unlink()
+    (warning,) = _warnings(take)
+    assert f"{take / 'log.csv'}: missing" in warning, warning
+    (take / "sets.csv").unlink()
+    (take / "t.ale").unlink()
+    said = _warnings(take)
+    assert [w.split(": ")[1] for w in said] == [str(take / n) for n in ("sets.csv", "log.csv", "t.ale")], said
+
+
+def test_a_take_that_never_had_sidecars_is_not_warned_of_them(dropping: Path, tmp_path: Path) -> None:
+    """No sidecar is looked for where the recorder wrote none: a rectified take (``rigctl rectify`` keeps the
+    frame sets in its manifest and writes no sidecar), a recording that did not end, or one whose notes say why
+    they could not be written (the recorder's own note, ``take.build.finalise``)."""
+    rectified = tmp_path / "rectified"
+    calibration = dropping / "truth" / "calibration.yaml"
+    res = rigctl("rectify", str(dropping), "--calibration", str(calibration), "--out", str(rectified))
+    assert res.returncode == 0, res.stderr
+    assert not (rectified / "sets.csv").exists() and _warnings(rectified) == []
+    for status, notes in (("recording", []), ("complete", [f"{NOT_WRITTEN}: No space left on device"])):
+        take = copy_take(dropping, tmp_path / status)
+        for name in ("sets.csv", "log.csv", "t.ale"):
+            (take / name).unlink()
+        edit_manifest(take, lambda m, s=status, n=notes: m.update(status=s, notes=n))
+        assert not [w for w in _warnings(take) if "missing" in w], status
 
 
 def test_sidecars_other_tools_rewrote_with_crlf_or_a_trailing_blank_line_still_hold(
