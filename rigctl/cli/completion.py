@@ -15,7 +15,7 @@ from rigctl.cli.helptext import examples
 
 SHELLS = ("bash", "zsh", "tcsh")
 RIG_DESTS = ("rig",)  # positional rig of plan, devices, record, tally, control, tui; --rig of usd
-CAMERA_DESTS = ("cameras", "camera", "program", "preview")
+CAMERA_DESTS = ("cameras", "camera", "program", "preview")  # options only
 
 # $1 is the word being completed; COMP_WORDS the line. Names containing "_file" make shtab's script ask bash
 # for file-name treatment (a slash after a folder).
@@ -36,9 +36,27 @@ __RIG_CASES__
     *) [ -f "$1" ] && sed -n 's/.*name: *\(r[0-9]*c[0-9]*\).*/\1/p' "$1" ;;
   esac
 }
+_rigctl_word() {  # a word of COMP_WORDS (kept as typed: quotes, backslashes, ~/) as the command gets it; no eval
+  local w=$1 out="" c q="" i
+  for ((i = 0; i < ${#w}; i++)); do
+    c=${w:i:1}
+    if [ "$q" = "'" ]; then
+      if [ "$c" = "'" ]; then q=""; else out+=$c; fi
+    elif [ "$q" = '"' ]; then
+      if [ "$c" = '"' ]; then q=""
+      elif [ "$c" = '\' ] && [[ "${w:i+1:1}" == [\"\\\$\`] ]]; then i=$((i + 1)); out+=${w:i:1}
+      else out+=$c; fi
+    elif [ "$c" = "'" ] || [ "$c" = '"' ]; then q=$c
+    elif [ "$c" = '\' ]; then i=$((i + 1)); out+=${w:i:1}
+    else out+=$c; fi
+  done
+  case "$w" in "~/"*) out=$HOME/${out:2} ;; "~") out=$HOME ;; esac
+  printf '%s' "$out"
+}
 _rigctl_cameras() {  # camera names of the take, grid folder or rig named earlier on the line
-  local w names="" rig=""
-  for w in "${COMP_WORDS[@]:1:COMP_CWORD-1}"; do
+  local w typed names="" rig=""
+  for typed in "${COMP_WORDS[@]:1:COMP_CWORD-1}"; do
+    w=$(_rigctl_word "$typed")
     if [ -f "$w/take.yaml" ] && [ -d "$w/cameras" ]; then
       names=$(cd "$w/cameras" && for f in *.index; do [ -e "$f" ] && echo "${f%.index}"; done)
     elif [ -f "$w/grid.yaml" ]; then
@@ -59,9 +77,11 @@ _rigctl_rig_or_file() {
   _files
 }
 _rigctl_cameras() {
-  local w
+  local w typed
   local -a names
-  for w in ${words[2,CURRENT-1]}; do
+  for typed in ${words[2,CURRENT-1]}; do
+    w=${(Q)typed}  # the word as the command gets it ($words keeps its quotes); ~/ as the shell expands it
+    [[ $typed == '~/'* ]] && w=$HOME/${w#'~/'}
     if [[ -f $w/take.yaml && -d $w/cameras ]]; then
       names=($w/cameras/*.index(N:t:r)); break
     elif [[ -f $w/grid.yaml ]]; then
@@ -99,7 +119,7 @@ def _mark(parser: argparse.ArgumentParser) -> None:
             continue
         if action.dest in RIG_DESTS:
             action.complete = {"bash": "_rigctl_rig_or_file", "zsh": "_rigctl_rig_or_file", "tcsh": "f"}  # type: ignore[attr-defined]
-        elif action.dest in CAMERA_DESTS:
+        elif action.dest in CAMERA_DESTS and action.option_strings:  # ``miv import CAMERAS`` is a JSON file
             action.complete = {"bash": "_rigctl_cameras", "zsh": "_rigctl_cameras"}  # type: ignore[attr-defined]
         elif action.metavar in ("DIR", "OUT", "RECTIFIED_TAKE"):
             action.complete = {**shtab.DIRECTORY, "bash": "_rigctl_compgen_dirs"}  # type: ignore[attr-defined]

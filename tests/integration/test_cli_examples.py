@@ -8,7 +8,9 @@ from __future__ import annotations
 import os
 import pty
 import shlex
+import shutil
 import subprocess
+import time
 from pathlib import Path
 
 import pytest
@@ -97,6 +99,8 @@ def test_bash_completion_script_is_accepted_and_completes_commands_rigs_and_came
     # a rig's cameras for tally, and file names where the argument is a path
     assert _complete(script, ["rigctl", "tally", "sim-3x3", "--program", "r2"], tmp_path) == ["r2c0", "r2c1", "r2c2"]
     assert _complete(script, ["rigctl", "take", "info", "T"], tmp_path) == ["T9"]
+    # miv import's positional ``cameras`` is the content's JSON file, not camera names
+    assert _complete(script, ["rigctl", "miv", "import", "T"], tmp_path) == ["T9"]
 
 
 def test_bash_completes_inside_a_folder_whose_name_has_a_space(tmp_path: Path) -> None:
@@ -113,6 +117,65 @@ def test_bash_completes_inside_a_folder_whose_name_has_a_space(tmp_path: Path) -
     assert _complete(script, ["rigctl", "rectify", "T", "--calibration", "cdir/a b/c"], tmp_path) == inside[1:]
     assert _complete(script, ["rigctl", "depth", "T", "--out", "cdir/a b/"], tmp_path) == inside[:1]  # a folder
     assert _complete(script, ["rigctl", "plan", "cdir/a b/"], tmp_path) == inside  # a rig or a rig file
+
+
+def _tmux(*argv: str) -> str:
+    return subprocess.run(["tmux", *argv], capture_output=True, text=True, check=True, timeout=30).stdout
+
+
+@pytest.mark.parametrize("shell", ["bash", "zsh"])
+def test_a_real_shell_completes_the_cameras_of_a_take_whose_path_is_quoted(tmp_path: Path, shell: str) -> None:
+    """Typed in a real bash and zsh in a terminal (tmux), with the script installed as the help says: the
+    cameras after ``--cameras`` are the take's when its path has a space (escaped or quoted) or starts with
+    ``~/``. Before, both shells looked for the word as typed (its quotes and backslashes kept), found no take
+    and offered the simulated rig's nine; a word on the line is never run (no eval)."""
+    for tool in ("tmux", shell):
+        assert shutil.which(tool), f"{tool} is needed (.ci/run installs it)"
+    home = tmp_path / "home"
+    take = home / "my take"
+    (take / "cameras").mkdir(parents=True)
+    (take / "take.yaml").write_text("spec: 1\n")
+    for cam in ("r0c0", "r1c0"):  # r1c0 alone begins with r1 (the simulated rig has r1c0, r1c1, r1c2)
+        (take / "cameras" / f"{cam}.index").write_bytes(b"")
+    res = subprocess.run([*rigctl_command(), "completion", shell], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    if shell == "bash":
+        (home / "rigctl.bash").write_text(res.stdout)
+        start, setup = "bash --norc --noprofile", "source ~/rigctl.bash"
+    else:
+        (home / "fn").mkdir()
+        (home / "fn" / "_rigctl").write_text(res.stdout)
+        start, setup = "zsh -f", "fpath=(~/fn $fpath); autoload -U compinit; compinit -u"
+    name = f"rigctl-complete-{shell}-{tmp_path.name}"
+    env = f"env -i HOME={shlex.quote(str(home))} TERM=xterm PATH=/usr/bin:/bin"
+    _tmux("new-session", "-d", "-s", name, "-x", "250", "-y", "20", "-c", str(home), f"{env} {start}")
+    try:
+        _tmux("send-keys", "-t", name, f"{setup}; PS1='$ '", "Enter")
+
+        def completed(line: str) -> str:
+            """The prompt's line after typing ``line`` and Tab, once it stops changing."""
+            _tmux("send-keys", "-t", name, "C-u")
+            _tmux("send-keys", "-t", name, "-l", line)
+            _tmux("send-keys", "-t", name, "Tab")
+            t0, last, seen = time.monotonic(), None, ""
+            while time.monotonic() - t0 < 20:
+                time.sleep(0.3)
+                rows = [r for r in _tmux("capture-pane", "-p", "-t", name).splitlines() if r.startswith("$ rigctl")]
+                seen = rows[-1][2:].rstrip() if rows else ""
+                if seen.startswith(line) and seen == last and seen != line:
+                    return seen
+                last = seen
+            return seen
+
+        for typed in ("my\\ take", "'my take'", '"my take"', "~/my\\ take"):
+            line = f"rigctl depth {typed} --cameras r1"
+            assert completed(line) == f"{line}c0", (shell, typed)
+        # quoted, the tilde is a folder named ~: no take there, so the simulated rig's cameras (r1c0..r1c2)
+        assert completed("rigctl depth '~/my take' --cameras r1") == "rigctl depth '~/my take' --cameras r1c"
+        assert completed("rigctl depth $(touch ran) --cameras r1") == "rigctl depth $(touch ran) --cameras r1c"
+        assert not (home / "ran").exists()
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", name], capture_output=True)
 
 
 def test_zsh_and_tcsh_scripts_are_generated() -> None:
