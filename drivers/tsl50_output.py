@@ -1,5 +1,8 @@
-"""Tally to TSL UMD 5.0 receivers over UDP (``udp://HOST:PORT``): the whole state in one packet, one display
-message per camera. Program lights the left and right tallies and the text red, preview green."""
+"""Tally to TSL UMD 5.0 receivers over UDP (``udp://HOST:PORT``) or TCP (``tcp://HOST:PORT``, each packet framed
+with DLE/STX: ``protocols.tsl50.frame``): the whole state in one packet, one display message per camera.
+Program lights the left and right tallies and the text red, preview green. Over TCP the connection is made
+when the output opens and a refused, reset or closed connection is a DeviceError, so the tally service
+(``rigctl.tally.TallyService``) connects again with backoff and resends the whole state."""
 
 from __future__ import annotations
 
@@ -10,14 +13,22 @@ from rigctl.drivers.protocols import tsl50
 from rigctl.errors import DeviceError, RigFileError
 from rigctl.interfaces import TallyState
 
+SCHEMES = ("udp", "tcp")
+CONNECT_TIMEOUT_S = 2.0  # a receiver that does not answer: the service retries with its backoff
+SEND_TIMEOUT_S = 2.0  # a receiver that stops reading: its buffer fills, the send fails rather than hangs
 
-def parse_udp(url: str) -> tuple[str, int]:
-    if not url.startswith("udp://"):
-        raise RigFileError(f"tally port {url!r}: TSL UMD 5.0 goes over UDP, write udp://HOST:PORT")
-    host, _, port = url.removeprefix("udp://").rpartition(":")
+
+def parse_url(url: str) -> tuple[str, str, int]:
+    """(scheme, host, port) of ``udp://HOST:PORT`` or ``tcp://HOST:PORT`` (an IPv6 host in brackets)."""
+    scheme, sep, rest = url.partition("://")
+    if not sep or scheme not in SCHEMES:
+        raise RigFileError(
+            f"tally port {url!r}: TSL UMD 5.0 goes over UDP or TCP, write udp://HOST:PORT or tcp://HOST:PORT"
+        )
+    host, _, port = rest.rpartition(":")
     if not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise RigFileError(f"tally port {url!r}: expected udp://HOST:PORT with a port 1..65535")
-    return host.strip("[]"), int(port)
+        raise RigFileError(f"tally port {url!r}: expected {scheme}://HOST:PORT with a port 1..65535")
+    return scheme, host.strip("[]"), int(port)
 
 
 class Tsl50Output:
@@ -25,13 +36,24 @@ class Tsl50Output:
         self.url = url
         self.addresses = addresses
         self.screen = screen
-        host, port = parse_udp(url)
+        scheme, host, port = parse_url(url)
+        self.tcp = scheme == "tcp"
+        kind = socket.SOCK_STREAM if self.tcp else socket.SOCK_DGRAM
         try:
-            info = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
+            info = socket.getaddrinfo(host, port, type=kind)[0]
         except socket.gaierror as exc:
             raise DeviceError(f"{url}: cannot resolve {host}: {exc}") from None
-        self.sock = socket.socket(info[0], socket.SOCK_DGRAM)
         self.target = info[4]
+        self.sock: socket.socket | None = socket.socket(info[0], kind)
+        if self.tcp:
+            try:
+                self.sock.settimeout(CONNECT_TIMEOUT_S)
+                self.sock.connect(self.target)
+                self.sock.settimeout(SEND_TIMEOUT_S)
+                self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # a lamp change goes now
+            except OSError as exc:
+                self.close()
+                raise DeviceError(f"{url}: cannot connect to the tally receiver: {exc.strerror or exc}") from None
 
     def packet(self, state: TallyState) -> bytes:
         displays = []
@@ -41,10 +63,17 @@ class Tsl50Output:
         return tsl50.encode(tsl50.Tsl5Packet(self.screen, tuple(displays)))
 
     def send(self, state: TallyState) -> None:
+        if self.sock is None:
+            raise DeviceError(f"{self.url}: tally not sent: the output is closed")
         try:
-            self.sock.sendto(self.packet(state), self.target)
+            if self.tcp:
+                self.sock.sendall(tsl50.frame(self.packet(state)))
+            else:
+                self.sock.sendto(self.packet(state), self.target)
         except OSError as exc:
-            raise DeviceError(f"{self.url}: tally not sent: {exc}") from None
+            raise DeviceError(f"{self.url}: tally not sent: {exc.strerror or exc}") from None
 
     def close(self) -> None:
-        self.sock.close()
+        if self.sock is not None:
+            self.sock.close()
+            self.sock = None

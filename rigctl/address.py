@@ -2,8 +2,8 @@
 
 A rig file names every device by an address: ``sim://r1c1`` and ``v4l2:///dev/video0`` (or a bare
 ``/dev/video0``, ``/dev/v4l/by-id/...``) for cameras; a serial port path or a pyserial URL (``loop://``,
-``spy://``, ``rfc2217://``, ``socket://``), ``sim://bridge`` or ``udp://HOST:PORT`` for serial and network
-lines. :func:`parse_address` turns the text into an :class:`Address` whose ``scheme`` the registry looks up
+``spy://``, ``rfc2217://``, ``socket://``), ``sim://bridge``, ``udp://HOST:PORT`` or ``tcp://HOST:PORT`` for
+serial and network lines. :func:`parse_address` turns the text into an :class:`Address` whose ``scheme`` the registry looks up
 in its factory tables; nothing else in the code inspects address prefixes.
 """
 
@@ -18,12 +18,12 @@ from rigctl.errors import DeviceError
 CAMERA_SCHEMES = ("sim", "v4l2")
 # pyserial's own URL handlers (serial_for_url), reached through the serial transport
 PYSERIAL_SCHEMES = ("loop", "spy", "rfc2217", "socket", "alt", "hwgrep", "cp2110")
-LINE_SCHEMES = ("serial", "sim", "udp", *PYSERIAL_SCHEMES)
+LINE_SCHEMES = ("serial", "sim", "udp", "tcp", *PYSERIAL_SCHEMES)
 
 
 @dataclass(frozen=True)
 class Address:
-    """A parsed device address: ``scheme`` (``sim``, ``v4l2``, ``serial``, ``udp``, or a pyserial handler),
+    """A parsed device address: ``scheme`` (``sim``, ``v4l2``, ``serial``, ``udp``, ``tcp``, or a pyserial handler),
     ``target`` (the camera or device name, the device path, or host:port) and ``options`` from a
     ``?key=value&...`` query. ``text`` is the address as written, for messages and for pyserial."""
 

@@ -146,8 +146,11 @@ def open_bridge(rig: Rig, url: str, devices: DeviceSet | None = None) -> SdiBrid
     from rigctl.drivers.sdi_bridge import SdiBridge
 
     address = line_address(url, "bridge")
-    if address.scheme == "udp":
-        raise DeviceError(f"bridge address {url!r}: the SDI bridge is a serial line, not udp://")
+    if address.scheme in ("udp", "tcp"):
+        raise DeviceError(
+            f"bridge address {url!r}: the SDI bridge is a serial line, not {address.scheme}:// "
+            "(a serial line over the network is socket://HOST:PORT or rfc2217://HOST:PORT)"
+        )
     if address.scheme != "sim":
         return SdiBridge(url)
     from rigctl.camera_control import camera_ids

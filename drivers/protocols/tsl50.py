@@ -5,8 +5,10 @@
     LENGTH u16, TEXT.  CONTROL: bits 0-1 right tally, 2-3 text tally, 4-5 left tally, 6-7 brightness,
     bit 15 control data. Tally colours: 0 off, 1 red, 2 green, 3 amber.
 
-TCP wraps packets with DLE/STX and byte stuffing; that framing is not implemented (its stuffing rule
-has not been checked against the TSL document).
+Over TCP each packet is framed (:func:`frame`, :class:`Unframer`): DLE STX (0xFE 0x02) before it, and every
+0xFE inside it sent twice; nothing after it (the byte count says where it ends) and PBC counts the packet
+before stuffing. Checked against an independent open implementation (the ``tsl-umd-v5`` package, which
+cites TSL's document), not against TSL's document itself nor a hardware receiver.
 """
 
 from __future__ import annotations
@@ -92,3 +94,51 @@ def decode(data: bytes) -> Tsl5Packet:
             raise ProtocolError(f"byte {pos - length}: display text is not valid") from None
         displays.append(Display(index, control & 3, (control >> 2) & 3, (control >> 4) & 3, (control >> 6) & 3, text))
     return Tsl5Packet(screen, tuple(displays), utf16, version)
+
+
+DLE, STX = 0xFE, 0x02  # TCP framing: DLE STX starts a packet; a DLE inside it is sent as DLE DLE
+
+
+def frame(packet: bytes) -> bytes:
+    """A packet (``encode``'s bytes) as sent over TCP."""
+    return bytes((DLE, STX)) + packet.replace(bytes((DLE,)), bytes((DLE, DLE)))
+
+
+class Unframer:
+    """Packets out of a TCP byte stream (what a receiver does with :func:`frame`'s bytes), fed in any pieces.
+    Bytes between packets and a DLE inside one followed by anything but DLE are a ProtocolError naming the
+    stream's byte offset."""
+
+    def __init__(self) -> None:
+        self.offset = 0  # bytes of the stream fed so far
+        self._packet: bytearray | None = None  # unstuffed bytes of the packet being read, None between packets
+        self._dle = False  # the last byte was a DLE (its meaning waits for the next one)
+
+    def feed(self, data: bytes) -> list[bytes]:
+        out: list[bytes] = []
+        for b in data:
+            at = self.offset
+            self.offset += 1
+            if self._packet is None:
+                if not self._dle:
+                    if b != DLE:
+                        raise ProtocolError(f"byte {at}: 0x{b:02X} between packets (a packet starts DLE STX)")
+                    self._dle = True
+                    continue
+                self._dle = False
+                if b != STX:
+                    raise ProtocolError(f"byte {at}: DLE followed by 0x{b:02X}, not STX, between packets")
+                self._packet = bytearray()
+                continue
+            if self._dle:
+                self._dle = False
+                if b != DLE:
+                    raise ProtocolError(f"byte {at}: DLE followed by 0x{b:02X} inside a packet (DLE is sent twice)")
+            elif b == DLE:
+                self._dle = True
+                continue
+            self._packet.append(b)
+            if len(self._packet) >= 2 and len(self._packet) == 2 + struct.unpack_from("<H", self._packet)[0]:
+                out.append(bytes(self._packet))
+                self._packet = None
+        return out

@@ -2,7 +2,7 @@
 registry as a user's rig opens it, on a real line with a simulated device at the far end:
 
 - TSL UMD 3.1 on a pseudo-terminal (pyserial and termios) to a simulated receiver;
-- TSL UMD 5.0 on a UDP socket;
+- TSL UMD 5.0 on a UDP socket, and on a TCP connection (DLE/STX framed) that the receiver can reset;
 - embedded tally and Blackmagic camera control through the SDI bridge driver on a pseudo-terminal to the
   simulated bridge, with read-back and blind.
 """
@@ -26,6 +26,7 @@ from line_contract import (  # type: ignore[import-not-found]
 from rigctl.drivers.protocols import tsl50
 from rigctl.simulators.sdi_bridge import SimSdiBridge
 from rigctl.simulators.tsl_receiver import SimTslReceiver
+from tally_support import TcpReceiver  # type: ignore[import-not-found]
 
 from rigctl.camera_control import camera_ids
 from rigctl.registry import open_control, open_tally
@@ -75,6 +76,18 @@ def tsl50_udp(tmp_path: Path) -> tuple[TallyHarness, Callable[[], None]]:
     return TallyHarness(open_tally(rig), rig.camera_names, received, None), rx.close
 
 
+def tsl50_tcp(tmp_path: Path) -> tuple[TallyHarness, Callable[[], None]]:
+    rx = TcpReceiver()
+    rig = rig_file(tmp_path, tally={"protocol": "tsl-umd-5.0", "port": f"tcp://127.0.0.1:{rx.port}"})
+
+    def received() -> Lamps | None:
+        assert not rx.errors, rx.errors  # every byte on the stream framed as TSL says
+        latest = {n: (d.left == tsl50.RED, d.left == tsl50.GREEN) for n, d in rx.latest.items()}
+        return latest if set(latest) == set(rig.camera_names) else None
+
+    return TallyHarness(open_tally(rig), rig.camera_names, received, rx.reset), rx.close
+
+
 def embedded_bridge(tmp_path: Path) -> tuple[TallyHarness, Callable[[], None]]:
     rig = rig_file(tmp_path)
     ids = camera_ids(rig)
@@ -91,9 +104,14 @@ def embedded_bridge(tmp_path: Path) -> tuple[TallyHarness, Callable[[], None]]:
     return TallyHarness(open_tally(rig), rig.camera_names, received, sim.unplug), sim.close
 
 
-TALLY_LINES = {"tsl31-pty": tsl31_pty, "tsl50-udp": tsl50_udp, "embedded-bridge-pty": embedded_bridge}
+TALLY_LINES = {
+    "tsl31-pty": tsl31_pty,
+    "tsl50-udp": tsl50_udp,
+    "tsl50-tcp": tsl50_tcp,
+    "embedded-bridge-pty": embedded_bridge,
+}
 CASES = [(name, check) for name in TALLY_LINES for check in TALLY_CONTRACT] + [
-    (name, check) for name in ("tsl31-pty", "embedded-bridge-pty") for check in TALLY_LINE_CONTRACT
+    (name, check) for name in ("tsl31-pty", "tsl50-tcp", "embedded-bridge-pty") for check in TALLY_LINE_CONTRACT
 ]
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import socket
+import time
 from pathlib import Path
 
 import numpy as np
@@ -15,12 +16,13 @@ from rigctl.drivers.embedded_tally_output import EmbeddedTallyOutput
 from rigctl.drivers.protocols import bmd_control, tsl50
 from rigctl.drivers.sdi_bridge import SdiBridge
 from rigctl.simulators.sdi_bridge import SimSdiBridge
+from tally_support import TcpReceiver  # type: ignore[import-not-found]
 from tests_support import make_non_device  # type: ignore[import-not-found]
 
 from rigctl.errors import DeviceError
 from rigctl.interfaces import CaptureFormat, SettingState, TallyState
 from rigctl.pixfmt import luma
-from rigctl.registry import open_cameras, open_control
+from rigctl.registry import open_cameras, open_control, open_tally
 from rigctl.rig import load_rig
 
 REPO = Path(__file__).resolve().parents[2]
@@ -276,7 +278,64 @@ def line_of(path: Path, text: str) -> int:
 def test_tsl50_bad_port_is_named(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
     rig = write_rig(tmp_path, tally={"protocol": "tsl-umd-5.0", "port": "/dev/ttyUSB0"})
     res = run_cli("tally", str(rig), "--program", "r0c1")
-    assert res.returncode == 3 and "TSL UMD 5.0 goes over UDP, write udp://HOST:PORT" in res.stderr
+    assert res.returncode == 3 and "write udp://HOST:PORT or tcp://HOST:PORT" in res.stderr
+
+
+def test_tsl50_over_tcp(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
+    """``rigctl tally`` to a receiver on a real TCP connection: the packet arrives DLE/STX framed, whole; with
+    nothing listening, one line naming the address and exit 4."""
+    rx = TcpReceiver()
+    try:
+        rig = write_rig(tmp_path, tally={"protocol": "tsl-umd-5.0", "port": f"tcp://127.0.0.1:{rx.port}"})
+        res = run_cli("tally", str(rig), "--program", "r0c1", "--preview", "r2c2")
+        assert res.returncode == 0, res.stderr
+        deadline = time.monotonic() + 10
+        while len(rx.latest) < 9 and time.monotonic() < deadline:
+            time.sleep(0.02)
+    finally:
+        rx.close()
+    assert not rx.errors and sorted(d.index for d in rx.latest.values()) == list(range(1, 10))
+    assert rx.latest["r0c1"].left == rx.latest["r0c1"].right == tsl50.RED
+    assert rx.latest["r2c2"].text_tally == tsl50.GREEN and rx.latest["r0c0"].right == tsl50.OFF
+    res = run_cli("tally", str(rig), "--program", "r0c1")  # the receiver is gone: connection refused
+    lines = res.stderr.strip().splitlines()
+    assert res.returncode == 4 and len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert f"tcp://127.0.0.1:{rx.port}: cannot connect to the tally receiver" in lines[0]
+
+
+def test_tsl50_tcp_receiver_restarted_gets_the_whole_state_back(tmp_path: Path) -> None:
+    """The shoot's tally service on TCP: a receiver that reboots (connection reset, port closed for 2 s, then
+    listening again) has every camera's lamps back within the service's backoff, nobody doing anything."""
+    from rigctl.tally import TallyService
+
+    rx = TcpReceiver()
+    port = rx.port
+    rig = load_rig(write_rig(tmp_path, tally={"protocol": "tsl-umd-5.0", "port": f"tcp://127.0.0.1:{port}"}))
+    service = TallyService(lambda: open_tally(rig)).start()
+    state = TallyState(program=frozenset({"r1c1"}), preview=frozenset({"r0c2"}))
+
+    def whole(receiver: TcpReceiver, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            got = dict(receiver.latest)
+            if len(got) == 9 and got["r1c1"].left == tsl50.RED and got["r0c2"].left == tsl50.GREEN:
+                return True
+            time.sleep(0.02)
+        return False
+
+    try:
+        service.set(state)
+        assert whole(rx, 10) and service.connected
+        rx.reset()
+        rx.close()
+        time.sleep(2.0)
+        assert not service.connected and "tcp://127.0.0.1" in service.last_error
+        rx = TcpReceiver(port)
+        assert whole(rx, 15), "the state never came back after the receiver restarted"
+        assert service.connected and rx.connections == 1 and not rx.errors
+    finally:
+        service.stop()
+        rx.close()
 
 
 FTDI = {"vendor_id": 0x0403, "product_id": 0x6001, "manufacturer": "FTDI", "product": "FT232R USB UART"}

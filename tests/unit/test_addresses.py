@@ -34,6 +34,7 @@ def test_camera_addresses(text: str, scheme: str, target: str) -> None:
         ("loop://", "loop"),
         ("spy:///dev/ttyUSB0", "spy"),
         ("udp://10.0.0.5:8900", "udp"),
+        ("tcp://10.0.0.5:9000", "tcp"),
         ("RFC2217://host:2217", "rfc2217"),
     ],
 )

@@ -133,6 +133,43 @@ def test_tsl50_garbage_only_protocol_errors(data: bytes) -> None:
         tsl50.decode(data)
 
 
+def test_tsl50_tcp_framing_vectors() -> None:
+    """Over TCP a packet goes after DLE STX (FE 02) with every FE inside it sent twice; PBC counts the packet
+    before stuffing. The second packet is the index 65534 one above: its FE is doubled."""
+    plain = hx("0E 00 00 00 00 00 05 00 C1 00 04 00 43 41 4D 35")
+    assert tsl50.frame(plain) == hx("FE 02") + plain
+    fe = hx("16 00 00 00 00 00 FE FF C1 00 04 00 43 41 4D 35 07 00 9E 00 02 00 42 32")
+    assert tsl50.frame(fe) == hx("FE 02 16 00 00 00 00 00 FE FE FF C1 00 04 00 43 41 4D 35 07 00 9E 00 02 00 42 32")
+    stream = tsl50.frame(plain) + tsl50.frame(fe)
+    assert tsl50.Unframer().feed(stream) == [plain, fe]
+
+
+@given(st.lists(st.lists(displays, max_size=4), min_size=1, max_size=4), st.data())
+def test_tsl50_tcp_stream_in_any_pieces(packets: list[list[tsl50.Display]], data: st.DataObject) -> None:
+    """Packets whose bytes hold FE anywhere (indexes, lengths, UTF-16 text), cut into arbitrary pieces: each
+    comes out whole, in order, once; a piece that ends inside a DLE pair waits for the next."""
+    wire = [tsl50.encode(tsl50.Tsl5Packet(0xFEFE, tuple(ds), utf16=True)) for ds in packets]
+    stream = b"".join(tsl50.frame(w) for w in wire)
+    cuts = sorted(data.draw(st.lists(st.integers(0, len(stream)), max_size=8)))
+    unframer, got = tsl50.Unframer(), []
+    for a, b in zip([0, *cuts], [*cuts, len(stream)], strict=True):
+        got += unframer.feed(stream[a:b])
+    assert got == wire and [tsl50.decode(g) for g in got] == [tsl50.decode(w) for w in wire]
+
+
+@pytest.mark.parametrize(
+    ("stream", "message"),
+    [
+        ("0E 00", "byte 0: 0x0E between packets"),
+        ("FE 03", "byte 1: DLE followed by 0x03, not STX"),
+        ("FE 02 06 00 00 00 FE 00", "byte 7: DLE followed by 0x00 inside a packet"),
+    ],
+)
+def test_tsl50_tcp_stream_errors_name_the_byte(stream: str, message: str) -> None:
+    with pytest.raises(ProtocolError, match=message):
+        tsl50.Unframer().feed(hx(stream))
+
+
 # ---- Blackmagic camera control --------------------------------------------------------------------
 VECTORS = [
     (bc.Message(4, 0, 1), "04 04 00 00 00 01 00 00"),
