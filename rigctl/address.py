@@ -3,8 +3,8 @@
 A rig file names every device by an address: ``sim://r1c1`` and ``v4l2:///dev/video0`` (or a bare
 ``/dev/video0``, ``/dev/v4l/by-id/...``) for cameras; a serial port path or a pyserial URL (``loop://``,
 ``spy://``, ``rfc2217://``, ``socket://``), ``sim://bridge``, ``udp://HOST:PORT`` or ``tcp://HOST:PORT`` for
-serial and network lines. :func:`parse_address` turns the text into an :class:`Address` whose ``scheme`` the registry looks up
-in its factory tables; nothing else in the code inspects address prefixes.
+serial and network lines. :func:`parse_address` turns the text into an :class:`Address` whose ``scheme`` the
+registry looks up in its factory tables; nothing else in the code inspects address prefixes.
 """
 
 from __future__ import annotations
