@@ -30,14 +30,23 @@ _rigctl_rig_or_file() {
   compgen -W "__RIGS__" -- "$1"
   compgen -f -- "$1"
 }
-_rigctl_rig_cameras() {  # a rig file's camera names (name: rXcY lines), or a shipped rig's
+_rigctl_rig_cameras() {  # a shipped rig's camera names or a rig file's (name: rXcY lines), one a line
   case "$1" in
 __RIG_CASES__
-    *) [ -f "$1" ] && sed -n 's/.*name: *\(r[0-9]*c[0-9]*\).*/\1/p' "$1" ;;
+    *) [ -f "$1" ] && sed -n 's/.*name: *\(r[0-9]*c[0-9]*\).*/\1/p' "$1" 2>/dev/null ;;
   esac
+}
+_rigctl_folder_cameras() {  # a take's cameras (take.yaml lists them all, rectified and --dest takes too) or a
+  # grid folder's (rXcY.png), one a line; no cd (a user's cd function), failglob off in this subshell only
+  if [ -f "$1/take.yaml" ]; then
+    sed -n '/^cameras:/,/^[^ ]/s/^  \(r[0-9]*c[0-9]*\):.*/\1/p' "$1/take.yaml" 2>/dev/null
+  elif [ -f "$1/grid.yaml" ]; then
+    (shopt -s nullglob; shopt -u failglob; for f in "$1"/r*c*.png; do f=${f##*/}; printf '%s\n' "${f%.png}"; done)
+  fi
 }
 _rigctl_word() {  # a word of COMP_WORDS (kept as typed: quotes, backslashes, ~/) as the command gets it; no eval
   local w=$1 out="" c q="" i
+  [ ${#w} -gt 4096 ] && return  # longer than any path: not one (and each character costs more, UTF-8)
   for ((i = 0; i < ${#w}; i++)); do
     c=${w:i:1}
     if [ "$q" = "'" ]; then
@@ -54,20 +63,18 @@ _rigctl_word() {  # a word of COMP_WORDS (kept as typed: quotes, backslashes, ~/
   printf '%s' "$out"
 }
 _rigctl_cameras() {  # camera names of the take, grid folder or rig named earlier on the line
-  local w typed names="" rig=""
+  local w typed names="" rig="" n
   for typed in "${COMP_WORDS[@]:1:COMP_CWORD-1}"; do
     w=$(_rigctl_word "$typed")
-    if [ -f "$w/take.yaml" ] && [ -d "$w/cameras" ]; then
-      names=$(cd "$w/cameras" && for f in *.index; do [ -e "$f" ] && echo "${f%.index}"; done)
-    elif [ -f "$w/grid.yaml" ]; then
-      names=$(cd "$w" && for f in r*c*.png; do [ -e "$f" ] && echo "${f%.png}"; done)
-    elif [ -z "$rig" ] && [[ " __RIGS__ " == *" $w "* || "$w" == *.yaml ]]; then
-      rig=$w
-    fi
+    names=$(_rigctl_folder_cameras "$w")
     [ -n "$names" ] && break
+    if [ -z "$rig" ] && [[ " __RIGS__ " == *" $w "* || "$w" == *.yaml ]]; then rig=$w; fi
   done
   [ -z "$names" ] && names=$(_rigctl_rig_cameras "${rig:-sim-3x3}")
-  compgen -W "$names" -- "$1"
+  # printed as they are, camera names only: compgen -W would expand a $(...) or `...` in a file's name
+  while IFS= read -r n; do
+    [[ $n =~ ^r[0-9]+c[0-9]+$ && $n == "$1"* ]] && printf '%s\n' "$n"
+  done <<< "$names"
 }
 """
 
@@ -76,20 +83,29 @@ _rigctl_rig_or_file() {
   compadd -- __RIGS__
   _files
 }
-_rigctl_cameras() {
-  local w typed
+_rigctl_rig_cameras() {  # a shipped rig's camera names or a rig file's (name: rXcY lines), one a line
+  case $1 in
+__RIG_CASES__
+    *) [[ -f $1 ]] && sed -n 's/.*name: *\(r[0-9]*c[0-9]*\).*/\1/p' $1 2>/dev/null ;;
+  esac
+}
+_rigctl_cameras() {  # camera names of the take, grid folder or rig named earlier on the line
+  local w typed rig=""
   local -a names
   for typed in ${words[2,CURRENT-1]}; do
     w=${(Q)typed}  # the word as the command gets it ($words keeps its quotes); ~/ as the shell expands it
     [[ $typed == '~/'* ]] && w=$HOME/${w#'~/'}
-    if [[ -f $w/take.yaml && -d $w/cameras ]]; then
-      names=($w/cameras/*.index(N:t:r)); break
+    if [[ -f $w/take.yaml ]]; then  # take.yaml lists every camera (rectified and --dest takes too)
+      names=(${(f)"$(sed -n '/^cameras:/,/^[^ ]/s/^  \(r[0-9]*c[0-9]*\):.*/\1/p' $w/take.yaml 2>/dev/null)"})
     elif [[ -f $w/grid.yaml ]]; then
-      names=($w/r*c*.png(N:t:r)); break
+      names=($w/r*c*.png(N:t:r))
+    elif [[ -z $rig && ( " __RIGS__ " == *" $w "* || $w == *.yaml ) ]]; then
+      rig=$w
     fi
+    (( ${#names} )) && break
   done
-  (( ${#names} )) || names=(__SIM_CAMERAS__)
-  compadd -- $names
+  (( ${#names} )) || names=(${(f)"$(_rigctl_rig_cameras ${rig:-sim-3x3})"})
+  compadd -- ${(M)names:#r<->c<->}
 }
 """
 
@@ -137,10 +153,10 @@ def script(shell: str) -> str:
     _mark(parser)
     rigs = shipped_rigs()
     names = " ".join(rigs)
-    cases = "\n".join(f'    {name}) echo "{cams}" ;;' for name, cams in rigs.items())
+    cases = "\n".join(f"    {name}) printf '%s\\n' {cams} ;;" for name, cams in rigs.items())
     preamble = {
         "bash": _BASH.replace("__RIGS__", names).replace("__RIG_CASES__", cases),
-        "zsh": _ZSH.replace("__RIGS__", names).replace("__SIM_CAMERAS__", rigs.get("sim-3x3", "")),
+        "zsh": _ZSH.replace("__RIGS__", names).replace("__RIG_CASES__", cases),
         "tcsh": "",
     }[shell]
     return shtab.complete(parser, shell=shell, preamble=preamble)

@@ -68,6 +68,12 @@ def test_the_cheap_examples_run_as_written(tmp_path: Path) -> None:
     assert (tmp_path / "home" / ".local/share/bash-completion/completions/rigctl").stat().st_size > 1000
 
 
+def _take_yaml(cameras: list[str], folder: str = "cameras/") -> str:
+    """take.yaml's cameras as the recorder writes them (two-space keys; a rectified take's files at its top)."""
+    listed = "".join(f"  {c}:\n    essence: {folder}{c}.essence\n    index: {folder}{c}.index\n" for c in cameras)
+    return f"spec: 1\ntake: T\ncameras:\n{listed}status: complete\n"
+
+
 def _complete(script: Path, words: list[str], cwd: Path) -> list[str]:
     """What bash's completion function offers for the last of ``words`` (the script sourced in a real bash)."""
     line = " ".join(shlex.quote(w) for w in words)
@@ -91,10 +97,8 @@ def test_bash_completion_script_is_accepted_and_completes_commands_rigs_and_came
     assert "--subject-depth" in _complete(script, ["rigctl", "plan", "--sub"], tmp_path)
     # the cameras of the take named earlier on the line (a take's camera files, as the recorder names them)
     take = tmp_path / "T9"
-    (take / "cameras").mkdir(parents=True)
-    (take / "take.yaml").write_text("spec: 1\n")
-    for cam in ("r0c0", "r0c1", "r1c0"):
-        (take / "cameras" / f"{cam}.index").write_bytes(b"")
+    take.mkdir()
+    (take / "take.yaml").write_text(_take_yaml(["r0c0", "r0c1", "r1c0"]))
     assert _complete(script, ["rigctl", "depth", "T9", "--cameras", "r0"], tmp_path) == ["r0c0", "r0c1"]
     # a rig's cameras for tally, and file names where the argument is a path
     assert _complete(script, ["rigctl", "tally", "sim-3x3", "--program", "r2"], tmp_path) == ["r2c0", "r2c1", "r2c2"]
@@ -132,11 +136,15 @@ def test_a_real_shell_completes_the_cameras_of_a_take_whose_path_is_quoted(tmp_p
     for tool in ("tmux", shell):
         assert shutil.which(tool), f"{tool} is needed (.ci/run installs it)"
     home = tmp_path / "home"
-    take = home / "my take"
-    (take / "cameras").mkdir(parents=True)
-    (take / "take.yaml").write_text("spec: 1\n")
-    for cam in ("r0c0", "r1c0"):  # r1c0 alone begins with r1 (the simulated rig has r1c0, r1c1, r1c2)
-        (take / "cameras" / f"{cam}.index").write_bytes(b"")
+    take = home / "my take"  # a rectified take: its camera files at its top, all listed in take.yaml
+    take.mkdir(parents=True)
+    (take / "take.yaml").write_text(_take_yaml(["r0c0", "r1c0"], ""))  # r1c0 alone begins with r1 (sim: three)
+    grid = home / "g [1]"  # a grid folder from someone else: file names that are commands
+    grid.mkdir()
+    (grid / "grid.yaml").write_text("spec: 1\n")
+    for name in ("r1c5", "r$(touch ran)c", "r`touch ran`c", "r1c$(touch ran)"):
+        (grid / f"{name}.png").write_bytes(b"")
+    (home / "five by five.yaml").write_text("".join(f"  - name: r4c{c}\n" for c in (3, 4)))
     res = subprocess.run([*rigctl_command(), "completion", shell], capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
     if shell == "bash":
@@ -173,6 +181,10 @@ def test_a_real_shell_completes_the_cameras_of_a_take_whose_path_is_quoted(tmp_p
         # quoted, the tilde is a folder named ~: no take there, so the simulated rig's cameras (r1c0..r1c2)
         assert completed("rigctl depth '~/my take' --cameras r1") == "rigctl depth '~/my take' --cameras r1c"
         assert completed("rigctl depth $(touch ran) --cameras r1") == "rigctl depth $(touch ran) --cameras r1c"
+        assert completed("rigctl depth 'g [1]' --cameras r1") == "rigctl depth 'g [1]' --cameras r1c5"
+        # a rig file's cameras (r4c3, r4c4: their common part), not the simulated rig's (no r4 there)
+        rig = "rigctl tally 'five by five.yaml' --program r4"
+        assert completed(rig) == f"{rig}c"
         assert not (home / "ran").exists()
     finally:
         subprocess.run(["tmux", "kill-session", "-t", name], capture_output=True)
