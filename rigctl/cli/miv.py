@@ -18,7 +18,7 @@ from rigctl.take.framesets import parse_frames
 
 log = logging.getLogger(__name__)
 
-PIX_FMT = re.compile(r"^yuv420p(?:(9|10|12|14|16)le)?$")
+PIX_FMT = re.compile(r"yuv420p(?:(9|10|12|14|16)le)?")
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -103,7 +103,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _bits(pix_fmt: str) -> int:
-    m = PIX_FMT.match(pix_fmt)
+    m = PIX_FMT.fullmatch(pix_fmt)
     if m is None or (m[1] is not None and int(m[1]) > 14):
         raise ParameterError(f"--pix-fmt {pix_fmt!r}: give yuv420p, yuv420p10le, yuv420p12le or yuv420p14le")
     return int(m[1] or 8)

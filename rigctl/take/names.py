@@ -8,14 +8,14 @@ from pathlib import Path
 
 from rigctl.errors import ParameterError
 
-_SAFE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
+_SAFE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}")
 
 
 def check_take_name(name: str) -> str:
     """``name`` if it is a plain folder name; refuses paths, '..', hidden names and odd characters."""
     if name in (".", "..") or "/" in name or "\\" in name or ".." in name or "\x00" in name:
         raise ParameterError(f"take name {name!r} could escape the destination: use letters, digits, '.', '_', '-'")
-    if not _SAFE.match(name):
+    if not _SAFE.fullmatch(name):  # not match with $: that lets a trailing newline through
         raise ParameterError(
             f"take name {name!r} is not allowed: start with a letter or digit, then letters, digits, '.', '_', '-' "
             "(at most 128 characters)"
@@ -40,7 +40,7 @@ def next_take_number(destinations: list[Path], scene: str, shot: str) -> int:
         if not dest.is_dir():
             continue
         for entry in dest.iterdir():
-            m = pattern.match(entry.name)
+            m = pattern.fullmatch(entry.name)
             if m:
                 highest = max(highest, int(m.group("take")))
     return highest + 1

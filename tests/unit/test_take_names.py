@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from rigctl.errors import ParameterError
-from rigctl.take.names import next_take_name, next_take_number
+from rigctl.take.names import check_take_name, next_take_name, next_take_number
 
 
 def test_numbers_go_on_from_the_highest_take_of_that_scene_and_shot(tmp_path: Path) -> None:
@@ -104,3 +104,20 @@ def test_leftovers_are_never_published_nor_their_frames_removed(
     e.create()  # the frame-less leftover of its own name is removed, and the name recorded
     assert empty.is_dir() and list(empty.iterdir()) == [] and e.plan.folder == empty
     e.discard()
+
+
+@pytest.mark.parametrize("name", ["T1", "S01-02-T03", "a.b_c-d", "9" * 128])
+def test_plain_names_pass(name: str) -> None:
+    assert check_take_name(name) == name
+
+
+@pytest.mark.parametrize(
+    "name",
+    # "T1\n" passed before (a ^...$ pattern by re.match: $ matches before a last newline), and made a folder
+    # and an ALE whose name held it, which take check then failed and printed over lines
+    ["T1\n", "\nT1", "T1\r", "T 1", "", ".T1", "-T1", "../T1", "a/b", "a" * 129, "T1\x00", "T\u00e91"],
+)
+def test_other_names_are_refused_in_one_line(name: str) -> None:
+    with pytest.raises(ParameterError) as err:
+        check_take_name(name)
+    assert "\n" not in str(err.value).replace("\\n", "")
