@@ -6,6 +6,7 @@ when the output opens and a refused, reset or closed connection is a DeviceError
 
 from __future__ import annotations
 
+import re
 import socket
 
 from rigctl.drivers.protocols import tsl50
@@ -26,9 +27,17 @@ def parse_url(url: str) -> tuple[str, str, int]:
             f"tally port {url!r}: TSL UMD 5.0 goes over UDP or TCP, write udp://HOST:PORT or tcp://HOST:PORT"
         )
     host, _, port = rest.rpartition(":")
-    if not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise RigFileError(f"tally port {url!r}: expected {scheme}://HOST:PORT with a port 1..65535")
-    return scheme, host.strip("[]"), int(port)
+    bracketed = host.startswith("[") and host.endswith("]") and len(host) > 2
+    if (
+        not host
+        or (("[" in host or "]" in host or ":" in host) and not bracketed)  # IPv6 only as [ADDRESS]
+        or not re.fullmatch(r"[0-9]{1,5}", port)  # ASCII digits (str.isdigit takes '²' too)
+        or not 0 < int(port) < 65536
+    ):
+        raise RigFileError(
+            f"tally port {url!r}: expected {scheme}://HOST:PORT with a port 1..65535 (an IPv6 host as [ADDRESS])"
+        )
+    return scheme, host[1:-1] if bracketed else host, int(port)
 
 
 class Tsl50Output:
@@ -43,6 +52,8 @@ class Tsl50Output:
             info = socket.getaddrinfo(host, port, type=kind)[0]
         except socket.gaierror as exc:
             raise DeviceError(f"{url}: cannot resolve {host}: {exc}") from None
+        except UnicodeError:  # the resolver's IDNA encoding refuses it (a..b, an empty label, a label of 64+)
+            raise DeviceError(f"{url}: {host!r:.80} is not a host name") from None
         self.target = info[4]
         self.sock: socket.socket | None = socket.socket(info[0], kind)
         if self.tcp:

@@ -78,6 +78,8 @@ def probe_scheduler(url: str, timeout: float = PROBE_TIMEOUT_S) -> None:
         raise DeviceError(f"--scheduler {url}: no answer within {timeout:g} s: not a Dask scheduler") from None
     except OSError as exc:
         raise DeviceError(f"--scheduler {url}: cannot reach it ({exc.strerror or exc})") from None
+    except UnicodeError:  # the resolver's IDNA encoding refuses it (a..b, an empty label, a label of 64+)
+        raise DeviceError(f"--scheduler {url}: {host!r:.80} is not a host name") from None
     if len(head) < 8:
         raise DeviceError(f"--scheduler {url}: closed the connection without a handshake: not a Dask scheduler")
     (size,) = struct.unpack("<Q", head)

@@ -611,6 +611,12 @@ def test_a_scheduler_address_that_is_no_dask_scheduler_is_one_line(tiny, tmp_pat
     one_line(res, EXIT_DEVICE, "--scheduler", "not a Dask scheduler")
 
 
+def test_a_scheduler_host_the_resolver_refuses_is_one_line(tiny, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """``a..b`` passes the address's form but not the resolver's IDNA encoding, which raised a UnicodeError."""
+    res = rigctl("process", str(tiny[1]), "--out", str(tmp_path / "p"), "--scheduler", "tcp://a..b:8786")
+    one_line(res, EXIT_DEVICE, "--scheduler", "'a..b' is not a host name")
+
+
 @pytest.mark.parametrize("mode", ["length", "buffers"])
 def test_a_scheduler_that_shakes_hands_then_claims_a_huge_message_is_one_line(tiny, tmp_path: Path, mode: str) -> None:  # type: ignore[no-untyped-def]
     """Past the handshake (which the probe checks), every message is bounded too: a peer that speaks Dask's

@@ -275,10 +275,22 @@ def line_of(path: Path, text: str) -> int:
     return next(i for i, ln in enumerate(path.read_text().splitlines(), 1) if ln.strip().startswith(text))
 
 
-def test_tsl50_bad_port_is_named(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
-    rig = write_rig(tmp_path, tally={"protocol": "tsl-umd-5.0", "port": "/dev/ttyUSB0"})
+@pytest.mark.parametrize(
+    ("port", "code", "said"),
+    [
+        ("/dev/ttyUSB0", 3, "write udp://HOST:PORT or tcp://HOST:PORT"),
+        ("tcp://127.0.0.1:\u00b2", 3, "with a port 1..65535"),  # '²'.isdigit() is True; int('²') raised
+        ("tcp://[127.0.0.1:47001", 3, "an IPv6 host as [ADDRESS]"),
+        ("tcp://::1:47001", 3, "an IPv6 host as [ADDRESS]"),
+        ("udp://a..b:47001", 4, "'a..b' is not a host name"),  # the resolver's IDNA encoding raised UnicodeError
+        ("tcp://.:47001", 4, "'.' is not a host name"),
+    ],
+)
+def test_tsl50_bad_port_is_one_line(tmp_path: Path, run_cli, port: str, code: int, said: str) -> None:  # type: ignore[no-untyped-def]
+    rig = write_rig(tmp_path, tally={"protocol": "tsl-umd-5.0", "port": port})
     res = run_cli("tally", str(rig), "--program", "r0c1")
-    assert res.returncode == 3 and "write udp://HOST:PORT or tcp://HOST:PORT" in res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert res.returncode == code and len(lines) == 1 and said in lines[0], res.stderr
 
 
 def test_tsl50_over_tcp(tmp_path: Path, run_cli) -> None:  # type: ignore[no-untyped-def]
