@@ -69,10 +69,10 @@ def missing_sidecars(reader: TakeReader) -> list[str]:
     names = [man.frame_sets.file, "log.csv"]
     with contextlib.suppress(ParameterError):  # a take name that is no plain file name: rigctl wrote no ALE of it
         names.append(f"{check_take_name(man.take)}.ale")
-    return [
+    return [  # once each (frame_sets.file may name log.csv or the ALE)
         f"{reader.folder / n}: missing; the recorder writes it when a take ends (its frames are not affected: "
         "nothing of rigctl reads it back, editorial does)"
-        for n in names
+        for n in dict.fromkeys(names)
         if not os.path.lexists(reader.folder / n)
     ]
 
