@@ -146,8 +146,10 @@ def test_a_drop_on_one_camera_shows_on_its_tile(fast_out: Path) -> None:
     r1c2 = take.manifest.cameras["r1c2"]
     injected = {d for d in drops if r1c2.first_sequence < d < r1c2.last_sequence}
     assert len(injected) >= 3 and injected <= set(r1c2.source_drops)
-    # another camera's drops (a loaded machine drops runs of frames anywhere) hit the injected sequences no
-    # more often than they hit the others: r1c2's pattern leaking to it would hit every injected one and no other
+    # r1c2's pattern leaking to another camera would drop every injected sequence there, and few others. A
+    # loaded machine drops frames of its own anywhere: with as few as three injected sequences in the take one
+    # of them coincided on r0c0 (CI with two CPU hogs beside it: 1 of 3 against 1 in 27 elsewhere), which the
+    # earlier rate comparison (injected rate at most the other rate + 0.25) failed. A leak is all of them.
     for name in RIG.camera_names:
         if name == "r1c2":
             continue
@@ -157,9 +159,8 @@ def test_a_drop_on_one_camera_shows_on_its_tile(fast_out: Path) -> None:
         own = set(cam.source_drops) & span
         if not inj:
             continue
-        hit_injected = len(own & inj) / len(inj)
         hit_other = len(own - inj) / max(1, len(span - inj))
-        assert hit_injected <= hit_other + 0.25, (name, hit_injected, hit_other)
+        assert not inj <= own or hit_other >= 0.5, (name, sorted(inj), sorted(own))
 
 
 def test_preflight_failure_blocks_recording_and_says_why(fast_out: Path) -> None:
