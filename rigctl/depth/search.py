@@ -42,6 +42,8 @@ class EstimateStats(TypedDict, total=False):
     fractional_candidates: int
     fractional_step: float  # px between the fractional sweep's candidates
     fractional_sweep_s: float
+    band_scale: float  # the sweep between a quarter-scale one and the full resolution (costvolume.band)
+    band_sweep_s: float
     # where the time went (the cost volume: summed over its sweeps) and the work each stage did, in pixels
     # times the disparities evaluated there (issue 24)
     cost_s: float  # the matching cost of every level and candidate
@@ -50,6 +52,7 @@ class EstimateStats(TypedDict, total=False):
     refinement_s: float  # the continuous refinement along the baselines and the outlier clean-up
     integer_sweep_pixel_levels: int
     fractional_sweep_pixel_levels: int
+    band_sweep_pixel_levels: int  # at half scale: a quarter of the full resolution's pixels
     pairs_pixel_levels: int  # OpenCV's semi-global matcher, over every pair (its rows or columns x levels)
     refine_pixel_levels: int  # pixels x Gauss-Newton steps
     pairs: int

@@ -86,7 +86,7 @@ STAGES = (
     *("cost", "aggregation", "candidates", "refinement"),
     *("key", "sensor_fixed", "views_count", "temporal", "occlusion_order", "cross_check"),
 )
-WORK = ("integer_sweep", "fractional_sweep", "pairs", "refine")  # EstimateStats' <stage>_pixel_levels
+WORK = ("integer_sweep", "band_sweep", "fractional_sweep", "pairs", "refine")  # EstimateStats' <stage>_pixel_levels
 SGBM_RUNS = 3  # the reference pair is timed this many times, the median kept
 
 
