@@ -12,10 +12,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.depth.grid import Grid, grey_of
+from rigctl.depth.referee_kernels import keep_best, view_differences, window_means
 
 F32 = NDArray[np.float32]
 INVALID_COST = 1e3  # a view that cannot see the point (outside its image)
 TRUNCATE = 1.5  # normalised-intensity difference above this is an occlusion or a mismatch, not more
+COMPILED = True  # SweepLevel.costs_where by the compiled kernels; False: the OpenCV and numpy reference
 
 
 def normalise(g: F32, win: int = 7) -> tuple[F32, F32]:
@@ -165,7 +167,10 @@ class SweepLevel:
 
     def costs_where(self, candidates: list[F32], where: NDArray[np.bool_], win: int, keep: int) -> F32:
         """(candidates, pixels) combined cost of each candidate disparity map at the pixels of ``where`` only:
-        each view is sampled at those pixels and their ``win`` neighbourhood, not over the whole crop."""
+        each view is sampled at those pixels and their ``win`` neighbourhood, not over the whole crop. By the
+        compiled kernels (``referee_kernels.py``) unless ``COMPILED`` is off (this numpy form, the reference)."""
+        if COMPILED:
+            return self._costs_where_compiled(candidates, where, win, keep)
         y0, _, x0, _ = self.box
         need = np.asarray(cv2.dilate(where.astype(np.uint8), np.ones((win, win), np.uint8)), bool)
         ys, xs = np.nonzero(need)
@@ -206,6 +211,25 @@ class SweepLevel:
                 cx, cy = qx + x0 - dq * np.float32(rx), qy + y0 - dq * np.float32(ry)
                 per_view[vi][(cx < 0) | (cx > self.w - 1) | (cy < 0) | (cy > self.h - 1)] = INVALID_COST
             out[ci] = combine(per_view, keep)
+        return out
+
+    def _costs_where_compiled(self, candidates: list[F32], where: NDArray[np.bool_], win: int, keep: int) -> F32:
+        y0, _, x0, _ = self.box
+        need = np.asarray(cv2.dilate(where.astype(np.uint8), np.ones((win, win), np.uint8)), bool)
+        ys, xs = np.nonzero(need)
+        qy, qx = np.nonzero(where)
+        del need
+        out = np.empty((len(candidates), qy.size), np.float32)
+        per_view = np.empty((len(self.views), qy.size), np.float32)
+        diff = np.zeros(where.shape, np.float32)  # written at the window pixels only, the same for every view
+        for ci, cand in enumerate(candidates):
+            c = np.ascontiguousarray(cand, np.float32)
+            for vi, name in enumerate(self.views):
+                org = (float(self.org[name][0]), float(self.org[name][1]))
+                view_differences(self.norm[name], org, self.rel[name], self.ref, c, (y0, x0), ys, xs, TRUNCATE, diff)
+                frame = (self.h, self.w)
+                window_means(diff, c, self.rel[name], frame, (y0, x0), qy, qx, win, INVALID_COST, per_view[vi])
+            keep_best(per_view, keep, INVALID_COST, out[ci])
         return out
 
 
