@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rigctl.depth.grid import Grid, grey_of
-from rigctl.depth.referee_kernels import keep_best, view_differences, window_means
+from rigctl.depth.referee_kernels import keep_best, normalised, view_differences, window_means
 
 F32 = NDArray[np.float32]
 INVALID_COST = 1e3  # a view that cannot see the point (outside its image)
@@ -37,14 +37,24 @@ def normalise_part(g: F32, part: tuple[int, int, int, int], win: int = NORMALISE
     at 3840x2160 a whole frame's five temporaries are 165 MB). The same values: the window reads only the
     reach, the frame's own edges are reflected as before, and OpenCV's box sums of float run in double, exact
     for pictures of up to 10 bits, so a sum started elsewhere on the row is the same number
-    (``tests/unit/test_cost.py``)."""
+    (``tests/unit/test_cost_normalise.py``). The box sums by OpenCV, the rest in one compiled pass over the
+    part only (``referee_kernels.normalised``: numpy's float32 operations in numpy's order, so the same
+    bits) unless ``COMPILED`` is off."""
     y0, y1, x0, x1 = part
     h, w = g.shape
     m = win // 2
     a0, a1, b0, b1 = max(0, y0 - m), min(h, y1 + m), max(0, x0 - m), min(w, x1 + m)
-    norm, std = normalise(np.ascontiguousarray(g[a0:a1, b0:b1]), win)
-    rows, cols = slice(y0 - a0, y1 - a0), slice(x0 - b0, x1 - b0)
-    return np.ascontiguousarray(norm[rows, cols]), np.ascontiguousarray(std[rows, cols])
+    if not COMPILED:
+        norm, std = normalise(np.ascontiguousarray(g[a0:a1, b0:b1]), win)
+        rows, cols = slice(y0 - a0, y1 - a0), slice(x0 - b0, x1 - b0)
+        return np.ascontiguousarray(norm[rows, cols]), np.ascontiguousarray(std[rows, cols])
+    around = np.ascontiguousarray(g[a0:a1, b0:b1], np.float32)
+    mean = np.asarray(cv2.boxFilter(around, -1, (win, win), borderType=cv2.BORDER_REFLECT), np.float32)
+    sq = np.asarray(cv2.boxFilter(around * around, -1, (win, win), borderType=cv2.BORDER_REFLECT), np.float32)
+    norm = np.empty((y1 - y0, x1 - x0), np.float32)
+    std = np.empty((y1 - y0, x1 - x0), np.float32)
+    normalised(around, mean, sq, (y0 - a0, x0 - b0), norm, std)
+    return norm, std
 
 
 PART_MARGIN = 4  # px around a view's part beyond the bilinear sample's pixels (see :func:`view_part`)

@@ -1,4 +1,5 @@
-"""The pair fusion's referee (``cost.SweepLevel.costs_where``) as compiled passes (Numba): at the pixels where
+"""The pair fusion's referee (``cost.SweepLevel.costs_where``) and the local normalisation of its views
+(``cost.normalise_part``) as compiled passes (Numba). The referee: at the pixels where
 the semi-global pairs disagree, each candidate disparity map's combined cost, sampled and summed at those
 pixels' windows only.
 
@@ -122,3 +123,20 @@ def keep_best(per_view: F32, keep: int, invalid: float, out: F32) -> None:
                 total += buf[v]
                 seen += 1
         out[i] = total / np.float32(seen) if seen > 0 else np.float32(invalid)
+
+
+@njit(parallel=True, cache=True, fastmath=False)
+def normalised(g: F32, mean: F32, sq: F32, origin: tuple[int, int], norm: F32, std: F32) -> None:
+    """``cost.normalise``'s arithmetic after its box sums, on the part of ``g`` whose top-left pixel is
+    ``origin`` (y, x) and whose size is ``norm``'s: ``std = sqrt(max(sq - mean * mean, 0))`` and
+    ``norm = (g - mean) / (std + 0.01)``, each a float32 operation rounded as numpy rounds it (the pair
+    fusion's referee normalises nine views a camera; numpy's five passes and temporaries over each)."""
+    oy, ox = origin
+    eps = np.float32(0.01)
+    zero = np.float32(0.0)
+    for y in prange(norm.shape[0]):
+        for x in range(norm.shape[1]):
+            m = mean[y + oy, x + ox]
+            s = np.sqrt(max(sq[y + oy, x + ox] - m * m, zero))
+            std[y, x] = s
+            norm[y, x] = (g[y + oy, x + ox] - m) / (s + eps)
