@@ -179,8 +179,8 @@ class SweepLevel:
         """(candidates, pixels) combined cost of each candidate disparity map at the pixels of ``where`` only:
         each view is sampled at those pixels and their ``win`` neighbourhood, not over the whole crop. By the
         compiled kernels (``referee_kernels.py``) unless ``COMPILED`` is off (this numpy form, the reference)."""
-        if COMPILED:
-            return self._costs_where_compiled(candidates, where, win, keep)
+        if COMPILED and win % 2 == 1 and min(where.shape) > win:  # else OpenCV's window (even: off-centre;
+            return self._costs_where_compiled(candidates, where, win, keep)  # wider: reflected again)
         y0, _, x0, _ = self.box
         need = np.asarray(cv2.dilate(where.astype(np.uint8), np.ones((win, win), np.uint8)), bool)
         ys, xs = np.nonzero(need)

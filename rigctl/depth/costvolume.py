@@ -423,6 +423,7 @@ def volume_disparity(
     banded = BAND and s < BAND_SCALE
     if banded:
         d0 = band(images, ref, rel, box, (lo, hi), (centre, asked), d0, region, grow, p, stats)
+        t0 = time.perf_counter()  # fractional_sweep_s without the band's own (band_sweep_s)
     act = active_pixels(region, 1.0, None, grow)
     full = cv if s == 1.0 else MatchViews(images, ref, rel, box, 1.0, centre, asked, act)
     h, w = full.shape

@@ -52,6 +52,10 @@ def view_differences(
         d = cand[y, x]
         mx = (np.float32(x + x0) - d * rx) - px
         my = (np.float32(y + y0) - d * ry) - py
+        # a sample beyond the part's edge replicates it (as remap's border): held at a pixel past the edge, so
+        # no position however far converts to an integer that overflows
+        mx = min(max(mx, np.float32(-1.0)), np.float32(pw))
+        my = min(max(my, np.float32(-1.0)), np.float32(ph))
         bx, by = np.floor(mx), np.floor(my)
         ex, ey = mx - bx, my - by
         ix, iy = int(bx), int(by)
@@ -78,7 +82,8 @@ def window_means(
 ) -> None:
     """``out[i]``: the mean of ``diff`` (crop-sized, made by :func:`view_differences` at the window's pixels)
     over the ``win`` x ``win`` window around crop pixel (``qy[i]``, ``qx[i]``), the crop's edges reflected as
-    ``cv2.boxFilter``'s BORDER_REFLECT; ``invalid`` where the query pixel's own sample, at its disparity in
+    ``cv2.boxFilter``'s BORDER_REFLECT (reflected once: ``win`` odd and no wider than the crop, which the caller
+    sees to); ``invalid`` where the query pixel's own sample, at its disparity in
     ``cand``, falls outside the view's frame (``frame``: h, w; the view at ``rel`` spacings)."""
     h, w = diff.shape
     r = win // 2

@@ -65,3 +65,39 @@ def test_no_query_pixel_gives_no_cost() -> None:
     cands = [np.full((64, 64), np.float32(lo))]
     out = referee(level, cands, np.zeros((64, 64), bool), 3, 4, True)
     assert out.shape == (1, 0)
+
+
+@pytest.mark.parametrize(
+    "box,win", [((40, 41, 20, 60), 5), ((40, 43, 30, 33), 9), ((40, 42, 10, 50), 7), ((20, 60, 5, 8), 4)]
+)
+def test_windows_wider_than_the_crop_or_even_take_the_reference(box: tuple[int, int, int, int], win: int) -> None:
+    """A window the crop cannot reflect once, or an even one (OpenCV's is off-centre): the reference's costs."""
+    grid = surfaces((96, 128))
+    assert grid.disparity_range is not None
+    lo, hi = grid.disparity_range
+    level = SweepLevel(grid, "r1c1", [n for n in grid.names if n != "r1c1"], 1.0, box, (lo, hi))
+    shape = (box[1] - box[0], box[3] - box[2])
+    cands = [np.full(shape, np.float32(0.5 * (lo + hi)))]
+    where = np.ones(shape, bool)
+    np.testing.assert_array_equal(
+        referee(level, cands, where, win, 4, True), referee(level, cands, where, win, 4, False)
+    )
+
+
+def test_a_sample_however_far_outside_replicates_the_edge() -> None:
+    """A window pixel whose disparity puts its sample 1e30 px away (an integer conversion that would overflow)
+    samples the part's edge, as the reference's remap does: within the tolerance of the rest."""
+    grid = surfaces((96, 128))
+    assert grid.disparity_range is not None
+    lo, hi = grid.disparity_range
+    box = (10, 80, 10, 110)
+    level = SweepLevel(grid, "r1c1", [n for n in grid.names if n != "r1c1"], 1.0, box, (lo, hi))
+    shape = (box[1] - box[0], box[3] - box[2])
+    where = np.zeros(shape, bool)
+    where[30, 40] = where[31, 41] = True
+    for far in (1e30, -1e30, 1e10):
+        cand = np.full(shape, np.float32(0.5 * (lo + hi)))
+        cand[29, 40] = far  # a neighbour in the windows of both query pixels
+        fast = referee(level, [cand], where, 3, 4, True)
+        want = referee(level, [cand], where, 3, 4, False)
+        assert np.abs(fast - want).max() <= 1e-5, (far, fast, want)
