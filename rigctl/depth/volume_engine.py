@@ -15,7 +15,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rigctl.depth.costvolume import F32, FRACTION, TRUNCATE, Aggregator, MatchViews, VolumeParams, volume_disparity
+from rigctl.depth.coarse_to_fine import volume_disparity
+from rigctl.depth.costvolume import F32, FRACTION, TRUNCATE, Aggregator, MatchViews, VolumeParams
 from rigctl.depth.pair_fusion import pairs_engine
 from rigctl.depth.pairs import neighbour
 from rigctl.depth.presets import PRESETS
