@@ -5,12 +5,15 @@ bit (issue 24: the write's time and memory)."""
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 F32 = NDArray[np.float32]
 
+COMPILED = True  # the whole-block shrink of a wide blur compiled (local_mean_kernels.py); False: numpy and OpenCV
 TILE = 32  # px: the fine blurs are made on the tiles of the frame the key reads (the edge band's)
 SHRINK_ROWS = 128  # rows of the frame shrunk at a time for a wide blur (whole blocks)
 
@@ -32,6 +35,8 @@ class LocalMean:
         self.fields: dict[int, F32] = {}  # a wide field (coarse), or a fine one's made tiles (or its frame)
         self.todo: dict[int, NDArray[np.bool_]] = {}  # a fine field's tiles not blurred yet
         self.slots: dict[int, NDArray[np.int32]] = {}  # where each tile of a fine field is held (-1: nowhere)
+        self.coarse: dict[int, F32] = {}  # a wide field's shrunk values, made on the rows read (_wide_rows)
+        self.have: dict[int, NDArray[np.bool_]] = {}  # which of its rows are made
 
     def weighted(self, box: tuple[int, int, int, int] | None = None) -> F32:
         """The values times the weight over ``box`` (top, bottom, left, right; default the frame), bit for bit."""
@@ -47,9 +52,8 @@ class LocalMean:
         return self
 
     def scale(self, k: int) -> int:
-        """1 / the scale blur ``k`` is made at: a wide blur at a coarser scale, the same field in a fraction of
-        the time."""
-        return max(1, int(self.sigmas[k] // 4))
+        """1 / the scale blur ``k`` is made at (:func:`coarse_scale`)."""
+        return coarse_scale(self.sigmas[k], *self.shape)
 
     def field(self, k: int, idx: NDArray[np.intp]) -> F32:
         """The blurred weighted values at ``sigmas[k]``, right at least at the flat pixel indices ``idx``:
@@ -57,6 +61,9 @@ class LocalMean:
         sigma, scale = self.sigmas[k], self.scale(k)
         if scale == 1:
             return self._fine(k, idx)
+        h, w = self.shape
+        if COMPILED and scale >= 3 and not (h % scale or w % scale) and _compilable(self.values, self.weight):
+            return self._wide_rows(k, idx)
         if k not in self.fields:
             self.fields[k] = np.asarray(cv2.GaussianBlur(self.shrunk(scale), (0, 0), sigma / scale), np.float32)
         return self.fields[k]
@@ -64,17 +71,57 @@ class LocalMean:
     def shrunk(self, scale: int) -> F32:
         """The weighted values at 1 / ``scale`` (OpenCV's area average). Where ``scale`` divides the frame, each
         value is its block's mean alone: made in bands of whole blocks, the frame's values bit for bit without
-        the frame's weighted values at once (issue 24: 133 MB at 4K, at the write's peak)."""
+        the frame's weighted values at once (issue 24: 133 MB at 4K, at the write's peak); for a scale of 3 or
+        more (where OpenCV sums each block in scalar code) compiled, in one pass that multiplies and sums,
+        the same bits in about half the time (the soft key is the write's critical path)."""
         h, w = self.shape
         if h % scale or w % scale:
             small = cv2.resize(self.weighted(), (max(1, w // scale), max(1, h // scale)), interpolation=cv2.INTER_AREA)
             return np.asarray(small, np.float32)
         out = np.empty((h // scale, w // scale, self.values.shape[2]), np.float32)
+        if COMPILED and scale >= 3 and _compilable(self.values, self.weight):
+            from rigctl.local_mean_kernels import shrunk_product  # compiled on first use
+
+            shrunk_product(self.values, self.weight, scale, out, 0, len(out))  # OpenCV's sums, one pass
+            return out
         for y0 in range(0, h, rows := -(-SHRINK_ROWS // scale) * scale):
             part = self.weighted((y0, min(h, y0 + rows), 0, w))
             band = out[y0 // scale : (y0 + len(part)) // scale]
             band[...] = cv2.resize(part, (w // scale, len(band)), interpolation=cv2.INTER_AREA)
         return out
+
+    def _wide_rows(self, k: int, idx: NDArray[np.intp]) -> F32:
+        """Wide field ``k`` (a scale that divides the frame, compiled) right at the rows ``idx`` reads: only the
+        coarse rows the blur reaches from them are shrunk (more are added when later pixels need them), the
+        rest left 0, and the coarse frame blurred (small), so each value read is the whole frame's bit for
+        bit. A wide blur is read by few pixels of the band (a few hundred of 10^5 at 1920x1080, where the
+        screen is farther than the fine blur reaches), which the frame's shrink, three of the soft key's
+        five, cost a quarter of its time for (issue 24: the soft key is the write's critical path)."""
+        from rigctl.local_mean_kernels import shrunk_product  # compiled on first use
+
+        h, w = self.shape
+        scale = self.scale(k)
+        hs, ws = h // scale, w // scale
+        small, have = self.coarse.get(k), self.have.get(k)
+        if small is None or have is None:
+            small = np.zeros((hs, ws, self.values.shape[2]), np.float32)
+            have = np.zeros(hs, bool)
+            self.coarse[k], self.have[k] = small, have
+        if not len(idx):
+            return self.fields.get(k, small)
+        ys = idx // w
+        lo = int(linear(ys.min(keepdims=True), hs, h)[0][0])  # the coarse rows bilinear reads, and the next
+        hi = int(linear(ys.max(keepdims=True), hs, h)[0][0]) + 1
+        reach = int(np.ceil(4 * self.sigmas[k] / scale)) + 1  # past OpenCV's kernel radius for float
+        first, last = max(0, lo - reach), min(hs, hi + reach + 1)
+        missing = np.flatnonzero(~have[first:last])
+        if len(missing) or k not in self.fields:
+            if len(missing):
+                a, b = first + int(missing[0]), first + int(missing[-1]) + 1
+                shrunk_product(self.values, self.weight, scale, small, a, b)
+                have[a:b] = True
+            self.fields[k] = np.asarray(cv2.GaussianBlur(small, (0, 0), self.sigmas[k] / scale), np.float32)
+        return self.fields[k]
 
     def _fine(self, k: int, idx: NDArray[np.intp]) -> F32:
         """Field ``k`` at full resolution, blurred on the tiles ``idx`` lies in that were not blurred before:
@@ -166,6 +213,26 @@ class LocalMean:
             out[rest[take]] = at[take, :-1] / at[take, -1:]
             done[rest[take]] = True
         return out, done.astype(np.float32)
+
+
+def coarse_scale(sigma: float, h: int, w: int) -> int:
+    """1 / the scale a blur of ``sigma`` is made at on an H x W frame: a wide blur at a coarser scale, the
+    same field in a fraction of the time. About sigma / 4 (a blur of 4 px or more there); the largest scale
+    that divides the frame both ways above half that (1920x1080 at sigma 64: 15, not 16), so that each coarse
+    value is its block's mean alone (:meth:`LocalMean.shrunk`), else sigma / 4."""
+    most = max(1, int(sigma // 4))
+    common = math.gcd(h, w)
+    return next((s for s in range(most, most // 2, -1) if common % s == 0), most)
+
+
+def _compilable(values: NDArray[np.generic], weight: NDArray[np.generic]) -> bool:
+    """What the compiled shrink takes: float32 H x W x C values and an H x W weight of bytes or float32."""
+    return (
+        values.dtype == np.float32
+        and values.ndim == 3
+        and weight.dtype in (np.uint8, np.float32)
+        and weight.shape == values.shape[:2]
+    )
 
 
 def linear(dst: NDArray[np.intp], small: int, size: int) -> tuple[NDArray[np.intp], F32]:

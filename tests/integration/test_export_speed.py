@@ -22,6 +22,7 @@ from rigctl.depth.pipeline import TakeProcessor
 from rigctl.depth.sources import OneGrid
 from rigctl.exr import read_exr
 from rigctl.keying import Keyer
+from rigctl.local_mean import coarse_scale
 from rigctl.local_mean import local_mean as _local_mean
 
 CAMS = ("r0c0", "r0c1", "r0c2")
@@ -69,7 +70,7 @@ def _reference_local_mean(values: np.ndarray, weight: np.ndarray, sigmas: tuple[
     h, w = weight.shape
     for sigma in sigmas:
         both = np.concatenate([values * weight[..., None], weight[..., None]], axis=2)
-        scale = max(1, int(sigma // 4))
+        scale = coarse_scale(sigma, h, w)
         if scale > 1:
             small = cv2.resize(both, (max(1, w // scale), max(1, h // scale)), interpolation=cv2.INTER_AREA)
             both = cv2.resize(cv2.GaussianBlur(small, (0, 0), sigma / scale), (w, h), interpolation=cv2.INTER_LINEAR)
