@@ -109,9 +109,24 @@ def half_picture(
 ) -> dict[str, NDArray[np.float16]]:
     """:func:`picture` as the half floats an EXR holds it in (numpy's rounding, as :func:`write_exr`'s), made
     in bands of HALF_BAND_ROWS rows: each pixel's value is its own, so the bytes are the whole picture's, and
-    no float32 copy of the frame is held (issue 24: 0.12 GiB at 4K, at the write's peak)."""
+    no float32 copy of the frame is held (issue 24: 0.12 GiB at 4K, at the write's peak). Where
+    :func:`picture` is compiled, its last pass rounds to half floats itself (``exr_kernels.premultiply_half``,
+    numpy's rounding bit for bit): numpy's cast was half of this step's time."""
     h = rgb.shape[0]
     out = {"RGB": np.empty(rgb.shape, np.float16), "A": np.empty(rgb.shape[:2], np.float16)}
+    if matte is not None and colour == "rec709" and _compilable(rgb, matte):
+        from rigctl.exr_kernels import lifted, premultiply_half  # compiled on first use
+
+        knee = _SLOPE * _BETA
+        bits = out["RGB"].view(np.uint16), out["A"].view(np.uint16)
+        powers = np.empty((min(h, HALF_BAND_ROWS), *rgb.shape[1:]), np.float32)
+        for y0 in range(0, h, HALF_BAND_ROWS):
+            rows = slice(y0, y0 + HALF_BAND_ROWS)
+            band = powers[: len(rgb[rows])]
+            lifted(rgb[rows], band, knee, _ALPHA - 1, _ALPHA)
+            np.power(band, np.float32(1 / 0.45), out=band)  # numpy's, as the reference's
+            premultiply_half(rgb[rows], matte[rows], band, bits[0][rows], bits[1][rows], knee, _SLOPE)
+        return out
     for y0 in range(0, h, HALF_BAND_ROWS):
         rows = slice(y0, y0 + HALF_BAND_ROWS)
         for k, v in picture(rgb[rows], None if matte is None else matte[rows], colour).items():
@@ -175,16 +190,18 @@ def write_exr(
     attributes: dict[str, object] | None = None,
     half: tuple[str, ...] = (),
     compression: Any = None,
+    durable: bool = True,
 ) -> None:
     """Write a scanline EXR with float32 channels, or half floats for those named in ``half``; ``RGB`` may be
-    one H x W x 3 array. ZIP unless ``compression`` says otherwise (an ``OpenEXR.*_COMPRESSION``)."""
+    one H x W x 3 array. ZIP unless ``compression`` says otherwise (an ``OpenEXR.*_COMPRESSION``).
+    ``durable=False``: not fsynced (:func:`rigctl.publish.publishing`), for a caller that makes it so."""
     header: dict[str, object] = {
         "compression": OpenEXR.ZIP_COMPRESSION if compression is None else compression,
         "type": OpenEXR.scanlineimage,
     }
     header.update(attributes or {})
     data = {k: np.ascontiguousarray(v, dtype=np.float16 if k in half else np.float32) for k, v in channels.items()}
-    with publishing(path) as tmp:  # a temporary name in the same folder, renamed once whole
+    with publishing(path, durable) as tmp:  # a temporary name in the same folder, renamed once whole
         try:
             _encode_threads()
             OpenEXR.File(header, data).write(str(tmp))

@@ -40,3 +40,63 @@ def premultiply(  # pragma: no cover  (compiled)
             for c in range(3):
                 v = rgb[y, x, c]
                 out[y, x, c] = (v / s if v < k else out[y, x, c]) * a
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def half_bits(f: np.uint32) -> np.uint16:  # pragma: no cover  (compiled)
+    """The IEEE half float nearest a float32's bits ``f`` (ties to even), as numpy's float32-to-float16 cast
+    gives it: overflow to infinity, underflow through the subnormals to a signed zero, a NaN kept a NaN with
+    its significand's top bits."""
+    sign = np.uint32((f >> np.uint32(16)) & np.uint32(0x8000))
+    exp = f & np.uint32(0x7F800000)
+    sig = f & np.uint32(0x007FFFFF)
+    if exp >= np.uint32(0x47800000):
+        if exp == np.uint32(0x7F800000) and sig != np.uint32(0):
+            nan = np.uint32(0x7C00) + (sig >> np.uint32(13))
+            return np.uint16(sign + (nan + np.uint32(1) if nan == np.uint32(0x7C00) else nan))
+        return np.uint16(sign + np.uint32(0x7C00))
+    if exp <= np.uint32(0x38000000):
+        if exp < np.uint32(0x33000000):
+            return np.uint16(sign)
+        # the subnormal significand: shifted 13 and as many more as the exponent is below the half's least
+        full = (np.uint32(0x00800000) + sig) >> (np.uint32(113) - (exp >> np.uint32(23)))
+        # ties to even, with the bits that shift lost looked for in the original
+        if (full & np.uint32(0x00003FFF)) != np.uint32(0x00001000) or (f & np.uint32(0x000007FF)) != np.uint32(0):
+            full += np.uint32(0x00001000)
+        return np.uint16(sign + (full >> np.uint32(13)))
+    h_exp = (exp - np.uint32(0x38000000)) >> np.uint32(13)
+    if (sig & np.uint32(0x00003FFF)) != np.uint32(0x00001000):
+        sig += np.uint32(0x00001000)
+    return np.uint16(sign + h_exp + (sig >> np.uint32(13)))
+
+
+@njit(parallel=True, cache=True, fastmath=False)
+def premultiply_half(  # pragma: no cover  (compiled)
+    rgb: np.ndarray,
+    matte: np.ndarray,
+    powers: np.ndarray,
+    out: np.ndarray,
+    alpha: np.ndarray,
+    knee: float,
+    slope: float,
+) -> None:
+    """:func:`premultiply` written as the half floats an EXR holds (``out`` H x W x 3 and ``alpha`` H x W, the
+    bits as uint16, :func:`half_bits`): the float32 products are rounded as numpy's cast rounds them, without
+    a float32 frame or numpy's scalar cast (issue 24: the write's picture, 7x faster)."""
+    k, s = np.float32(knee), np.float32(slope)
+    zero, one = np.float32(0.0), np.float32(1.0)
+    h, w = matte.shape
+    for y in prange(h):
+        lin = np.empty(3 * w + w, np.float32)  # the row's products and alphas, read back as bits
+        bits = lin.view(np.uint32)
+        for x in range(w):
+            a = matte[y, x]
+            a = zero if a < zero else (one if a > one else a)
+            lin[3 * w + x] = a
+            for c in range(3):
+                v = rgb[y, x, c]
+                lin[3 * x + c] = (v / s if v < k else powers[y, x, c]) * a
+        for x in range(w):
+            alpha[y, x] = half_bits(bits[3 * w + x])
+            for c in range(3):
+                out[y, x, c] = half_bits(bits[3 * x + c])

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
+import os
 import shutil
 import uuid
 from collections.abc import Callable
@@ -174,6 +175,7 @@ class Target:
     timecode: Timecode | None = None
     flat: bool = False  # one picture (a grid folder): DIR/<camera>.<ext>
     colour: str = "rec709"  # rigctl.exr.COLOURS
+    durable: bool = True  # False: the EXRs are not fsynced here (a staging folder whose writer does it)
 
     def path(self, camera: str, ext: str) -> Path:
         return output_path(self.out, "flat" if self.flat else self.layout, self.frame, camera, ext)
@@ -205,13 +207,20 @@ def write_outputs(
 
 
 def write_all(
-    target: Target, grid: Grid, results: dict[str, DepthResult], d_range: tuple[float, float], formats: tuple[str, ...]
+    target: Target,
+    grid: Grid,
+    results: dict[str, DepthResult],
+    d_range: tuple[float, float],
+    formats: tuple[str, ...],
+    finished: Callable[[Path], None] | None = None,
 ) -> None:
     """Every camera's outputs, one camera after another. The EXR picture's soft key, the write's dearest part,
     is made in a second thread (numpy and OpenCV let go of the GIL): a camera's while its PFM and PNG are made
     and written and while the camera before it writes its EXR (issue 24: the key and the EXR's compression
     side by side). Each camera's depth layers are made after its key is done, so that the key's temporaries
-    and theirs are not held at once (at 3840x2160 that kept the write's peak at 0.98 GiB, not 1.11)."""
+    and theirs are not held at once (at 3840x2160 that kept the write's peak at 0.98 GiB, not 1.11).
+    ``finished``: told of each file once it is at its name (:meth:`Exporter.write` fsyncs and checksums it
+    there while the next camera's is made)."""
     cams = list(results)
     with ThreadPoolExecutor(1, thread_name_prefix="soft-key") as beside:
 
@@ -223,18 +232,25 @@ def write_all(
         pending = start(0)
         for i, name in enumerate(cams):
             res = results[name]
+            written = []
             if "pfm" in formats:
-                write_pfm(target.path(name, ".pfm"), res.disparity)
+                write_pfm(path := target.path(name, ".pfm"), res.disparity)
+                written.append(path)
             if "png" in formats:
-                publish_png(target.path(name, ".png"), colour_preview(res.disparity, d_range))
+                publish_png(path := target.path(name, ".png"), colour_preview(res.disparity, d_range))
+                written.append(path)
             key = pending.result() if pending is not None else None
             pending = start(i + 1)
             if "exr" in formats:
                 pic = exr_picture(grid, name, res, key, target.colour)
                 key = None  # the key's planes go before the depth layers are made and the file encoded
                 write_depth_exr(target, name, grid, pic, depth_channels(grid, name, res))
+                written.append(target.path(name, ".exr"))
                 del pic
             del key
+            if finished is not None:
+                for path in written:
+                    finished(path)
 
 
 def depth_channels(grid: Grid, name: str, res: DepthResult) -> dict[str, F32]:
@@ -273,7 +289,9 @@ def write_depth_exr(target: Target, name: str, grid: Grid, pic: dict[str, F16], 
         "rigctl:disparity": "pixels of the horizontal spacing; depth.Z holds 1/Z",
         **disparity_header(st),
     }
-    write_exr(target.path(name, ".exr"), channels, attrs, half=("RGB", "A"), compression=FAST_LOSSLESS)
+    write_exr(
+        target.path(name, ".exr"), channels, attrs, ("RGB", "A"), compression=FAST_LOSSLESS, durable=target.durable
+    )
 
 
 def drop_unasked(target: Target, cameras: list[str], formats: tuple[str, ...]) -> None:
@@ -295,10 +313,25 @@ def drop_unasked(target: Target, cameras: list[str], formats: tuple[str, ...]) -
                 raise output_error(path, exc) from None
 
 
-def publish(tmp: Path, final: Path) -> dict[str, FileRecord]:
+def durable_record(path: Path) -> FileRecord:
+    """Make a written file durable (fsync) and return its record (read back while the page cache has it)."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        return file_record(path)
+    except OSError as exc:
+        raise output_error(path, exc) from None
+
+
+def publish(tmp: Path, final: Path, known: dict[str, FileRecord] | None = None) -> dict[str, FileRecord]:
     """Move every finished file into the frame's folder by rename (a reader sees a whole file or none), the
-    folder fsynced after (:func:`rigctl.publish.move_into`); returns each file's record."""
-    records = {f.name: file_record(f) for f in sorted(tmp.iterdir())}
+    folder fsynced after (:func:`rigctl.publish.move_into`); returns each file's record (``known``'s where it
+    has one: each made durable by :func:`durable_record` as it was written)."""
+    known = known or {}
+    records = {f.name: known[f.name] if f.name in known else file_record(f) for f in sorted(tmp.iterdir())}
     move_into(tmp, final)
     return records
 
@@ -331,10 +364,19 @@ class Exporter:
             return {}
         name = frame_name(number)
         tmp = self.out / f"{PARTIAL_PREFIX}{name}-{uuid.uuid4().hex[:12]}"
-        staging = dataclasses.replace(target, out=tmp, flat=True)
+        # the EXRs are written unsynced and each made durable and checksummed in a thread while the next
+        # camera's is made (issue 24: 0.2 s of a 1920x1080 frame set's write was these fsyncs and reads)
+        staging = dataclasses.replace(target, out=tmp, flat=True, durable=False)
         try:
-            write_all(staging, grid, results, d_range, self.formats)
-            records = publish(tmp, inside(self.out, self.out / name))
+            with ThreadPoolExecutor(1, thread_name_prefix="durable") as finisher:
+                done: dict[str, Future[FileRecord]] = {}
+
+                def finished(path: Path) -> None:
+                    done[path.name] = finisher.submit(durable_record, path)
+
+                write_all(staging, grid, results, d_range, self.formats, finished)
+                known = {n: f.result() for n, f in done.items()}
+            records = publish(tmp, inside(self.out, self.out / name), known)
             drop_unasked(target, list(results), self.formats)  # after: the frame's folder is never emptier
             return records
         finally:

@@ -74,6 +74,9 @@ def test_the_half_picture_in_bands_is_the_whole_picture_in_half_floats(
     from rigctl.exr import half_picture
 
     monkeypatch.setattr(exr, "HALF_BAND_ROWS", rows)
+    ran = []
+    real = exr_kernels.premultiply_half
+    monkeypatch.setattr(exr_kernels, "premultiply_half", lambda *a: ran.append(1) or real(*a))
     rgb, matte = _pictures()
     rgb[5, 5, 0], matte[6, 6] = np.nan, np.nan
     for m in (matte, None):
@@ -82,5 +85,41 @@ def test_the_half_picture_in_bands_is_the_whole_picture_in_half_floats(
         for k in want:
             assert got[k].dtype == np.float16 and got[k].shape == want[k].shape
             assert np.array_equal(got[k].view(np.uint16), want[k].astype(np.float16).view(np.uint16))
+        # rounded by the compiled pass where the picture is (a matte, Rec. 709), else numpy's cast
+        assert bool(ran) == (m is not None and colour == "rec709")
+        ran.clear()
     empty = half_picture(np.zeros((0, 4, 3), np.float32), np.zeros((0, 4), np.float32), colour)
     assert empty["RGB"].shape == (0, 4, 3) and empty["A"].shape == (0, 4)
+
+
+def test_half_bits_round_as_numpys_cast() -> None:
+    """The compiled rounding to half floats (``exr_kernels.half_bits``) against numpy's float32-to-float16
+    cast: every float32 whose bits lie near a half's rounding boundaries (ties to even, both sides), in every
+    exponent (overflow to infinity, the subnormals, underflow to a signed zero), NaNs with any significand,
+    and random bits. (All 2^32 float32 patterns were compared once, 338 s: none differed.)"""
+    from numba import njit
+
+    half_bits = exr_kernels.half_bits
+
+    @njit(cache=False)
+    def cast(bits: np.ndarray) -> np.ndarray:  # pragma: no cover  (compiled)
+        out = np.empty(bits.size, np.uint16)
+        for i in range(bits.size):
+            out[i] = half_bits(bits[i])
+        return out
+
+    top = np.arange(512, dtype=np.uint32) << np.uint32(23)  # sign and exponent, every one
+    low = np.unique(
+        np.concatenate(
+            [
+                np.arange(0, 1 << 14, dtype=np.uint32),  # the bits below a normal half's last place, all
+                np.array([0x7FFFFF, 0x7FE000, 0x7FF000, 0x400000, 0x000001], np.uint32),
+                np.random.default_rng(5).integers(0, 1 << 23, 2000, dtype=np.uint32),
+            ]
+        )
+    )
+    for lows in (low, (low << np.uint32(9)) & np.uint32(0x7FFFFF)):  # and the high significand bits
+        bits = (top[:, None] | lows[None, :]).reshape(-1)
+        with np.errstate(over="ignore"):
+            want = bits.view(np.float32).astype(np.float16).view(np.uint16)
+        assert np.array_equal(cast(bits), want)
