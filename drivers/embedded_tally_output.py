@@ -22,5 +22,8 @@ class EmbeddedTallyOutput:
     def send(self, state: TallyState) -> None:
         self.bridge.send_tally(self.packet(state))
 
+    def settle(self) -> None:
+        """Nothing to wait for: the bridge reports its own failures when sent to."""
+
     def close(self) -> None:
         self.bridge.close()

@@ -31,5 +31,8 @@ class Tsl31Output:
         except Exception as exc:  # pyserial raises its own and OS errors
             raise DeviceError(f"{self.url}: tally line lost: {exc}") from None
 
+    def settle(self) -> None:
+        """Nothing to wait for: a serial line has no receiver to say it dropped the tally."""
+
     def close(self) -> None:
         self.link.close()

@@ -7,7 +7,9 @@ when the output opens and a refused, reset or closed connection is a DeviceError
 from __future__ import annotations
 
 import re
+import select
 import socket
+import time
 
 from rigctl.drivers.protocols import tsl50
 
@@ -17,6 +19,7 @@ from rigctl.interfaces import TallyState
 SCHEMES = ("udp", "tcp")
 CONNECT_TIMEOUT_S = 2.0  # a receiver that does not answer: the service retries with its backoff
 SEND_TIMEOUT_S = 2.0  # a receiver that stops reading: its buffer fills, the send fails rather than hangs
+SETTLE_S = 0.2  # how long a one-shot send waits for a receiver that drops it (closed or reset) to say so
 
 
 def parse_url(url: str) -> tuple[str, str, int]:
@@ -76,6 +79,8 @@ class Tsl50Output:
     def send(self, state: TallyState) -> None:
         if self.sock is None:
             raise DeviceError(f"{self.url}: tally not sent: the output is closed")
+        if self.tcp and (gone := self._gone(0.0)):  # a closed connection takes one send without a word
+            raise DeviceError(f"{self.url}: tally not sent: the receiver {gone} the connection")
         try:
             if self.tcp:
                 self.sock.sendall(tsl50.frame(self.packet(state)))
@@ -83,6 +88,32 @@ class Tsl50Output:
                 self.sock.sendto(self.packet(state), self.target)
         except OSError as exc:
             raise DeviceError(f"{self.url}: tally not sent: {exc.strerror or exc}") from None
+
+    def settle(self, wait: float = SETTLE_S) -> None:
+        """After a one-shot send: a DeviceError when the TCP receiver drops the connection within ``wait``
+        seconds (a receiver that closes at once, or resets what it did not read: the tally was not shown);
+        nothing to wait for over UDP."""
+        if self.tcp and self.sock is not None and (gone := self._gone(wait)):
+            raise DeviceError(f"{self.url}: tally not shown: the receiver {gone} the connection")
+
+    def _gone(self, wait: float) -> str | None:
+        """``closed`` or ``reset`` when the receiver's end of the connection is gone (seen within ``wait``
+        seconds), None while it is open. A TSL 5.0 receiver sends nothing back; whatever it does send is
+        read and dropped."""
+        assert self.sock is not None
+        deadline = time.monotonic() + wait
+        while True:
+            ready, _, _ = select.select([self.sock], [], [], max(0.0, deadline - time.monotonic()))
+            if not ready:
+                return None
+            try:
+                data = self.sock.recv(4096, socket.MSG_DONTWAIT)
+            except (BlockingIOError, TimeoutError):  # nothing after all: look again while there is time
+                continue
+            except OSError:  # ECONNRESET, or any error the connection now holds
+                return "reset"
+            if not data:
+                return "closed"
 
     def close(self) -> None:
         if self.sock is not None:

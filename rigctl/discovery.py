@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any, NotRequired, TypedDict
 
 from rigctl.address import camera_address, line_address
-from rigctl.errors import DeviceError
+from rigctl.errors import DeviceError, RigFileError
 from rigctl.publish import kind
 from rigctl.rig import Rig, UsbIdentity
 
@@ -125,6 +125,23 @@ def _line_state(text: str, role: str) -> str:
     return "found" if _not_a_device(address.target) is None else "MISSING"
 
 
+def _tally_url_problem(rig: Rig, url: str) -> str | None:
+    """Why a network tally address is one ``rigctl tally`` refuses before it sends (not a TSL 5.0 URL, no
+    port, a host name no resolver takes), or None; whether a receiver answers there is not tried."""
+    if rig.model.tally is None or rig.model.tally.protocol != "tsl-umd-5.0":
+        return None
+    from rigctl.drivers.tsl50_output import parse_url
+
+    try:
+        _, host, _ = parse_url(url)
+        host.encode("idna")  # what the resolver does first ('a..b', an empty label, a label of 64+)
+    except RigFileError as exc:
+        return str(exc)
+    except UnicodeError:
+        return f"{url}: {host!r:.80} is not a host name"
+    return None
+
+
 def _not_a_device(path: str) -> str | None:
     """Why a line's ``path`` is no device node (missing, or a folder, file, FIFO or socket: rigctl tally refuses
     those), or None when it is one."""
@@ -178,6 +195,9 @@ def describe_attached(rig: Rig) -> AttachedReport:
         if address is None:
             continue
         state = _line_state(address, f"{role} line")
+        if state == "network" and role == "tally" and (why := _tally_url_problem(rig, address)):
+            state = "INVALID"
+            missing.append(f"tally line ({why})")
         lines.append({"role": role, "address": address, "state": state})
         if state == "MISSING":
             why = _not_a_device(line_address(address, f"{role} line").target)

@@ -160,6 +160,11 @@ class TallyOutput(Protocol):
     def send(self, state: TallyState) -> None:
         """Send the complete state; raises DeviceError when the line fails (the service reopens it)."""
 
+    def settle(self) -> None:
+        """After a one-shot send (``rigctl tally``): raises DeviceError when the receiver is seen to drop what
+        was sent (a TCP receiver that closes or resets the connection at once); returns at once where no
+        receiver can say so."""
+
     def close(self) -> None:
         """Release the line. Never raises."""
 

@@ -16,8 +16,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "tally",
         help="send the complete tally state (program / preview) once",
         epilog=examples(
-            ("the centre camera on program, its left and right neighbours on preview",
-             "rigctl tally sim-3x3 --program r1c1 --preview r1c0 r1c2"),
+            (
+                "the centre camera on program, its left and right neighbours on preview",
+                "rigctl tally sim-3x3 --program r1c1 --preview r1c0 r1c2",
+            ),
             ("every lamp off", "rigctl tally sim-3x3"),
         ),
     )
@@ -37,6 +39,7 @@ def run(ns: argparse.Namespace) -> int:
     out = open_tally(rig)
     try:
         out.send(state)
+        out.settle()  # a receiver that drops the connection at once did not show it
     finally:
         out.close()
     print(

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import socket
+import struct
+import threading
 import time
 from pathlib import Path
 
@@ -315,6 +317,44 @@ def test_tsl50_over_tcp(tmp_path: Path, run_cli) -> None:  # type: ignore[no-unt
     assert f"tcp://127.0.0.1:{rx.port}: cannot connect to the tally receiver" in lines[0]
 
 
+@pytest.mark.parametrize("how", ["closes", "resets"])
+def test_tsl50_over_tcp_to_a_receiver_that_drops_the_connection_at_once_fails(
+    tmp_path: Path, run_cli, how: str
+) -> None:  # type: ignore[no-untyped-def]
+    """A receiver that accepts and at once closes (or resets) the connection did not show the tally: ``rigctl
+    tally`` says so in one line and exits 4, not "tally sent" (a closed TCP connection takes a send without a
+    word; the reset comes back after it)."""
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+    stop = threading.Event()
+
+    def drop() -> None:
+        server.settimeout(0.05)
+        while not stop.is_set():
+            try:
+                conn, _ = server.accept()
+            except TimeoutError:
+                continue
+            if how == "resets":
+                conn.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+            conn.close()
+
+    thread = threading.Thread(target=drop, daemon=True)
+    thread.start()
+    try:
+        rig = write_rig(tmp_path, tally={"protocol": "tsl-umd-5.0", "port": f"tcp://127.0.0.1:{port}"})
+        for _ in range(3):  # whichever comes first, the drop or the send
+            res = run_cli("tally", str(rig), "--program", "r0c1")
+            lines = res.stderr.strip().splitlines()
+            assert res.returncode == 4 and len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+            assert f"tcp://127.0.0.1:{port}: tally not" in lines[0] and "the receiver" in lines[0], lines[0]
+            assert "tally sent" not in res.stdout
+    finally:
+        stop.set()
+        thread.join(5)
+        server.close()
+
+
 def test_tsl50_tcp_receiver_restarted_gets_the_whole_state_back(tmp_path: Path) -> None:
     """The shoot's tally service on TCP: a receiver that reboots (connection reset, port closed for 2 s, then
     listening again) has every camera's lamps back within the service's backoff, nobody doing anything."""
@@ -470,3 +510,25 @@ def test_a_line_that_answers_in_something_else_than_bridge_frames_is_not_called_
         stop.set()
         os.close(master)
         os.close(slave)
+
+
+@pytest.mark.parametrize(
+    ("port", "said"),
+    [
+        ("tcp://a..b:47001", "'a..b' is not a host name"),
+        ("tcp://127.0.0.1:99999", "with a port 1..65535"),
+        ("tcp://::1:47001", "an IPv6 host as [ADDRESS]"),
+        ("socket://127.0.0.1:47001", "write udp://HOST:PORT or tcp://HOST:PORT"),  # a serial line's URL
+    ],
+)
+def test_devices_names_a_tally_url_that_rigctl_tally_refuses(tmp_path: Path, port: str, said: str) -> None:
+    """A hostile-user review: ``rigctl devices`` called any network tally address "network" (exit 0) that
+    ``rigctl tally`` then refused; such an address is now INVALID, named with the reason, exit 1. A good one
+    stays "network" (nothing is sent to find out whether a receiver answers)."""
+    rig = write_rig(tmp_path, tally={"protocol": "tsl-umd-5.0", "port": port})
+    code, out, err = run_devices(tmp_path, rig)
+    assert code == 1 and "Traceback" not in err, out + err
+    assert f"tally: {port}  INVALID" in out and said in out.split("missing:")[1], out
+    good = write_rig(tmp_path, tally={"protocol": "tsl-umd-5.0", "port": "tcp://[::1]:47001"})
+    code, out, err = run_devices(tmp_path, good)
+    assert code == 0 and "tally: tcp://[::1]:47001  network" in out, out + err
