@@ -100,3 +100,30 @@ def premultiply_half(  # pragma: no cover  (compiled)
             alpha[y, x] = half_bits(bits[3 * w + x])
             for c in range(3):
                 out[y, x, c] = half_bits(bits[3 * x + c])
+
+
+@njit(parallel=True, cache=True, fastmath=False)
+def depth_planes(  # pragma: no cover  (compiled)
+    disparity: np.ndarray, f_spacing: float, doffs: float, scales: np.ndarray, inv_z: np.ndarray, out: np.ndarray
+) -> None:
+    """A depth EXR's planes from the disparity in one pass: ``inv_z`` = 1 / Z, Z = f * spacing / (d + doffs)
+    (0 where there is no estimate, d + doffs <= 0 or Z is not a positive finite number), and ``out[i]`` = the
+    disparity (0 where it is not finite) times ``scales[i]``; all in float32, as
+    :meth:`rigctl.depth.grid.Grid.depth`, the EXR's 1/Z and :func:`rigctl.disparity_layers.layers` compute
+    them with numpy, bit for bit."""
+    fs, off = np.float32(f_spacing), np.float32(doffs)
+    zero, one = np.float32(0.0), np.float32(1.0)
+    h, w = disparity.shape
+    for y in prange(h):
+        for x in range(w):
+            d = disparity[y, x]
+            den = d + off
+            v = zero
+            if np.isfinite(den) and den > zero:
+                z = fs / den
+                if np.isfinite(z) and z > zero:
+                    v = one / z
+            inv_z[y, x] = v
+            fin = d if np.isfinite(d) else zero
+            for i in range(scales.shape[0]):
+                out[i, y, x] = fin * scales[i]

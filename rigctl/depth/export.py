@@ -181,6 +181,7 @@ class Target:
         return output_path(self.out, "flat" if self.flat else self.layout, self.frame, camera, ext)
 
 
+COMPILED = True  # the depth EXR's 1/Z and disparity layers in one compiled pass; False: numpy's, the reference
 KEYER = Keyer()  # the soft key of every EXR picture
 
 
@@ -254,13 +255,31 @@ def write_all(
 
 
 def depth_channels(grid: Grid, name: str, res: DepthResult) -> dict[str, F32]:
-    """The EXR's channels but the picture: 1/Z, confidence and the disparity layers. The disparity is read
-    (made from its packed form) for each, not held beside them (issue 24: the write's peak)."""
+    """The EXR's channels but the picture: 1/Z, confidence and the disparity layers. Compiled, in one pass
+    over the disparity (``exr_kernels.depth_planes``: the numpy path's bits, which is kept as the reference
+    with ``COMPILED`` off, where the disparity is read, made from its packed form, for each)."""
+    st = steps(grid.offsets, name)
+    if COMPILED:
+        from rigctl.exr_kernels import depth_planes  # compiled on first use
+
+        d = np.ascontiguousarray(res.disparity, np.float32)
+        signed = (
+            [("disparityL.x", -st.right), ("disparityR.x", st.left)]
+            if st.right is not None and st.left is not None
+            else []
+        ) + ([("disparityV.y", -st.below)] if st.below is not None else [])
+        inv_z, planes = np.empty(d.shape, np.float32), np.empty((len(signed), *d.shape), np.float32)
+        scales = np.array([s for _, s in signed], np.float32)
+        depth_planes(d, grid.focal_px * grid.spacing, grid.doffs, scales, inv_z, planes)
+        made = dict(zip([n for n, _ in signed], planes, strict=True))
+        zero = np.zeros(d.shape, np.float32)
+        names = list(layers(np.zeros((0, 0), np.float32), st))  # the layers' names, in their order
+        return {"depth.Z": inv_z, "confidence.Y": res.confidence, **{n: made.get(n, zero) for n in names}}
     z = grid.depth(res.disparity)
     with np.errstate(divide="ignore"):
         inv_z = np.asarray(np.where(np.isfinite(z) & (z > 0), 1.0 / z, np.float32(0.0)), np.float32)
     del z
-    return {"depth.Z": inv_z, "confidence.Y": res.confidence, **layers(res.disparity, steps(grid.offsets, name))}
+    return {"depth.Z": inv_z, "confidence.Y": res.confidence, **layers(res.disparity, st)}
 
 
 def exr_picture(grid: Grid, name: str, res: DepthResult, key: SoftKey | None, colour: str) -> dict[str, F16]:

@@ -240,7 +240,7 @@ class Grid:
 
     def depth(self, disparity: F32) -> F32:
         """Z = f * spacing / (d + doffs); +inf where there is no estimate or d + doffs <= 0."""
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a tiny d + doffs: Z overflows, +inf
             den = disparity + np.float32(self.doffs)
             z = np.where(np.isfinite(den) & (den > 0), self.focal_px * self.spacing / den, np.inf)
         return np.asarray(z, dtype=np.float32)

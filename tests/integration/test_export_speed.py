@@ -278,3 +278,32 @@ def test_the_compiled_preview_is_the_reference_bit_for_bit(d_range: tuple[float,
     assert (got[~np.isfinite(d)] == 0).all()
     if d_range[1] - d_range[0] > 1:
         assert len(np.unique(got.reshape(-1, 3), axis=0)) > 100  # the whole map in use, not one colour
+
+
+@pytest.mark.parametrize("doffs", [0.0, -2.5])
+def test_the_compiled_depth_planes_are_numpys(
+    computed: tuple[Grid, dict[str, DepthResult]], monkeypatch: pytest.MonkeyPatch, doffs: float
+) -> None:
+    """Issue 24, the write: 1/Z and the NUKE disparity layers made in one compiled pass are the numpy path's
+    bit for bit, in the same order, on a row of cameras (left and right layers) and a grid (and the vertical
+    one), at every kind of disparity: none (inf, NaN), negative, zero of both signs, where d + doffs <= 0, where
+    Z overflows, and huge."""
+    grid, results = computed
+    specials = np.array(
+        [np.inf, -np.inf, np.nan, -1.0, 0.0, -0.0, 1e-45, 2.5, 2.5000002, 1e30, -3e38, 7.25], np.float32
+    )
+    rng = np.random.default_rng(4)
+    for offsets in (grid.offsets, {c: (float(i % 2), float(i // 2)) for i, c in enumerate(CAMS)}):
+        g = dataclasses.replace(grid, offsets=offsets, doffs=doffs)
+        for cam in CAMS:
+            d = rng.uniform(-5, 12, (H, W)).astype(np.float32)
+            d.reshape(-1)[: specials.size * 50] = np.tile(specials, 50)
+            res = dataclasses.replace(results[cam], disparity=d)
+            monkeypatch.setattr(export, "COMPILED", True)
+            got = export.depth_channels(g, cam, res)
+            monkeypatch.setattr(export, "COMPILED", False)
+            want = export.depth_channels(g, cam, res)
+            assert list(got) == list(want)
+            for k in want:
+                assert got[k].dtype == np.float32 and np.array_equal(got[k].view(np.uint32), want[k].view(np.uint32)), k
+            assert ("disparityV.y" in want) == (offsets is not grid.offsets)
