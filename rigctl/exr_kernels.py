@@ -30,16 +30,28 @@ def premultiply(  # pragma: no cover  (compiled)
     """``alpha`` = ``matte`` clipped to [0, 1]; ``out`` (the powers above the knee) becomes the linear light,
     v / slope below the knee, times alpha; float32. A NaN matte or code value gives NaN, as in numpy's path."""
     k, s = np.float32(knee), np.float32(slope)
-    zero, one = np.float32(0.0), np.float32(1.0)
     h, w = matte.shape
     for y in prange(h):
         for x in range(w):
-            a = matte[y, x]
-            a = zero if a < zero else (one if a > one else a)
+            a = _unit(matte[y, x])
             alpha[y, x] = a
             for c in range(3):
-                v = rgb[y, x, c]
-                out[y, x, c] = (v / s if v < k else out[y, x, c]) * a
+                out[y, x, c] = _light(rgb[y, x, c], out[y, x, c], a, k, s)
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _unit(a: np.float32) -> np.float32:  # pragma: no cover  (compiled)
+    """The matte clipped to [0, 1] (NaN stays NaN, as numpy's clip keeps it)."""
+    zero, one = np.float32(0.0), np.float32(1.0)
+    return zero if a < zero else (one if a > one else a)
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _light(
+    v: np.float32, power: np.float32, a: np.float32, knee: np.float32, slope: np.float32
+) -> np.float32:  # pragma: no cover
+    """Linear light times alpha: v / slope below the knee, the power (made by numpy) above it."""
+    return (v / slope if v < knee else power) * a
 
 
 @njit(cache=True, fastmath=False, inline="always")
@@ -84,18 +96,15 @@ def premultiply_half(  # pragma: no cover  (compiled)
     bits as uint16, :func:`half_bits`): the float32 products are rounded as numpy's cast rounds them, without
     a float32 frame or numpy's scalar cast (issue 24: the write's picture, 7x faster)."""
     k, s = np.float32(knee), np.float32(slope)
-    zero, one = np.float32(0.0), np.float32(1.0)
     h, w = matte.shape
     for y in prange(h):
         lin = np.empty(3 * w + w, np.float32)  # the row's products and alphas, read back as bits
         bits = lin.view(np.uint32)
         for x in range(w):
-            a = matte[y, x]
-            a = zero if a < zero else (one if a > one else a)
+            a = _unit(matte[y, x])
             lin[3 * w + x] = a
             for c in range(3):
-                v = rgb[y, x, c]
-                lin[3 * x + c] = (v / s if v < k else powers[y, x, c]) * a
+                lin[3 * x + c] = _light(rgb[y, x, c], powers[y, x, c], a, k, s)
         for x in range(w):
             alpha[y, x] = half_bits(bits[3 * w + x])
             for c in range(3):
