@@ -59,14 +59,17 @@ def missing_sidecars(reader: TakeReader) -> list[str]:
     """The sidecars the recorder writes at a take's end (``sets.csv`` as ``frame_sets.file`` names it,
     ``log.csv``, ``TAKE.ale``) that a take which ended is missing, a warning each: the frames are all there,
     but editorial's lists were lost (a copy that left them behind, a hand clean-up). None is looked for in a take
-    still ``recording``, a rectified one (``rectification.source_take``: ``rigctl rectify`` writes none), one
-    without frame sets, or one whose notes say they could not be written (the recorder said why then)."""
+    still ``recording``, a rectified one (``rectification.source_take``: ``rigctl rectify`` writes none) or one
+    whose notes say they could not be written (the recorder said why then); ``sets.csv`` not in one without
+    frame sets."""
     man = reader.manifest
     rectified = man.rectification is not None and man.rectification.source_take is not None
     noted = any(n.startswith(NOT_WRITTEN) for n in man.notes)
-    if man.status == "recording" or man.frame_sets is None or rectified or noted:
+    if man.status == "recording" or rectified or noted:
         return []
-    names = [man.frame_sets.file, "log.csv"]
+    # without frame sets (a take.yaml from elsewhere, or edited) there is no sets.csv to look for; the camera
+    # log and the ALE are the recorder's all the same
+    names = ([man.frame_sets.file] if man.frame_sets is not None else []) + ["log.csv"]
     with contextlib.suppress(ParameterError):  # a take name that is no plain file name: rigctl wrote no ALE of it
         names.append(f"{check_take_name(man.take)}.ale")
     return [  # once each (frame_sets.file may name log.csv or the ALE)

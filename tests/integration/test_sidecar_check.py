@@ -109,6 +109,11 @@ def test_a_sidecar_missing_from_a_take_that_ended_is_a_warning_each(dropping: Pa
     assert [w.split(": ")[1] for w in said] == [str(take / n) for n in ("sets.csv", "log.csv", "t.ale")], said
     edit_manifest(take, lambda m: m["frame_sets"].update(file="log.csv"))  # a name another sidecar has
     assert len(_warnings(take)) == 2, "log.csv warned of twice"
+    # a take.yaml without frame sets (edited, or from elsewhere): no sets.csv to look for, but the camera log
+    # and the ALE are still the recorder's (session 28's review: no warning at all before)
+    edit_manifest(take, lambda m: m.pop("frame_sets"))
+    said = _warnings(take)
+    assert [w.split(": ")[1] for w in said] == [str(take / n) for n in ("log.csv", "t.ale")], said
 
 
 def test_a_take_that_never_had_sidecars_is_not_warned_of_them(dropping: Path, tmp_path: Path) -> None:

@@ -111,3 +111,21 @@ def test_a_regular_file_is_read_through_a_blocking_descriptor(tmp_path: Path) ->
         assert size == 4096 and os.get_blocking(fd)
     finally:
         os.close(fd)
+
+
+def test_a_link_to_nothing_is_named_as_one(tmp_path: Path) -> None:
+    """A hostile-user review: a dangling symbolic link (sets.csv pointing at a file that is gone) was
+    reported as "no such frame-set file", though a file is listed at that name; the link and where it points
+    are named. A name with nothing at it still reads "no such"."""
+    from rigctl.regular import read_regular
+
+    link = tmp_path / "sets.csv"
+    link.symlink_to(tmp_path / "gone" / "sets.csv")
+    with pytest.raises(TakeError) as err:
+        read_regular(link, 1000, TakeError, "frame-set file")
+    assert (
+        str(err.value)
+        == f"{link}: frame-set file is a symbolic link to '{tmp_path}/gone/sets.csv', which does not exist"
+    )
+    with pytest.raises(TakeError, match=r"log.csv: no such frame-set file$"):
+        read_regular(tmp_path / "log.csv", 1000, TakeError, "frame-set file")
