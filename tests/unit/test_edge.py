@@ -81,6 +81,31 @@ def test_coverage_of_a_picture_without_soft_pixels_is_the_matte() -> None:
     assert np.array_equal(coverage(rgb, matte), matte)
 
 
+@pytest.mark.parametrize("ss", [1, 8])
+def test_the_compiled_coverage_is_the_reference_within_float32_rounding(ss: int) -> None:
+    """Issue 24: the coverage made at the soft pixels by a compiled kernel, from each one's window, against the
+    box filters over the frame (``coverage_reference``): the matte itself wherever it is not soft, the same
+    mix within float32 rounding on the soft edge (the box filters' running sums round in float32), and so
+    the same pixels with depth; at the frame's edges too (the subject cut by them, windows replicated)."""
+    from rigctl.depth import edge
+
+    rgb, _ = subject_on_screen(ss=ss)
+    rng = np.random.default_rng(ss)
+    cut = np.ascontiguousarray(rgb[20:, 40:])  # the disc and the arm reach the frame's top and left edges
+    for picture in (rgb, cut):
+        matte = Keyer().matte(picture)
+        noisy = np.clip(matte + rng.normal(0, 0.2, matte.shape).astype(np.float32) * (matte > 0), 0, 1)
+        for m in (matte, noisy.astype(np.float32)):
+            soft = (m > 0) & (m < 1)
+            got, want = edge.coverage(picture, m), edge.coverage_reference(picture, m)
+            assert soft.sum() > 50 and got.dtype == np.float32
+            assert np.array_equal(got[~soft], m[~soft])
+            assert np.abs(got - want).max() <= 2e-6
+            near = np.abs(want - DEPTH_COVERAGE) < 1e-5
+            assert np.array_equal((got >= DEPTH_COVERAGE)[~near], (want >= DEPTH_COVERAGE)[~near])
+            assert not np.array_equal(got[soft], m[soft])  # the mix, not the matte, on the edge
+
+
 def plane_with_overlay(d: float, h: int = 120, w: int = 160) -> dict[str, np.ndarray]:
     """A textured plane at disparity ``d`` in a 3x3 grid, with a block pattern burnt into the same corner of
     every camera's picture (fixed to the sensor, as the simulator's frame id)."""
