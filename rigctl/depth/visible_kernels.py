@@ -37,9 +37,13 @@ def _visible(
     h, w = d.shape
     hh, ww = zbuf.shape
     t = np.float32(tol)
+    zbuf[:] = -np.inf
+    top, bottom, left, right = hh, 0, ww, 0  # the cells the last view's splat wrote (none yet)
     for v in range(rel.shape[0]):
         rx, ry = rel[v, 0], rel[v, 1]
-        zbuf[:] = -np.inf
+        if top < bottom:  # only those are set back: the rest of the view never was written (issue 24)
+            zbuf[top:bottom, left:right] = -np.inf
+        top, bottom, left, right = hh, 0, ww, 0
         for y in range(h):
             for x in range(w):
                 if not front[y, x]:
@@ -49,6 +53,8 @@ def _visible(
                 if not (mx > -1.0 and mx < ww and my > -1.0 and my < hh):
                     continue
                 xa, ya = int(np.floor(mx)), int(np.floor(my))
+                top, bottom = min(top, max(ya, 0)), max(bottom, min(ya + 2, hh))
+                left, right = min(left, max(xa, 0)), max(right, min(xa + 2, ww))
                 for j in range(max(ya, 0), min(ya + 2, hh)):
                     for i in range(max(xa, 0), min(xa + 2, ww)):
                         if zbuf[j, i] < dd:
