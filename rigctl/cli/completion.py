@@ -21,10 +21,14 @@ CAMERA_DESTS = ("cameras", "camera", "program", "preview")  # options only
 # for file-name treatment (a slash after a folder).
 _BASH = r"""
 _rigctl_compgen_files() {  # shtab's own pass $1 unquoted: "a b/" became the words "a" and "b/"
-  compgen -f -- "$1"
+  compgen -f -- "$(_rigctl_plain "$1")"
 }
 _rigctl_compgen_dirs() {
-  compgen -d -- "$1"
+  compgen -d -- "$(_rigctl_plain "$1")"
+}
+_rigctl_plain() {  # the word as typed, its quotes and backslashes taken off (compgen takes it as it is); a ~ is
+  # left to compgen, which keeps it in what it offers
+  case "$1" in "~"*) printf '%s' "$1" ;; *) _rigctl_word "$1" ;; esac
 }
 _rigctl_rig_or_file() {
   compgen -W "__RIGS__" -- "$1"
@@ -61,6 +65,42 @@ _rigctl_word() {  # a word of COMP_WORDS (kept as typed: quotes, backslashes, ~/
   done
   case "$w" in "~/"*) out=$HOME/${out:2} ;; "~") out=$HOME ;; esac
   printf '%s' "$out"
+}
+_rigctl_complete() {  # what bash calls: it splits a word at : and = (COMP_WORDBREAKS), so a path such as
+  # "take 12:30/" reached shtab's function as three words. The parts are joined again (a --name=value option as
+  # the two words it stands for), shtab's function completes the whole word, and each completion loses what
+  # bash keeps of the word before its last : or =; a folder gets its slash here (bash no longer sees the folder)
+  local line=${COMP_LINE:0:COMP_POINT} pos=0 i tok lead w r
+  local -a joined=() split=() out=()
+  for ((i = 0; i < ${#COMP_WORDS[@]} && i <= COMP_CWORD; i++)); do
+    tok=${COMP_WORDS[i]}
+    lead=${line:pos}
+    lead=${lead%%[![:blank:]]*}  # the blanks before this part: none where bash split a word
+    pos=$((pos + ${#lead} + ${#tok}))
+    if ((i > 1 && ${#lead} == 0)) && [[ $tok =~ ^[:=]+$ || ${COMP_WORDS[i-1]} =~ ^[:=]+$ ]]; then
+      joined[${#joined[@]}-1]+=$tok
+    else
+      joined+=("$tok")
+    fi
+  done
+  for w in "${joined[@]}"; do
+    if [[ $w =~ ^(--[A-Za-z0-9][-A-Za-z0-9]*)=(.*)$ ]]; then split+=("${BASH_REMATCH[1]}" "${BASH_REMATCH[2]}")
+    else split+=("$w"); fi
+  done
+  local typed=${COMP_WORDS[COMP_CWORD]}
+  [[ $typed =~ ^[:=]+$ ]] && typed=""
+  local whole=${split[${#split[@]}-1]}
+  local kept=${whole%"$typed"}
+  local COMP_WORDS=("${split[@]}") COMP_CWORD=$((${#split[@]} - 1))
+  _shtab_rigctl
+  [ -z "$kept" ] && return 0
+  kept=$(_rigctl_plain "$kept")  # what the completions, unquoted, begin with
+  for r in "${COMPREPLY[@]}"; do
+    [[ $r == "$kept"* ]] || continue
+    if [ -d "$r" ]; then out+=("${r#"$kept"}/"); compopt -o nospace 2>/dev/null
+    else out+=("${r#"$kept"}"); fi
+  done
+  COMPREPLY=("${out[@]}")
 }
 _rigctl_cameras() {  # camera names of the take, grid folder or rig named earlier on the line
   local w typed names="" rig="" n
@@ -159,7 +199,13 @@ def script(shell: str) -> str:
         "zsh": _ZSH.replace("__RIGS__", names).replace("__RIG_CASES__", cases),
         "tcsh": "",
     }[shell]
-    return shtab.complete(parser, shell=shell, preamble=preamble)
+    text = shtab.complete(parser, shell=shell, preamble=preamble)
+    if shell == "bash":  # bash calls the function that joins the words it split at : and = (see _BASH)
+        hook = "complete -o bashdefault -F _shtab_rigctl rigctl"
+        if hook not in text:
+            raise RuntimeError(f"shtab's bash script no longer ends in {hook!r}: update rigctl.cli.completion")
+        text = text.replace(hook, "complete -o bashdefault -F _rigctl_complete rigctl")
+    return text
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -171,10 +217,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "names where an argument is a path. Install it once per shell, as the examples show.",
         epilog=examples(
             ("bash, for this shell only", "source <(rigctl completion bash)"),
-            ("bash, for every new shell (bash-completion loads it on first use)",
-             "rigctl completion bash > ~/.local/share/bash-completion/completions/rigctl"),
-            ("zsh: a file named _rigctl in a folder of $fpath (then: autoload -U compinit && compinit)",
-             "rigctl completion zsh > ~/.zfunc/_rigctl"),
+            (
+                "bash, for every new shell (bash-completion loads it on first use)",
+                "rigctl completion bash > ~/.local/share/bash-completion/completions/rigctl",
+            ),
+            (
+                "zsh: a file named _rigctl in a folder of $fpath (then: autoload -U compinit && compinit)",
+                "rigctl completion zsh > ~/.zfunc/_rigctl",
+            ),
             ("tcsh: source it from ~/.tcshrc", "rigctl completion tcsh > ~/.rigctl.completion.csh"),
         ),
     )

@@ -127,6 +127,22 @@ def _tmux(*argv: str) -> str:
     return subprocess.run(["tmux", *argv], capture_output=True, text=True, check=True, timeout=30).stdout
 
 
+def _completed(session: str, line: str) -> str:
+    """The prompt's line in tmux ``session`` after typing ``line`` and Tab, once it stops changing."""
+    _tmux("send-keys", "-t", session, "C-u")
+    _tmux("send-keys", "-t", session, "-l", line)
+    _tmux("send-keys", "-t", session, "Tab")
+    t0, last, seen = time.monotonic(), None, ""
+    while time.monotonic() - t0 < 20:
+        time.sleep(0.3)
+        rows = [r for r in _tmux("capture-pane", "-p", "-t", session).splitlines() if r.startswith("$ rigctl")]
+        seen = rows[-1][2:].rstrip() if rows else ""
+        if seen.startswith(line) and seen == last and seen != line:
+            return seen
+        last = seen
+    return seen
+
+
 @pytest.mark.parametrize("shell", ["bash", "zsh"])
 def test_a_real_shell_completes_the_cameras_of_a_take_whose_path_is_quoted(tmp_path: Path, shell: str) -> None:
     """Typed in a real bash and zsh in a terminal (tmux), with the script installed as the help says: the
@@ -161,19 +177,7 @@ def test_a_real_shell_completes_the_cameras_of_a_take_whose_path_is_quoted(tmp_p
         _tmux("send-keys", "-t", name, f"{setup}; PS1='$ '", "Enter")
 
         def completed(line: str) -> str:
-            """The prompt's line after typing ``line`` and Tab, once it stops changing."""
-            _tmux("send-keys", "-t", name, "C-u")
-            _tmux("send-keys", "-t", name, "-l", line)
-            _tmux("send-keys", "-t", name, "Tab")
-            t0, last, seen = time.monotonic(), None, ""
-            while time.monotonic() - t0 < 20:
-                time.sleep(0.3)
-                rows = [r for r in _tmux("capture-pane", "-p", "-t", name).splitlines() if r.startswith("$ rigctl")]
-                seen = rows[-1][2:].rstrip() if rows else ""
-                if seen.startswith(line) and seen == last and seen != line:
-                    return seen
-                last = seen
-            return seen
+            return _completed(name, line)
 
         for typed in ("my\\ take", "'my take'", '"my take"', "~/my\\ take"):
             line = f"rigctl depth {typed} --cameras r1"
@@ -186,6 +190,41 @@ def test_a_real_shell_completes_the_cameras_of_a_take_whose_path_is_quoted(tmp_p
         rig = "rigctl tally 'five by five.yaml' --program r4"
         assert completed(rig) == f"{rig}c"
         assert not (home / "ran").exists()
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", name], capture_output=True)
+
+
+def test_a_real_bash_completes_words_it_splits_at_colons_and_equals(tmp_path: Path) -> None:
+    """Session 28's review: bash splits a word at : and = (COMP_WORDBREAKS), so a take in "take 12:30" or
+    "x=y" completed nothing, nor did a --name=value option's value. Typed in a real bash in a terminal (tmux),
+    with the script sourced: each completes, a folder with its slash, and the cameras of a take whose path has
+    a colon are the take's (not the simulated rig's)."""
+    for tool in ("tmux", "bash"):
+        assert shutil.which(tool), f"{tool} is needed (.ci/run installs it)"
+    home = tmp_path / "home"
+    (home / "shoot 12:30" / "T1").mkdir(parents=True)
+    (home / "shoot 12:30" / "T1" / "take.yaml").write_text(_take_yaml(["r0c0", "r1c0"], ""))
+    (home / "x=y" / "T2").mkdir(parents=True)
+    res = subprocess.run([*rigctl_command(), "completion", "bash"], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    (home / "rigctl.bash").write_text(res.stdout)
+    name = f"rigctl-breaks-{tmp_path.name}"
+    env = f"env -i HOME={shlex.quote(str(home))} TERM=xterm PATH=/usr/bin:/bin"
+    _tmux("new-session", "-d", "-s", name, "-x", "250", "-y", "20", "-c", str(home), f"{env} bash --norc --noprofile")
+    try:
+        _tmux("send-keys", "-t", name, "source ~/rigctl.bash; PS1='$ '", "Enter")
+
+        def completed(line: str) -> str:
+            return _completed(name, line)
+
+        assert completed("rigctl take info shoot\\ 12:30/T") == "rigctl take info shoot\\ 12:30/T1/"
+        # inside quotes bash does not split: the folder, its quote closed by bash itself
+        assert completed("rigctl take info 'shoot 12:") == "rigctl take info 'shoot 12:30'/"
+        assert completed("rigctl take info x=y/T") == "rigctl take info x=y/T2/"
+        assert completed("rigctl depth x --out=x=") == "rigctl depth x --out=x=y/"
+        line = "rigctl depth 'shoot 12:30/T1' --cameras r1"
+        assert completed(line) == f"{line}c0"  # the take's r1c0, not the simulated rig's r1c0..r1c2
+        assert completed("rigctl take e") == "rigctl take export"  # words without : or = as before
     finally:
         subprocess.run(["tmux", "kill-session", "-t", name], capture_output=True)
 
