@@ -94,7 +94,8 @@ class Tsl50Output:
         seconds (a receiver that closes at once, or resets what it did not read: the tally was not shown);
         nothing to wait for over UDP."""
         if self.tcp and self.sock is not None and (gone := self._gone(wait)):
-            raise DeviceError(f"{self.url}: tally not shown: the receiver {gone} the connection")
+            why = "did not read it" if gone == "reset" else "it may not have been shown"
+            raise DeviceError(f"{self.url}: the receiver {gone} the connection at once: {why}")
 
     def _gone(self, wait: float) -> str | None:
         """``closed`` or ``reset`` when the receiver's end of the connection is gone (seen within ``wait``
@@ -103,8 +104,9 @@ class Tsl50Output:
         assert self.sock is not None
         deadline = time.monotonic() + wait
         while True:
-            ready, _, _ = select.select([self.sock], [], [], max(0.0, deadline - time.monotonic()))
-            if not ready:
+            poll = select.poll()  # not select(): it refuses a descriptor past 1023
+            poll.register(self.sock, select.POLLIN)
+            if not poll.poll(max(0.0, deadline - time.monotonic()) * 1000):
                 return None
             try:
                 data = self.sock.recv(4096, socket.MSG_DONTWAIT)

@@ -3,15 +3,17 @@ in one pass (:meth:`rigctl.local_mean.LocalMean.shrunk`). The numpy and OpenCV p
 bands and hands each to OpenCV's area resize, which reads it back: a pass and a frame-sized write per wide
 blur, three to five a camera (issue 24: the soft key was the write's critical path). This kernel sums each
 block's products in OpenCV's order (its integer-scale area resize, in float32: row by row, four at a time) and
-scales the sum as it does, so the values are the same bit for bit (``test_local_mean_kernels``)."""
+scales the sum as it does, so the values are the same bit for bit (``tests/unit/test_local_mean.py``; a NaN
+may differ in its sign bit). Not parallel: the soft key runs it in its own thread beside the EXR writer's
+compiled passes, and only numba's TBB and OpenMP layers take parallel calls from two threads at once."""
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 
-@njit(parallel=True, cache=True, fastmath=False)
+@njit(cache=True, fastmath=False)
 def shrunk_product(  # pragma: no cover  (compiled)
     values: np.ndarray, weight: np.ndarray, scale: int, out: np.ndarray, first: int, last: int
 ) -> None:
@@ -24,7 +26,7 @@ def shrunk_product(  # pragma: no cover  (compiled)
     area = scale * scale
     inv = np.float32(1.0) / np.float32(area)
     whole = area - area % 4
-    for by in prange(first, last):
+    for by in range(first, last):
         total = np.zeros(c, np.float32)
         group = np.zeros(c, np.float32)
         for bx in range(ws):

@@ -16,11 +16,11 @@ def open_regular(path: Path, error: type[RigctlError] = TakeError, what: str = "
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | os.O_CLOEXEC)
     except FileNotFoundError:
-        if os.path.islink(path):  # there is something at the name: a link to nothing
-            raise error(
-                f"{path}: {what} is a symbolic link to {os.readlink(path)!r:.200}, which does not exist"
-            ) from None
-        raise error(f"{path}: no such {what}") from None
+        try:
+            target = os.readlink(path)  # there is something at the name: a link that leads to no file
+        except OSError:
+            raise error(f"{path}: no such {what}") from None
+        raise error(f"{path}: {what} is a symbolic link to {target!r:.200}, which leads to no file") from None
     except OSError as exc:
         raise error(f"{path}: cannot open {what}: {exc.strerror}") from None
     st = os.fstat(fd)

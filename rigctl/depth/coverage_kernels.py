@@ -5,7 +5,9 @@ mix at every pixel (issue 24: 0.3 s of a 4K camera's depth, for the few pixels t
 
 The window sums are taken directly, in float64, where ``cv2.boxFilter`` keeps running sums in float32: the
 values agree with the numpy and OpenCV path (kept as ``edge.coverage_reference``) within float32 rounding,
-which ``tests/unit/test_edge.py`` asserts; the frame's edge is replicated as there. Parallel over rows."""
+which ``tests/unit/test_edge.py`` asserts (on finite pictures, as depth's are: a NaN spreads through a box
+filter's running sums, here it stays in its own pixel); the frame's edge is replicated as there. Parallel over
+rows."""
 
 from __future__ import annotations
 

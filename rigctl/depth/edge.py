@@ -39,7 +39,7 @@ from rigctl.depth.fixed_kernels import window_disagreements
 from rigctl.depth.grid import Grid
 from rigctl.keying import subject_box
 
-COMPILED = True  # coverage computed at the soft pixels by a compiled kernel; False: coverage_reference
+COVERAGE_COMPILED = True  # coverage at the soft pixels by a compiled kernel; False: coverage_reference
 DEPTH_COVERAGE = 0.5  # depth where the subject covers at least this share of the pixel
 WINDOW = 2  # radius of the window the local subject and screen colours are taken from
 MIN_LUMA_STEP = 0.03  # below this luma difference between subject and screen, the green excess decides
@@ -66,9 +66,10 @@ def _mix(value: F32, fg: F32, bg: F32) -> F32:
 def coverage(rgb: F32, matte: F32) -> F32:
     """The share of each pixel the subject covers: the matte where it is 0 or 1, the two-colour mix (luma,
     else green excess) on the soft edge between. An edge pixel with no pure subject or screen pixel in its
-    window keeps the matte. Compiled at the soft pixels alone (``coverage_kernels.py``) unless ``COMPILED``
-    is off or the picture is not float32 RGB; :func:`coverage_reference` is the numpy and OpenCV path."""
-    if not COMPILED or rgb.dtype != np.float32 or rgb.ndim != 3 or rgb.shape[:2] != matte.shape:
+    window keeps the matte. Compiled at the soft pixels alone (``coverage_kernels.py``) unless
+    ``COVERAGE_COMPILED`` is off or the picture is not float32 RGB; :func:`coverage_reference` is the numpy
+    and OpenCV path."""
+    if not COVERAGE_COMPILED or rgb.dtype != np.float32 or rgb.shape != (*matte.shape, 3):
         return coverage_reference(rgb, matte)
     from rigctl.depth.coverage_kernels import edge_coverage  # compiled on first use
 

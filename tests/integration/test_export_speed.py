@@ -157,8 +157,8 @@ def test_a_frame_sets_report_times_its_write_elapsed_and_in_cpu_seconds(tmp_path
     t = done.report.timings_s
     assert t.depth > 0 and t.write > 0 and t.write_cpu > 0
     assert sorted(done.files) == sorted(f"{c}.{e}" for c in CAMS for e in every)
-    # each file's record, made by the thread that fsyncs the staged file as it is written (or at publishing,
-    # for the PFM and PNG), is what was published
+    # each file's record, made by the thread that fsyncs each staged file once it is written, is what was
+    # published
     from rigctl.depth.export import file_record
 
     folder = tmp_path / "000000"

@@ -125,7 +125,7 @@ def test_a_link_to_nothing_is_named_as_one(tmp_path: Path) -> None:
         read_regular(link, 1000, TakeError, "frame-set file")
     assert (
         str(err.value)
-        == f"{link}: frame-set file is a symbolic link to '{tmp_path}/gone/sets.csv', which does not exist"
+        == f"{link}: frame-set file is a symbolic link to '{tmp_path}/gone/sets.csv', which leads to no file"
     )
     with pytest.raises(TakeError, match=r"log.csv: no such frame-set file$"):
         read_regular(tmp_path / "log.csv", 1000, TakeError, "frame-set file")
