@@ -82,7 +82,7 @@ class LocalMean:
         if COMPILED and scale >= 3 and _compilable(self.values, self.weight):
             from rigctl.local_mean_kernels import shrunk_product  # compiled on first use
 
-            shrunk_product(self.values, self.weight, scale, out, 0, len(out))  # OpenCV's sums, one pass
+            shrunk_product(self.values, self.weight, scale, out, (0, out.shape[0]), (0, out.shape[1]))  # one pass
             return out
         for y0 in range(0, h, rows := -(-SHRINK_ROWS // scale) * scale):
             part = self.weighted((y0, min(h, y0 + rows), 0, w))
@@ -91,10 +91,10 @@ class LocalMean:
         return out
 
     def _wide_rows(self, k: int, idx: NDArray[np.intp]) -> F32:
-        """Wide field ``k`` (a scale that divides the frame, compiled) right at the rows ``idx`` reads: only the
-        coarse rows the blur reaches from them are shrunk (more are added when later pixels need them), the
-        rest left 0, and the coarse frame blurred (small), so each value read is the whole frame's bit for
-        bit. A wide blur is read by few pixels of the band (a few hundred of 10^5 at 1920x1080, where the
+        """Wide field ``k`` (a scale that divides the frame, compiled) right at the pixels ``idx`` reads: only
+        the coarse cells the blur reaches from their box are shrunk (more are added when later pixels need
+        them), the rest left 0, and the coarse frame blurred (small), so each value read is the whole frame's
+        bit for bit. A wide blur is read by few pixels of the band (a few hundred of 10^5 at 1920x1080, where the
         screen is farther than the fine blur reaches), which the frame's shrink, three of the soft key's
         five, cost a quarter of its time for (issue 24: the soft key is the write's critical path)."""
         from rigctl.local_mean_kernels import shrunk_product  # compiled on first use
@@ -105,21 +105,28 @@ class LocalMean:
         small, have = self.coarse.get(k), self.have.get(k)
         if small is None or have is None:
             small = np.zeros((hs, ws, self.values.shape[2]), np.float32)
-            have = np.zeros(hs, bool)
+            have = np.zeros((hs, ws), bool)
             self.coarse[k], self.have[k] = small, have
         if not len(idx):
             return self.fields.get(k, small)
-        ys = idx // w
-        lo = int(linear(ys.min(keepdims=True), hs, h)[0][0])  # the coarse rows bilinear reads, and the next
-        hi = int(linear(ys.max(keepdims=True), hs, h)[0][0]) + 1
+        ys, xs = np.divmod(idx, w)
         reach = int(np.ceil(4 * self.sigmas[k] / scale)) + 1  # past OpenCV's kernel radius for float
-        first, last = max(0, lo - reach), min(hs, hi + reach + 1)
-        missing = np.flatnonzero(~have[first:last])
-        if len(missing) or k not in self.fields:
-            if len(missing):
-                a, b = first + int(missing[0]), first + int(missing[-1]) + 1
-                shrunk_product(self.values, self.weight, scale, small, a, b)
-                have[a:b] = True
+        # the coarse cells bilinear reads (and the next), and the blur's reach around them
+        top, bottom = (int(linear(v, hs, h)[0][0]) for v in (ys.min(keepdims=True), ys.max(keepdims=True)))
+        left, right = (int(linear(v, ws, w)[0][0]) for v in (xs.min(keepdims=True), xs.max(keepdims=True)))
+        r0, r1 = max(0, top - reach), min(hs, bottom + 1 + reach + 1)
+        c0, c1 = max(0, left - reach), min(ws, right + 1 + reach + 1)
+        rows, cols = np.nonzero(~have[r0:r1, c0:c1])
+        if len(rows) or k not in self.fields:
+            if len(rows):
+                a, b, c, d = (
+                    r0 + int(rows.min()),
+                    r0 + int(rows.max()) + 1,
+                    c0 + int(cols.min()),
+                    c0 + int(cols.max()) + 1,
+                )
+                shrunk_product(self.values, self.weight, scale, small, (a, b), (c, d))
+                have[a:b, c:d] = True
             self.fields[k] = np.asarray(cv2.GaussianBlur(small, (0, 0), self.sigmas[k] / scale), np.float32)
         return self.fields[k]
 

@@ -15,21 +15,21 @@ from numba import njit
 
 @njit(cache=True, fastmath=False)
 def shrunk_product(  # pragma: no cover  (compiled)
-    values: np.ndarray, weight: np.ndarray, scale: int, out: np.ndarray, first: int, last: int
+    values: np.ndarray, weight: np.ndarray, scale: int, out: np.ndarray, rows: tuple, columns: tuple
 ) -> None:
-    """Rows ``first`` to ``last`` - 1 of ``out`` (H/scale x W/scale x C): the mean of ``values`` (H x W x C,
-    float32) times ``weight`` (H x W, uint8 or float32, the product float32) over each ``scale`` x ``scale``
-    block, summed as OpenCV's area resize sums it: the block's k-th product row-major, each group of four
+    """``out`` (H/scale x W/scale x C) at ``rows`` and ``columns`` (first, end): the mean of ``values`` (H x W
+    x C, float32) times ``weight`` (H x W, uint8 or float32, the product float32) over each ``scale`` x
+    ``scale`` block, summed as OpenCV's area resize sums it: the block's k-th product row-major, each group of four
     added up first and then to the sum, the rest (past the last whole group) one by one, and the sum times
-    1 / scale**2 in float32."""
-    ws, c = out.shape[1], out.shape[2]
+    1 / scale**2 in float32. The rest of ``out`` is left as it is."""
+    c = out.shape[2]
     area = scale * scale
     inv = np.float32(1.0) / np.float32(area)
     whole = area - area % 4
-    for by in range(first, last):
+    for by in range(rows[0], rows[1]):
         total = np.zeros(c, np.float32)
         group = np.zeros(c, np.float32)
-        for bx in range(ws):
+        for bx in range(columns[0], columns[1]):
             total[:] = 0.0
             k = 0
             for y in range(by * scale, by * scale + scale):

@@ -133,6 +133,10 @@ def test_a_wide_field_is_shrunk_only_on_the_rows_read_and_reads_the_frames(
         assert np.array_equal(got_bottom.view(np.uint32), want(bottom))
         assert rows.have[k].sum() > made.sum()
         assert np.array_equal(rows.sample(k, top).view(np.uint32), got.view(np.uint32))  # unchanged
+        left = LocalMean(values, weight, sigmas)  # a few pixels near the left edge: only the columns reached
+        near = np.arange(100, 110) * w + 3
+        assert np.array_equal(left.sample(k, near).view(np.uint32), want(near))
+        assert left.have[k][:, 0].any() and not left.have[k][:, -1].any()
         everything = np.arange(h * w)
         assert np.array_equal(rows.sample(k, everything).view(np.uint32), want(everything))
         assert rows.have[k].all()
