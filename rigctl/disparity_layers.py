@@ -96,26 +96,28 @@ def steps(offsets: Mapping[str, tuple[float, float]], name: str) -> Steps:
     return Steps(right, left, below)
 
 
+def layer_scales(st: Steps) -> dict[str, float | None]:
+    """The NUKE disparity layers of a camera with steps ``st``, in their order: the multiple of the disparity
+    each holds, None for one that is all zeros."""
+    out: dict[str, float | None] = {}
+    if st.right is not None and st.left is not None:
+        out.update({"disparityL.x": -st.right, "disparityL.y": None, "disparityR.x": st.left, "disparityR.y": None})
+    if st.below is not None:
+        out.update({"disparityV.x": None, "disparityV.y": -st.below})
+    return out
+
+
 def layers(disparity: F32, st: Steps) -> dict[str, F32]:
-    """The NUKE disparity layers of one camera; a missing estimate (+inf) is 0 (no motion), as NUKE has no
-    marker for it (``depth.Z`` is 0 there)."""
+    """The NUKE disparity layers of one camera (:func:`layer_scales`); a missing estimate (+inf) is 0 (no
+    motion), as NUKE has no marker for it (``depth.Z`` is 0 there)."""
     fin = np.asarray(np.where(np.isfinite(disparity), disparity, np.float32(0.0)), np.float32)
     zero = np.zeros_like(fin)
 
-    def times(step: float, sign: float) -> F32:  # sign * fin * step, made in place (no frame-sized temporaries)
-        out = np.negative(fin) if sign < 0 else fin.copy()
-        return np.multiply(out, np.float32(step), out=out)
+    def times(scale: float) -> F32:  # fin * scale, made in place (no frame-sized temporaries)
+        out = np.negative(fin) if scale < 0 else fin.copy()
+        return np.multiply(out, np.float32(abs(scale)), out=out)
 
-    out: dict[str, F32] = {}
-    if st.right is not None and st.left is not None:
-        out["disparityL.x"] = times(st.right, -1)
-        out["disparityL.y"] = zero
-        out["disparityR.x"] = times(st.left, 1)
-        out["disparityR.y"] = zero
-    if st.below is not None:
-        out["disparityV.x"] = zero
-        out["disparityV.y"] = times(st.below, -1)
-    return out
+    return {n: zero if s is None else times(s) for n, s in layer_scales(st).items()}
 
 
 def header(st: Steps) -> dict[str, object]:

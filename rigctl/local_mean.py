@@ -35,8 +35,8 @@ class LocalMean:
         self.fields: dict[int, F32] = {}  # a wide field (coarse), or a fine one's made tiles (or its frame)
         self.todo: dict[int, NDArray[np.bool_]] = {}  # a fine field's tiles not blurred yet
         self.slots: dict[int, NDArray[np.int32]] = {}  # where each tile of a fine field is held (-1: nowhere)
-        self.coarse: dict[int, F32] = {}  # a wide field's shrunk values, made on the rows read (_wide_rows)
-        self.have: dict[int, NDArray[np.bool_]] = {}  # which of its rows are made
+        self.coarse: dict[int, F32] = {}  # a wide field's shrunk values, made on the cells read (_wide_cells)
+        self.have: dict[int, NDArray[np.bool_]] = {}  # which of its cells are made
 
     def weighted(self, box: tuple[int, int, int, int] | None = None) -> F32:
         """The values times the weight over ``box`` (top, bottom, left, right; default the frame), bit for bit."""
@@ -63,7 +63,7 @@ class LocalMean:
             return self._fine(k, idx)
         h, w = self.shape
         if COMPILED and scale >= 3 and not (h % scale or w % scale) and _compilable(self.values, self.weight):
-            return self._wide_rows(k, idx)
+            return self._wide_cells(k, idx)
         if k not in self.fields:
             self.fields[k] = np.asarray(cv2.GaussianBlur(self.shrunk(scale), (0, 0), sigma / scale), np.float32)
         return self.fields[k]
@@ -90,7 +90,7 @@ class LocalMean:
             band[...] = cv2.resize(part, (w // scale, len(band)), interpolation=cv2.INTER_AREA)
         return out
 
-    def _wide_rows(self, k: int, idx: NDArray[np.intp]) -> F32:
+    def _wide_cells(self, k: int, idx: NDArray[np.intp]) -> F32:
         """Wide field ``k`` (a scale that divides the frame, compiled) right at the pixels ``idx`` reads: only
         the coarse cells the blur reaches from their box are shrunk (more are added when later pixels need
         them), the rest left 0, and the coarse frame blurred (small), so each value read is the whole frame's

@@ -127,7 +127,12 @@ def check_output_file(path: Path, what: str = "--out") -> None:
 
 def fsync_dir(folder: Path) -> None:
     """Make a folder's entries (a rename, a new file) durable: what a rename publishes survives a power cut."""
-    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    fsync_path(folder, os.O_DIRECTORY)
+
+
+def fsync_path(path: Path, flags: int = 0) -> None:
+    """Make a written file's bytes durable (OSError as the open or the fsync raise it)."""
+    fd = os.open(path, os.O_RDONLY | flags)
     try:
         os.fsync(fd)
     finally:
@@ -181,11 +186,7 @@ def publishing(path: Path, durable: bool = True, exists: str | None = None) -> I
     try:
         yield tmp
         if durable:
-            fd = os.open(tmp, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
+            fsync_path(tmp)
         if exists is None:
             os.replace(tmp, path)
         else:

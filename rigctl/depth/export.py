@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
-import os
 import shutil
 import uuid
 from collections.abc import Callable
@@ -28,14 +27,14 @@ from rigctl.depth.estimate import DepthResult
 from rigctl.depth.grid import Grid
 from rigctl.diskspace import check_free_space
 from rigctl.disparity_layers import header as disparity_header
-from rigctl.disparity_layers import layers, steps
+from rigctl.disparity_layers import layer_scales, layers, steps
 from rigctl.errors import ParameterError
 from rigctl.exr import FAST_LOSSLESS, half_picture, picture_attributes, write_exr
 from rigctl.exrcam import camera_attributes
 from rigctl.keying import Keyer, SoftKey
 from rigctl.layout import inside, output_path
 from rigctl.pfm import write_pfm
-from rigctl.publish import move_into, output_error, publish_png
+from rigctl.publish import fsync_path, move_into, output_error, publish_png
 from rigctl.timecode import Timecode
 
 F32 = NDArray[np.float32]
@@ -175,7 +174,7 @@ class Target:
     timecode: Timecode | None = None
     flat: bool = False  # one picture (a grid folder): DIR/<camera>.<ext>
     colour: str = "rec709"  # rigctl.exr.COLOURS
-    durable: bool = True  # False: the EXRs are not fsynced here (a staging folder whose writer does it)
+    durable: bool = True  # False: no file is fsynced here (a staging folder whose writer does it)
 
     def path(self, camera: str, ext: str) -> Path:
         return output_path(self.out, "flat" if self.flat else self.layout, self.frame, camera, ext)
@@ -235,10 +234,10 @@ def write_all(
             res = results[name]
             written = []
             if "pfm" in formats:
-                write_pfm(path := target.path(name, ".pfm"), res.disparity)
+                write_pfm(path := target.path(name, ".pfm"), res.disparity, target.durable)
                 written.append(path)
             if "png" in formats:
-                publish_png(path := target.path(name, ".png"), colour_preview(res.disparity, d_range))
+                publish_png(path := target.path(name, ".png"), colour_preview(res.disparity, d_range), target.durable)
                 written.append(path)
             key = pending.result() if pending is not None else None
             pending = start(i + 1)
@@ -263,18 +262,13 @@ def depth_channels(grid: Grid, name: str, res: DepthResult) -> dict[str, F32]:
         from rigctl.exr_kernels import depth_planes  # compiled on first use
 
         d = np.ascontiguousarray(res.disparity, np.float32)
-        signed = (
-            [("disparityL.x", -st.right), ("disparityR.x", st.left)]
-            if st.right is not None and st.left is not None
-            else []
-        ) + ([("disparityV.y", -st.below)] if st.below is not None else [])
-        inv_z, planes = np.empty(d.shape, np.float32), np.empty((len(signed), *d.shape), np.float32)
-        scales = np.array([s for _, s in signed], np.float32)
+        scaled = {n: s for n, s in layer_scales(st).items() if s is not None}
+        inv_z, planes = np.empty(d.shape, np.float32), np.empty((len(scaled), *d.shape), np.float32)
+        scales = np.array(list(scaled.values()), np.float32)
         depth_planes(d, grid.focal_px * grid.spacing, grid.doffs, scales, inv_z, planes)
-        made = dict(zip([n for n, _ in signed], planes, strict=True))
+        made = dict(zip(scaled, planes, strict=True))
         zero = np.zeros(d.shape, np.float32)
-        names = list(layers(np.zeros((0, 0), np.float32), st))  # the layers' names, in their order
-        return {"depth.Z": inv_z, "confidence.Y": res.confidence, **{n: made.get(n, zero) for n in names}}
+        return {"depth.Z": inv_z, "confidence.Y": res.confidence, **{n: made.get(n, zero) for n in layer_scales(st)}}
     z = grid.depth(res.disparity)
     with np.errstate(divide="ignore"):
         inv_z = np.asarray(np.where(np.isfinite(z) & (z > 0), 1.0 / z, np.float32(0.0)), np.float32)
@@ -335,11 +329,7 @@ def drop_unasked(target: Target, cameras: list[str], formats: tuple[str, ...]) -
 def durable_record(path: Path) -> FileRecord:
     """Make a written file durable (fsync) and return its record (read back while the page cache has it)."""
     try:
-        fd = os.open(path, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+        fsync_path(path)
         return file_record(path)
     except OSError as exc:
         raise output_error(path, exc) from None
@@ -383,7 +373,7 @@ class Exporter:
             return {}
         name = frame_name(number)
         tmp = self.out / f"{PARTIAL_PREFIX}{name}-{uuid.uuid4().hex[:12]}"
-        # the EXRs are written unsynced and each made durable and checksummed in a thread while the next
+        # the files are written unsynced and each made durable and checksummed in a thread while the next
         # camera's is made (issue 24: 0.2 s of a 1920x1080 frame set's write was these fsyncs and reads)
         staging = dataclasses.replace(target, out=tmp, flat=True, durable=False)
         try:
