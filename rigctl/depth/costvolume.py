@@ -42,7 +42,7 @@ from rigctl.depth.cost_kernels import combined_costs
 from rigctl.depth.feature_kernels import features_of_levels, view_features, view_levels
 from rigctl.depth.grid import grey_of
 from rigctl.depth.search import EstimateStats
-from rigctl.depth.sweep_kernels import truncate_level, update, update_reference
+from rigctl.depth.sweep_kernels import finish, truncate_level, update, update_reference
 from rigctl.depth.visible_kernels import visible_views, visible_views_reference
 
 F32 = NDArray[np.float32]
@@ -322,6 +322,29 @@ def sweep(
     if stats is not None:
         stats["cost_s"] = stats.get("cost_s", 0.0) + t_cost
         stats["aggregation_s"] = stats.get("aggregation_s", 0.0) + t_agg
+    if COMPILED and len(candidates) and (base := _base_and_offsets(candidates)) is not None:
+        disp, mean, bound, no_view = finish(state, *base, INVALID_COST)
+        return Sweep(disp, best, mean, bound, no_view)
+    return finish_reference(candidates, state)
+
+
+def _base_and_offsets(candidates: Sequence[float | F32]) -> tuple[F32 | None, F32] | None:
+    """The candidates as the compiled finish takes them (``sweep_kernels.finish``): a base map and offsets
+    (``Around``), or the levels alone (constant disparities); None for a list of maps."""
+    if isinstance(candidates, Around):
+        return candidates.base, candidates.offsets
+    if all(isinstance(c, float) for c in candidates):
+        return None, np.asarray(candidates, np.float32)
+    return None
+
+
+def finish_reference(
+    candidates: Sequence[float | F32], state: tuple[F32, NDArray[np.int32], F32, F32, F32, NDArray[np.bool_]]
+) -> Sweep:
+    """The sweep's result from its state in numpy (the reference ``sweep_kernels.finish`` matches): the best
+    candidate moved by the parabola through its neighbours' costs, at most half a step."""
+    best, k_best, c_minus, c_plus, total, seen_any = state
+    shape = best.shape
     n = len(candidates)
     stack_at = _pick(candidates, k_best, shape)
     step = _pick(candidates, np.minimum(k_best + 1, n - 1), shape) - _pick(candidates, np.maximum(k_best - 1, 0), shape)

@@ -39,8 +39,10 @@ def refine(
     """Gauss-Newton along the baselines, over the ``keep`` views with the smallest residual at each pixel.
     Returns the refined map (within ``reach`` px of ``disp``, a number or a map) and the fit's strength (sum of g^2)."""
     agg = Aggregator(views.guide, radius, eps)
-    d = disp.astype(np.float32).copy()
+    disp = np.asarray(disp, np.float32)
+    d = disp.copy()
     strength = np.zeros_like(d)
+    lo, hi = disp - reach, disp + reach  # the same planes each step
     nv = len(views.names)
     for _ in range(iterations):
         if COMPILED and nv:
@@ -58,12 +60,20 @@ def refine(
                 (views.h, views.w),
                 views.active,
             )
-            a, b = agg.smooth(a_raw), agg.smooth(b_raw)
+            a = agg.smooth(a_raw)
+            del a_raw  # each sum goes once filtered (issue 24: the 4K estimate's peak is here)
+            b = agg.smooth(b_raw)
+            del b_raw
         else:
             a, b = _normal_equations(views, d, keep, agg)
-        # damped (Levenberg): where the baseline gradient is weaker than the noise, the pixel barely moves
-        step = -b / (a + np.float32(DAMPING))
-        d = np.clip(d + np.clip(step, -0.25, 0.25), disp - reach, disp + reach).astype(np.float32)
+        # damped (Levenberg): where the baseline gradient is weaker than the noise, the pixel barely moves.
+        # -b / (a + DAMPING), clipped to a quarter pixel, added to d, held within reach of the start: the same
+        # ufuncs in the same order, in place in b's plane (no frame-sized temporaries beside the filter's)
+        step = np.negative(b, out=b)
+        np.divide(step, a + np.float32(DAMPING), out=step)
+        np.clip(step, -0.25, 0.25, out=step)
+        np.add(d, step, out=step)
+        d = np.clip(step, lo, hi, out=step)
         strength = a
     return d, strength
 

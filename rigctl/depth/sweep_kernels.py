@@ -4,7 +4,8 @@ of its two neighbouring levels (for the parabola), the running total and where a
 
 Each level took about a dozen frame-sized numpy passes (masks, ``copyto`` with ``where``, boolean writes);
 these are two, the same arithmetic in the same order, so the same bits (``update_reference`` is the numpy form
-``costvolume.sweep`` ran, ``tests/unit/test_sweep_kernels.py`` holds the two to identical results).
+``costvolume.sweep`` ran, ``tests/unit/test_sweep_kernels.py`` holds the two to identical results). After the
+last level, ``finish`` makes the result (the parabola's sub-step, the mean cost, the bounds) in one pass.
 """
 
 from __future__ import annotations
@@ -124,3 +125,61 @@ def update_reference(
     total += np.minimum(c, np.float32(truncate))
     seen_any |= seen
     return c
+
+
+@njit(parallel=True, cache=True, fastmath=False)
+def _finish(
+    state: tuple[F32, NDArray[np.int32], F32, F32, F32, NDArray[np.bool_]],
+    base: F32,
+    offsets: F32,
+    invalid: np.float32,
+    out: tuple[F32, F32, NDArray[np.bool_], NDArray[np.bool_]],
+) -> None:
+    best, k_best, c_minus, c_plus, total, seen_any = state
+    disp, mean, bound, no_view = out
+    n = offsets.shape[0]
+    per = np.float32(max(n, 1))
+    half, tiny, invalid_half = np.float32(0.5), np.float32(1e-9), invalid * np.float32(0.5)
+    with_base = base.shape[0] > 0
+    for y in prange(best.shape[0]):
+        for x in range(best.shape[1]):
+            k = k_best[y, x]
+            b0 = base[y, x] if with_base else np.float32(0.0)
+            # each candidate as ``_pick`` makes it: the base map plus the offset (or the level alone)
+            at = b0 + offsets[k] if with_base else offsets[k]
+            up = b0 + offsets[min(k + 1, n - 1)] if with_base else offsets[min(k + 1, n - 1)]
+            down = b0 + offsets[max(k - 1, 0)] if with_base else offsets[max(k - 1, 0)]
+            step = up - down
+            cm, cp, b = c_minus[y, x], c_plus[y, x], best[y, x]
+            interior = np.isfinite(cm) and np.isfinite(cp) and cm < invalid and cp < invalid
+            den = cm + cp - np.float32(2.0) * b
+            ok = interior and den > tiny
+            sub = half * (cm - cp) / den if ok else np.float32(0.0)
+            sub = min(max(sub, -half), half) * (step * half if ok else np.float32(0.0))
+            disp[y, x] = at + sub
+            mean[y, x] = total[y, x] / per
+            bound[y, x] = n > 2 and (k == 0 or k == n - 1)
+            no_view[y, x] = (not seen_any[y, x]) or b >= invalid_half
+
+
+def finish(
+    state: tuple[F32, NDArray[np.int32], F32, F32, F32, NDArray[np.bool_]],
+    base: F32 | None,
+    offsets: F32,
+    invalid: float,
+) -> tuple[F32, F32, NDArray[np.bool_], NDArray[np.bool_]]:
+    """The sweep's result from its ``state`` (see :func:`update`) in one pass: the best candidate moved by the
+    parabola through its neighbours' costs (half a step at most), the mean cost, whether the best lay at the
+    first or last of more than two candidates, and where no view saw the point. Candidate k is ``base +
+    offsets[k]`` per pixel, or ``offsets[k]`` without a base. ``costvolume.finish_reference`` is the numpy form
+    it matches bit for bit (issue 24: about ten frame-sized temporaries there)."""
+    shape = state[0].shape
+    out = (
+        np.empty(shape, np.float32),
+        np.empty(shape, np.float32),
+        np.empty(shape, np.bool_),
+        np.empty(shape, np.bool_),
+    )
+    b = np.zeros((0, 0), np.float32) if base is None else np.ascontiguousarray(base, np.float32)
+    _finish(state, b, np.ascontiguousarray(offsets, np.float32), np.float32(invalid), out)
+    return out
