@@ -86,16 +86,23 @@ def pairs_engine(job: SearchJob) -> BoxEstimate:
 
 def fill_from_background(disp: F32, holes: NDArray[np.bool_]) -> F32:
     """Holes (inside the subject) take the farther (smaller) of the nearest valid disparities left and right
-    on their row: an occluded point belongs to the background side of the edge."""
+    on their row: an occluded point belongs to the background side of the edge. Only the rows with a hole
+    are scanned (each row on its own: the same values; issue 24, 0.28 s a camera at 4K over every row)."""
     out = disp.copy()
-    h, w = disp.shape
-    valid = np.isfinite(disp) & ~holes
+    rows = np.flatnonzero(holes.any(axis=1))
+    if not rows.size:
+        return out
+    part, gaps = disp[rows], holes[rows]
+    w = disp.shape[1]
+    valid = np.isfinite(part) & ~gaps
     cols = np.arange(w, dtype=np.int32)[None, :]  # 32-bit column numbers (issue 24: memory)
     left = np.maximum.accumulate(np.where(valid, cols, np.int32(-1)), axis=1)
     right = np.minimum.accumulate(np.where(valid, cols, np.int32(w))[:, ::-1], axis=1)[:, ::-1]
-    rows = np.arange(h)[:, None]
-    lv = np.where(left >= 0, disp[rows, np.clip(left, 0, w - 1)], np.inf)
-    rv = np.where(right < w, disp[rows, np.clip(right, 0, w - 1)], np.inf)
+    at = np.arange(len(rows))[:, None]
+    lv = np.where(left >= 0, part[at, np.clip(left, 0, w - 1)], np.inf)
+    rv = np.where(right < w, part[at, np.clip(right, 0, w - 1)], np.inf)
     fill = np.minimum(lv, rv)
-    out[holes] = fill[holes]
+    filled = out[rows]
+    filled[gaps] = fill[gaps]
+    out[rows] = filled
     return out
