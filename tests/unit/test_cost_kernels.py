@@ -267,6 +267,14 @@ def test_the_compiled_visible_count_matches_the_reference() -> None:
     assert (want < len(rel)).any() and (want == len(rel)).any()
     # counted only where asked (the report's pixels), the same counts there and none elsewhere
     assert np.array_equal(views.visible_count(d, front, where=front), np.where(front, want, 0))
+    # the splat in bands of rows, each written only from the rows that can land there: the same counts for
+    # any number of bands (one, a band boundary inside the steps, more bands than the views' rows)
+    from rigctl.depth.visible_kernels import visible_views
+
+    y0, _, x0, _ = views.box
+    for bands in (1, 2, 7, 1000):
+        got = visible_views(d, front, views.rel_array, (y0, x0), (views.h, views.w), cvm.OCCLUDER_PX, bands=bands)
+        assert np.array_equal(got, want), bands
 
 
 @pytest.mark.parametrize("win", [1, 3, 5])
